@@ -1,0 +1,1 @@
+"""Offline evaluation: metrics and runners over bags."""

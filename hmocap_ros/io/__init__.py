@@ -1,0 +1,1 @@
+"""Message <-> numpy conversion, bag reading/writing, record and replay (no rclpy here)."""

@@ -1,0 +1,1 @@
+"""Synthetic smart room: body motion, cameras, rendering, MCAP bags with ground truth."""
