@@ -1,0 +1,35 @@
+# hmocap_ros: `make demo` and `make test` set everything up if needed, then run.
+# DDS stays on this machine (loopback only) with its own domain: in a real
+# multi-host room, run the nodes without these two variables (see README).
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export ROS_DOMAIN_ID ?= 42
+export PYTHONUNBUFFERED = 1
+
+VENV ?= .venv
+PY := $(VENV)/bin/python
+
+.PHONY: setup demo test test-slow bench clean help
+help:
+	@echo "make demo       set up if needed, run the demo on the shipped data"
+	@echo "make test       set up if needed, run the test suite"
+	@echo "make test-slow  long evaluations (marked slow)"
+	@echo "make bench      benchmark scripts"
+	@echo "make setup      only set up .venv (idempotent)"
+
+setup:
+	@HMOCAP_VENV=$(VENV) bash tools/setup_env.sh
+
+demo: setup
+	$(VENV)/bin/hmocap demo --out out/demo
+
+test: setup
+	$(PY) -m pytest -q -p no:cacheprovider
+
+test-slow: setup
+	$(PY) -m pytest -q -m slow
+
+bench: setup
+	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+clean:
+	rm -rf out msg_defs/build build *.egg-info

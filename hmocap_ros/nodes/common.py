@@ -1,0 +1,182 @@
+"""What every hmocap_ros node shares: parameters from a frozen dataclass, config YAML, --help, start/stop.
+
+A node's tunables are one frozen dataclass whose fields carry a ``description`` in their
+metadata (see :func:`param`). :func:`declare_parameters` declares each as a ROS parameter
+with that description and reads them back into the dataclass, which the algorithm takes.
+:func:`run_node` handles ``--help`` (printing the parameter table), loads
+``config/<node_name>.yaml`` as the default parameter file, spins, and shuts down cleanly
+on Ctrl-C or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import signal
+import sys
+import typing
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from rclpy.signals import SignalHandlerOptions
+
+from hmocap_ros.config_files import default_config_file
+
+#: Images and other high-rate sensor data: best effort, keep last 5.
+SENSOR_QOS = qos_profile_sensor_data
+#: Latched topics (camera_rig, body_shape): reliable, transient local, keep last 1.
+LATCHED_QOS = QoSProfile(
+    depth=1,
+    history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+#: Results (joint states, gestures): reliable, volatile, keep last 10.
+RESULT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def param(default, description: str, read_only: bool = False):
+    """A dataclass field that becomes a described ROS parameter."""
+    if isinstance(default, list):
+        return dataclasses.field(
+            default_factory=lambda: list(default),
+            metadata={"description": description, "read_only": read_only},
+        )
+    return dataclasses.field(default=default, metadata={"description": description, "read_only": read_only})
+
+
+def _field_types(config_cls) -> dict[str, type]:
+    return typing.get_type_hints(config_cls)
+
+
+def declare_parameters(node: Node, config_cls):
+    """Declare every field of ``config_cls`` as a parameter of ``node``; return the filled dataclass."""
+    hints = _field_types(config_cls)
+    values = {}
+    for field in dataclasses.fields(config_cls):
+        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
+        descriptor = ParameterDescriptor(
+            description=field.metadata.get("description", ""),
+            read_only=field.metadata.get("read_only", False),
+        )
+        if isinstance(default, list) and not default:
+            # An empty list has no type for rclpy: declare it by its annotation.
+            from rclpy.parameter import Parameter
+
+            inner = typing.get_args(hints[field.name])
+            ptype = {str: Parameter.Type.STRING_ARRAY, float: Parameter.Type.DOUBLE_ARRAY,
+                     int: Parameter.Type.INTEGER_ARRAY, bool: Parameter.Type.BOOL_ARRAY}[inner[0]]
+            # Declared by type with no value, it stays uninitialised unless YAML/-p set it.
+            value = node.declare_parameter(field.name, ptype, descriptor).value
+            values[field.name] = list(value) if value is not None else []
+        else:
+            value = node.declare_parameter(field.name, default, descriptor).value
+            values[field.name] = list(value) if isinstance(default, list) else value
+    return config_cls(**values)
+
+
+def parameter_table(config_cls) -> str:
+    """The parameters of a config dataclass as text: name, type, default, description."""
+    hints = _field_types(config_cls)
+    rows = []
+    for field in dataclasses.fields(config_cls):
+        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
+        tname = getattr(hints[field.name], "__name__", str(hints[field.name]))
+        rows.append(f"  {field.name} ({tname}, default {default!r})\n      {field.metadata.get('description', '')}")
+    return "\n".join(rows)
+
+
+def print_help(node_name: str, doc: str, config_cls=None) -> None:
+    print(f"usage: {node_name} [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] [-r FROM:=TO ...]]\n")
+    print((doc or "").strip() + "\n")
+    if config_cls is not None:
+        print("parameters (ROS parameters, defaults from config/%s.yaml when present):" % node_name)
+        print(parameter_table(config_cls))
+
+
+def ros_args_with_default_config(node_name: str, argv: Sequence[str]) -> list[str]:
+    """argv with the node's default parameter file prepended (user files and -p still override)."""
+    argv = list(argv)
+    path = default_config_file(node_name)
+    if path is None:
+        return argv
+    return [argv[0], "--ros-args", "--params-file", str(path), *argv[1:]]
+
+
+class ShutdownFlag:
+    """Set by SIGINT/SIGTERM so a node's loop can finish its work (flush files) before exiting."""
+
+    def __init__(self):
+        self.requested = False
+        self.signal_name = ""
+
+    def install(self) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._handle)
+
+    def _handle(self, signum, _frame) -> None:
+        self.requested = True
+        self.signal_name = signal.Signals(signum).name
+
+
+def run_node(
+    node_factory: Callable[[], Node],
+    node_name: str,
+    doc: str,
+    config_cls=None,
+    args: Sequence[str] | None = None,
+    on_shutdown: Callable[[Node], None] | None = None,
+) -> int:
+    """Standard ``main`` of a node: --help, default config, spin until Ctrl-C/SIGTERM, clean shutdown."""
+    argv = list(sys.argv if args is None else args)
+    if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv[1:2]:
+        print_help(node_name, doc, config_cls)
+        return 0
+    flag = ShutdownFlag()
+    rclpy.init(args=ros_args_with_default_config(node_name, argv), signal_handler_options=SignalHandlerOptions.NO)
+    flag.install()
+    node = None
+    try:
+        node = node_factory()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not flag.requested and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            if on_shutdown is not None:
+                on_shutdown(node)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def message_class(typename: str):
+    """The rclpy message class for 'pkg/msg/Name' (ImportError with a clear text if unknown)."""
+    import importlib
+
+    parts = typename.split("/")
+    if len(parts) != 3:
+        raise ImportError(f"not a ROS 2 message type name: {typename!r}")
+    pkg, kind, name = parts
+    try:
+        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+    except (ImportError, AttributeError) as err:
+        raise ImportError(f"message type {typename} is not installed here ({err})") from err
+
+
+def package_path(*parts: str) -> Path:
+    """A path inside the installed hmocap_ros Python package."""
+    return Path(__file__).resolve().parents[1].joinpath(*parts)

@@ -1,0 +1,145 @@
+"""Bag recorder node (``hmocap record``): subscribes to topics and writes a rosbag2 MCAP bag.
+
+Subscriptions: each requested topic (or every topic with ``--all``), with its type and
+QoS discovered from the publishers: best effort when a publisher is best effort (camera
+images), transient local when a publisher is latched (``camera_rig``), reliable otherwise.
+Messages are written as the serialized CDR bytes DDS delivered, so nothing is decoded.
+Publications: none. Parameters: none (command-line options).
+
+Ctrl-C or SIGTERM stops the recording: the node first takes every message already
+delivered, then flushes and closes the bag, and prints what it recorded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from hmocap_ros.io.bag_writer import BagWriter, QosProfile
+from hmocap_ros.nodes.common import ShutdownFlag, message_class
+
+# Topics of the ROS graph itself, never worth recording with --all.
+_GRAPH_TOPICS = {"/rosout", "/parameter_events"}
+
+
+class Recorder(Node):
+    """Discovers the requested topics and writes every message it receives to a BagWriter."""
+
+    def __init__(self, writer: BagWriter, topics: list[str], record_all: bool = False):
+        super().__init__("hmocap_recorder")
+        self.writer = writer
+        self.requested = [self._absolute(t) for t in topics]
+        self.record_all = record_all
+        self._subs = {}
+        self._unknown_types: set[str] = set()
+        self._discover()
+        self.create_timer(0.2, self._discover)
+
+    def _absolute(self, topic: str) -> str:
+        return topic if topic.startswith("/") else "/" + topic
+
+    def _qos_for(self, topic: str) -> tuple[QoSProfile, QosProfile]:
+        infos = self.get_publishers_info_by_topic(topic)
+        best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
+        latched = bool(infos) and all(
+            i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos
+        )
+        qos = QoSProfile(
+            depth=100,
+            reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        )
+        stored = QosProfile(reliability=2 if best_effort else 1, durability=1 if latched else 2,
+                            depth=1 if latched else 10)
+        return qos, stored
+
+    def _discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._subs:
+                continue
+            if self.record_all:
+                if topic in _GRAPH_TOPICS:
+                    continue
+            elif topic not in self.requested:
+                continue
+            if not self.get_publishers_info_by_topic(topic):
+                continue
+            typename = types[0]
+            try:
+                cls = message_class(typename)
+            except ImportError as err:
+                if typename not in self._unknown_types:
+                    self.get_logger().error(f"cannot record {topic}: {err}")
+                    self._unknown_types.add(typename)
+                continue
+            qos, stored = self._qos_for(topic)
+            self.writer.add_topic(topic, typename, stored)
+            self._subs[topic] = self.create_subscription(
+                cls, topic, self._make_callback(topic, typename), qos, raw=True
+            )
+            self.get_logger().info(f"recording {topic} [{typename}]{' (latched)' if stored.latched else ''}")
+
+    def _make_callback(self, topic: str, typename: str):
+        def callback(data: bytes) -> None:
+            self.writer.write(topic, data, self.get_clock().now().nanoseconds, msgtype=typename)
+
+        return callback
+
+    def missing_topics(self) -> list[str]:
+        return [t for t in self.requested if t not in self._subs]
+
+
+def record(output: str, topics: list[str], record_all: bool = False, duration: float | None = None,
+           ros_args: list[str] | None = None, quiet: bool = False) -> dict[str, int]:
+    """Record until Ctrl-C/SIGTERM (or ``duration`` seconds); return messages written per topic."""
+    flag = ShutdownFlag()
+    rclpy.init(args=["hmocap_record", *(ros_args or [])], signal_handler_options=SignalHandlerOptions.NO)
+    flag.install()
+    writer = BagWriter(output).open()
+    node = Recorder(writer, topics, record_all)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    if not quiet:
+        print(f"recording to {output}: {'all topics' if record_all else ' '.join(topics)} (Ctrl-C to stop)",
+              flush=True)
+    t_end = None if duration is None else time.monotonic() + duration
+    try:
+        while not flag.requested and (t_end is None or time.monotonic() < t_end):
+            executor.spin_once(timeout_sec=0.05)
+        # Take what DDS has already delivered to us before closing the bag.
+        drain_end = time.monotonic() + 0.3
+        while time.monotonic() < drain_end:
+            executor.spin_once(timeout_sec=0.02)
+    finally:
+        missing = node.missing_topics()
+        node.destroy_node()
+        writer.close()
+        rclpy.try_shutdown()
+    if not quiet:
+        for topic, count in sorted(writer.counts.items()):
+            print(f"  {topic}: {count} messages")
+        for topic in missing:
+            print(f"  {topic}: never published (not recorded)")
+        print(f"closed {output}" + (f" on {flag.signal_name}" if flag.signal_name else ""), flush=True)
+    return dict(writer.counts)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("-o", "--output", required=True,
+                        help="bag to write: OUT.mcap for one MCAP file, any other name for a rosbag2 directory")
+    parser.add_argument("topics", nargs="*", help="topics to record (relative names are taken from /)")
+    parser.add_argument("-a", "--all", action="store_true", help="record every topic that appears")
+    parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+
+
+def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
+    if not ns.topics and not ns.all:
+        raise SystemExit("hmocap record: name the topics to record, or pass --all")
+    record(ns.output, ns.topics, ns.all, ns.duration, ros_args)
+    return 0

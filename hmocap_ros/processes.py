@@ -1,0 +1,81 @@
+"""Starting and stopping hmocap_ros nodes as separate processes (demo, tests, benchmarks).
+
+There is no ``ros2 launch`` in a PyPI-wheel install, so the demo and the DDS tests start
+each node with this environment's Python (needed: its bootstrapper sets LD_LIBRARY_PATH)
+and stop it with SIGINT, as a terminal would.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+
+def loopback_dds_env(base: Mapping[str, str] | None = None, domain_id: int | None = None) -> dict[str, str]:
+    """An environment keeping DDS on this machine: LOCALHOST discovery and a domain id.
+
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and ``ROS_DOMAIN_ID`` already set in ``base`` are kept
+    unless ``domain_id`` is given.
+    """
+    env = dict(os.environ if base is None else base)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if domain_id is not None:
+        env["ROS_DOMAIN_ID"] = str(domain_id)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env
+
+
+class NodeProcess:
+    """A node (or ``hmocap`` subcommand) running in its own process, output captured to a log file."""
+
+    def __init__(self, name: str, argv: Sequence[str], env: Mapping[str, str], log_dir: Path):
+        self.name = name
+        self.log_path = Path(log_dir) / f"{name}.log"
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        self._log = self.log_path.open("w")
+        self.proc = subprocess.Popen(
+            list(argv), env=dict(env), stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+        )
+
+    @classmethod
+    def module(cls, name: str, module: str, args: Sequence[str], env, log_dir) -> NodeProcess:
+        """Run ``python -m module args`` with this interpreter."""
+        return cls(name, [sys.executable, "-m", module, *args], env, log_dir)
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def wait_for_output(self, text: str, timeout: float) -> bool:
+        """Wait until ``text`` appears in the process output (False on timeout or exit)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if text in self.output():
+                return True
+            if self.proc.poll() is not None:
+                return text in self.output()
+            time.sleep(0.05)
+        return False
+
+    def wait(self, timeout: float) -> int | None:
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGINT, then SIGKILL after ``timeout``; returns the exit code."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode

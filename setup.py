@@ -1,0 +1,34 @@
+"""ament_python package hmocap_ros (colcon in a ROS install, `pip install -e .` in the venv)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "hmocap_ros"
+
+# Every executable `ros2 run hmocap_ros <name>` finds: the nodes and the `hmocap` tool.
+CONSOLE_SCRIPTS = [
+    "hmocap = hmocap_ros.cli:main",
+    "camera_rig_publisher = hmocap_ros.nodes.camera_rig_publisher:main",
+]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    package_data={PACKAGE: ["data/*", "data/**/*"]},
+    include_package_data=True,
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="hmocap_ros developers",
+    maintainer_email="hmocap@example.org",
+    description="Multi-view 3D body tracking and depth gesture localization for smart rooms (ROS 2 Jazzy).",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={"console_scripts": CONSOLE_SCRIPTS},
+)

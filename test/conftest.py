@@ -1,0 +1,13 @@
+"""Test-wide set-up: DDS stays on loopback, each test run gets its own ROS domain.
+
+Set here, at import time, before any test imports rclpy, and inherited by the node
+processes the DDS tests start (see notes in README "Testing").
+"""
+
+import os
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+# A domain of its own per pytest process, so parallel runs on one machine never cross
+# (Fast DDS ports stay valid for ids up to 101 on Linux).
+os.environ["ROS_DOMAIN_ID"] = str(os.environ.get("HMOCAP_TEST_DOMAIN_ID") or 1 + os.getpid() % 100)
+os.environ.setdefault("PYTHONUNBUFFERED", "1")

@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Create .venv with everything hmocap_ros needs, idempotently:
+#   1. the pinned Python dependencies (ROS 2 Jazzy wheels, numpy, OpenCV, rosbags, ...);
+#   2. the interface package msg_defs/ (hmocap_interfaces), built with CMake against the wheels;
+#   3. hmocap_ros itself in editable mode.
+# Each step is skipped when its inputs have not changed since it last succeeded
+# (stamp files in .venv/.hmocap/ hold a hash of the inputs).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+VENV=${HMOCAP_VENV:-$ROOT/.venv}
+PY=${PYTHON:-python3}
+STAMPS=$VENV/.hmocap
+
+die() { echo "setup: ERROR: $*" >&2; exit 1; }
+say() { echo "setup: $*"; }
+hash_of() { cat "$@" | sha256sum | cut -c1-16; }
+fresh() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
+mark() { mkdir -p "$STAMPS"; echo "$2" > "$STAMPS/$1"; }
+
+command -v "$PY" >/dev/null || die "$PY not found: install CPython 3.11 (e.g. apt-get install python3 python3-venv)."
+"$PY" -c 'import sys; assert sys.version_info[:2] == (3, 11)' 2>/dev/null \
+  || die "the ROS 2 Jazzy wheels need CPython 3.11; $PY is $("$PY" -V 2>&1). Set PYTHON=python3.11."
+
+if [ ! -x "$VENV/bin/python" ]; then
+  say "creating $VENV"
+  "$PY" -m venv "$VENV" || die "could not create a venv (on Debian: apt-get install python3-venv)."
+fi
+
+deps=$(hash_of requirements.txt requirements-lock.txt)
+if ! fresh deps "$deps"; then
+  say "installing pinned dependencies (about 30 s on a fresh machine)"
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  "$VENV/bin/python" -m pip install -q -r requirements.txt -c requirements-lock.txt
+  mark deps "$deps"
+fi
+
+msgs=$(hash_of msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/pyproject.toml msg_defs/msg/*.msg requirements.txt)
+if ! fresh interfaces "$msgs" || ! "$VENV/bin/python" -c 'import hmocap_interfaces.msg' 2>/dev/null; then
+  for tool in cmake g++ make; do
+    command -v $tool >/dev/null || die "'$tool' is needed to build msg_defs (hmocap_interfaces). On Debian: apt-get install cmake g++ make."
+  done
+  say "building the interface package hmocap_interfaces (msg_defs/, about 15 s)"
+  rm -rf msg_defs/build
+  CMAKE_PREFIX_PATH=$VENV AMENT_PREFIX_PATH=$VENV \
+    "$VENV/bin/python" -m pip install -q --no-build-isolation --force-reinstall --no-deps \
+      -C cmake.define.Python3_EXECUTABLE="$VENV/bin/python" ./msg_defs \
+    || die "building msg_defs failed (see the CMake output above)."
+  mark interfaces "$msgs"
+fi
+
+pkg=$(hash_of setup.py setup.cfg package.xml)
+if ! fresh package "$pkg" || ! "$VENV/bin/python" -c 'import hmocap_ros' 2>/dev/null; then
+  say "installing hmocap_ros (editable)"
+  "$VENV/bin/python" -m pip install -q --no-build-isolation --no-deps -e . \
+    || die "pip install -e . failed."
+  mark package "$pkg"
+fi
+
+"$VENV/bin/python" -c 'import rclpy, hmocap_interfaces.msg, hmocap_ros' \
+  || die "the environment is incomplete: rclpy, hmocap_interfaces or hmocap_ros does not import."
+say "ready ($VENV)"
