@@ -8,7 +8,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-VENV=${HMOCAP_VENV:-$ROOT/.venv}
+VENV=${HMOCAP_VENV:-.venv}
+case $VENV in /*) ;; *) VENV=$ROOT/$VENV ;; esac
 PY=${PYTHON:-python3}
 STAMPS=$VENV/.hmocap
 
