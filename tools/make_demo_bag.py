@@ -21,7 +21,6 @@ from hmocap_ros.config_files import find_config_file
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory
-from hmocap_ros.io.typestore import hmocap_typestore
 from hmocap_ros.rig import Rig, load_rig, rig_to_msg, save_rig
 
 OUT_DIR = Path(__file__).resolve().parents[1] / "hmocap_ros" / "data" / "demo"
@@ -65,7 +64,7 @@ def main() -> None:
     bag_path = ns.out / "room_4cam.mcap"
     if bag_path.exists():
         bag_path.unlink()
-    factory = RosbagsFactory(hmocap_typestore())
+    factory = RosbagsFactory()
     t0_ns = 1_700_000_000_000_000_000
     with BagWriter(bag_path) as bag:
         bag.add_topic("/camera_rig", "hmocap_interfaces/msg/CameraRig", LATCHED)
