@@ -1,0 +1,41 @@
+"""Every config/<node>.yaml loads and names only parameters its node declares; the launch file compiles."""
+
+import dataclasses
+import importlib
+import py_compile
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+# node name -> (module, config dataclass)
+NODE_CONFIGS = {
+    "camera_rig_publisher": ("hmocap_ros.nodes.camera_rig_publisher", "CameraRigPublisherConfig"),
+}
+
+
+def test_every_node_yaml_is_known():
+    node_yamls = {p.stem for p in (ROOT / "config").glob("*.yaml") if not p.stem.startswith("rig")}
+    assert node_yamls == set(NODE_CONFIGS)
+
+
+@pytest.mark.parametrize("node", sorted(NODE_CONFIGS))
+def test_node_yaml_matches_declared_parameters(node):
+    data = yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())
+    assert list(data) == [node]
+    params = data[node]["ros__parameters"]
+    module, cls_name = NODE_CONFIGS[node]
+    cls = getattr(importlib.import_module(module), cls_name)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    assert set(params) <= set(fields), f"unknown parameters in {node}.yaml: {set(params) - set(fields)}"
+    for name, value in params.items():
+        default = fields[name].default
+        if default is not dataclasses.MISSING:
+            assert isinstance(value, type(default)), f"{name}: {value!r} is not a {type(default).__name__}"
+    assert all(f.metadata.get("description") for f in fields.values()), "every parameter needs a description"
+
+
+def test_launch_files_compile(tmp_path):
+    for path in (ROOT / "launch").glob("*.py"):
+        py_compile.compile(str(path), cfile=str(tmp_path / "x.pyc"), doraise=True)
