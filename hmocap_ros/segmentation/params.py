@@ -1,0 +1,92 @@
+"""Parameters of the foreground segmentation (one frozen dataclass, one set per camera).
+
+The fields carry a ``description`` in their metadata, so the ``foreground_segmentation`` node
+can declare them as ROS parameters (``hmocap_ros.nodes.common.declare_parameters``) without
+this module importing rclpy. Defaults suit 640x480 colour cameras at 25 fps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+
+def _param(default, description: str):
+    return dataclasses.field(default=default, metadata={"description": description, "read_only": False})
+
+
+@dataclass(frozen=True)
+class ForegroundParams:
+    """Tunables of :class:`hmocap_ros.segmentation.BackgroundModel` (thesis sec. 2.4, after Xu et al. [128]).
+
+    Colour values are in uint8 levels of the input image; rates are per frame.
+    """
+
+    learn_frames: int = _param(
+        50, "Frames (from the first one, or after relearn) that learn the background mean and "
+            "variance; no foreground is reported before they are done.")
+    k_sigma: float = _param(
+        3.5, "Foreground threshold: a pixel is foreground when its Mahalanobis distance to the "
+             "background Gaussian (diagonal, 3 channels) exceeds k_sigma.")
+    min_sigma: float = _param(
+        3.0, "Floor of every channel's standard deviation (levels): covers sensor noise that the "
+             "learning frames under-sample and noise-free (rendered) images.")
+    max_sigma: float = _param(
+        30.0, "Ceiling of every channel's standard deviation (levels), so that a flickering pixel "
+              "does not become blind.")
+    learning_rate: float = _param(
+        0.005, "Running-average rate of mean and variance where the pixel is background "
+               "(0.005 per frame = 8 s time constant at 25 fps); 0 freezes the model.")
+    absorb_frames: int = _param(
+        500, "A pixel that differs from the background for this many consecutive frames "
+             "(a moved chair, a new shadow) is absorbed into the background; 0 never absorbs.")
+    absorb_rate: float = _param(
+        0.1, "Rate at which an absorbed pixel's mean moves to the new colour each frame.")
+    shadow_suppression: bool = _param(
+        True, "Label darker pixels of the background's chromaticity as shadow, not foreground.")
+    shadow_min_brightness: float = _param(
+        0.5, "tau_low: the lowest brightness ratio (pixel / background, along the background colour) "
+             "that can still be a shadow; darker pixels are foreground.")
+    shadow_max_brightness: float = _param(
+        1.0, "tau_high: shadows are strictly darker than this ratio of the background brightness.")
+    shadow_max_chroma: float = _param(
+        0.07, "Largest chromaticity distortion of a shadow: colour distance perpendicular to the "
+             "background colour, divided by the shadow's brightness (tan of the colour angle).")
+    shadow_chroma_sigma: float = _param(
+        2.0, "Extra tolerance of the chromaticity test for sensor noise, in standard deviations "
+             "(matters for dark pixels, whose colour angle is noisy).")
+    illumination_compensation: bool = _param(
+        True, "Estimate a global gain per frame (median brightness ratio over the last frame's "
+              "background pixels) and compare each pixel with the gain-scaled background.")
+    gain_sample_step: int = _param(
+        4, "Pixel step (rows and columns) of the sample that estimates the global gain.")
+    opening_size: int = _param(
+        3, "Side (pixels) of the elliptic structuring element of the opening that removes "
+           "speckle; 0 or 1 disables it.")
+    closing_size: int = _param(
+        5, "Side (pixels) of the elliptic structuring element of the closing that bridges "
+           "small gaps; 0 or 1 disables it.")
+    min_blob_area: int = _param(
+        100, "Connected foreground components smaller than this (pixels) are removed; 0 keeps all.")
+    max_hole_area: int = _param(
+        300, "Background holes inside a blob up to this area (pixels) are filled; 0 fills none.")
+
+    def __post_init__(self):
+        checks = [
+            (self.learn_frames >= 1, "learn_frames must be >= 1"),
+            (self.k_sigma > 0.0, "k_sigma must be > 0"),
+            (0.0 < self.min_sigma <= self.max_sigma, "need 0 < min_sigma <= max_sigma"),
+            (0.0 <= self.learning_rate <= 1.0, "learning_rate must be in [0, 1]"),
+            (0 <= self.absorb_frames <= 65535, "absorb_frames must be in [0, 65535]"),
+            (0.0 < self.absorb_rate <= 1.0, "absorb_rate must be in (0, 1]"),
+            (0.0 < self.shadow_min_brightness < self.shadow_max_brightness <= 1.0,
+             "need 0 < shadow_min_brightness < shadow_max_brightness <= 1"),
+            (self.shadow_max_chroma >= 0.0, "shadow_max_chroma must be >= 0"),
+            (self.shadow_chroma_sigma >= 0.0, "shadow_chroma_sigma must be >= 0"),
+            (self.gain_sample_step >= 1, "gain_sample_step must be >= 1"),
+            (self.opening_size >= 0 and self.closing_size >= 0, "morphology sizes must be >= 0"),
+            (self.min_blob_area >= 0 and self.max_hole_area >= 0, "areas must be >= 0"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"ForegroundParams: {message}")
