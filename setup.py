@@ -9,6 +9,7 @@ PACKAGE = "hmocap_ros"
 CONSOLE_SCRIPTS = [
     "hmocap = hmocap_ros.cli:main",
     "camera_rig_publisher = hmocap_ros.nodes.camera_rig_publisher:main",
+    "foreground_segmentation = hmocap_ros.nodes.foreground_segmentation:main",
 ]
 
 setup(

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.processes import NodeProcess, loopback_dds_env
+from hmocap_ros.processes import loopback_dds_env, replay_through_nodes
 
 DATA_DIR = Path(__file__).resolve().parent / "data" / "demo"
 DEMO_BAG = DATA_DIR / "room_4cam.mcap"
@@ -55,28 +55,11 @@ def run_demo(out: str | Path = "out/demo", domain_id: int | None = None, bag: Pa
 
     t0 = time.monotonic()
     logs = out / "logs"
-    recorder = NodeProcess.module("record", "hmocap_ros.cli",
-                                  ["record", "-o", str(out_bag), "/camera_rig", *info_topics], env, logs)
-    node = NodeProcess.module("camera_rig_publisher", "hmocap_ros.nodes.camera_rig_publisher",
-                              ["--ros-args", "-p", f"rig_file:={rig}"], env, logs)
-    try:
-        if not node.wait_for_output("serving rig", 30):
-            print(node.output())
-            raise RuntimeError("camera_rig_publisher did not start (log above)")
-        if not recorder.wait_for_output("recording /camera_rig", 30):
-            print(recorder.output())
-            raise RuntimeError("the recorder did not see camera_rig (log above)")
-        replay = NodeProcess.module("replay", "hmocap_ros.cli",
-                                    ["replay", str(bag), "--topics", *image_topics, "--wait-subscribers", "1"],
-                                    env, logs)
-        if replay.wait(120) is None:
-            replay.stop()
-            raise RuntimeError("replay did not finish in 120 s")
-        replay.stop()
-        time.sleep(1.0)
-    finally:
-        node.stop()
-        recorder.stop()
+    replay_through_nodes(
+        bag,
+        [("camera_rig_publisher", "hmocap_ros.nodes.camera_rig_publisher",
+          ["--ros-args", "-p", f"rig_file:={rig}"], "serving rig")],
+        ["/camera_rig", *info_topics], out_bag, env, logs, replay_topics=image_topics)
     elapsed = time.monotonic() - t0
     print("demo: replay -> camera_rig_publisher -> record, logs in", logs)
 

@@ -48,7 +48,8 @@ class NodeProcess:
         return cls(name, [sys.executable, "-m", module, *args], env, log_dir)
 
     def output(self) -> str:
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text(errors="replace")
 
     def wait_for_output(self, text: str, timeout: float) -> bool:
@@ -79,3 +80,57 @@ class NodeProcess:
                 self.proc.wait()
         self._log.close()
         return self.proc.returncode
+
+
+def replay_through_nodes(
+    bag: Path,
+    nodes: Sequence[tuple[str, str, Sequence[str], str]],
+    record_topics: Sequence[str],
+    out_bag: Path,
+    env: Mapping[str, str],
+    log_dir: Path,
+    replay_topics: Sequence[str] | None = None,
+    replay_rate: float = 1.0,
+    ready_timeout: float = 60.0,
+    settle: float = 1.0,
+    replay_timeout: float = 600.0,
+) -> dict[str, NodeProcess]:
+    """Replay ``bag`` into ``nodes`` (separate processes over DDS) while recording ``record_topics``.
+
+    ``nodes`` are ``(name, module, args, ready_text)``: each is started with ``python -m module
+    args`` and waited for until ``ready_text`` appears in its output. The recorder starts first,
+    the replay waits for a subscriber on each replayed topic, and after the replay ends and
+    ``settle`` seconds pass, nodes and recorder are stopped with SIGINT (the recorder last, so it
+    flushes everything). Returns the processes (stopped) so callers can read their logs.
+    Raises RuntimeError, with the log of the process at fault, when something does not start.
+    """
+    procs: dict[str, NodeProcess] = {}
+    recorder = NodeProcess.module("record", "hmocap_ros.cli",
+                                  ["record", "-o", str(out_bag), *record_topics], env, log_dir)
+    procs["record"] = recorder
+    try:
+        for name, module, args, ready in nodes:
+            procs[name] = NodeProcess.module(name, module, list(args), env, log_dir)
+        for name, _module, _args, ready in nodes:
+            if not procs[name].wait_for_output(ready, ready_timeout):
+                raise RuntimeError(f"{name} did not start:\n{procs[name].output()}")
+        # Outputs are published only once the replay feeds the nodes: make sure the recorder has
+        # subscribed to each of them first (its discovery logs "recording <topic> [type]").
+        for topic in record_topics:
+            if not recorder.wait_for_output(f"recording {topic} [", ready_timeout):
+                raise RuntimeError(f"the recorder never saw a publisher of {topic}:\n{recorder.output()}")
+        time.sleep(0.5)  # DDS matches the new subscriptions to the publishers
+        replay_args = ["replay", str(bag), "--rate", str(replay_rate), "--wait-subscribers", "1"]
+        if replay_topics:
+            replay_args += ["--topics", *replay_topics]
+        replay = NodeProcess.module("replay", "hmocap_ros.cli", replay_args, env, log_dir)
+        procs["replay"] = replay
+        if replay.wait(replay_timeout) is None:
+            raise RuntimeError(f"the replay did not finish in {replay_timeout:.0f} s")
+        time.sleep(settle)
+    finally:
+        for name, proc in procs.items():
+            if name != "record":
+                proc.stop()
+        recorder.stop()
+    return procs

@@ -9,9 +9,10 @@ import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-# node name -> (module, config dataclass)
+# node name -> (module, config dataclass[, module, dataclass ...]): every dataclass the node declares
 NODE_CONFIGS = {
     "camera_rig_publisher": ("hmocap_ros.nodes.camera_rig_publisher", "CameraRigPublisherConfig"),
+    "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation", "ForegroundNodeConfig", "hmocap_ros.segmentation", "ForegroundParams"),
 }
 
 
@@ -25,14 +26,17 @@ def test_node_yaml_matches_declared_parameters(node):
     data = yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())
     assert list(data) == [node]
     params = data[node]["ros__parameters"]
-    module, cls_name = NODE_CONFIGS[node]
-    cls = getattr(importlib.import_module(module), cls_name)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    spec = NODE_CONFIGS[node]
+    fields = {}
+    for module, cls_name in zip(spec[::2], spec[1::2], strict=True):
+        cls = getattr(importlib.import_module(module), cls_name)
+        fields.update({f.name: f for f in dataclasses.fields(cls)})
     assert set(params) <= set(fields), f"unknown parameters in {node}.yaml: {set(params) - set(fields)}"
     for name, value in params.items():
         default = fields[name].default
         if default is not dataclasses.MISSING:
-            assert isinstance(value, type(default)), f"{name}: {value!r} is not a {type(default).__name__}"
+            expected = float if isinstance(default, float) else type(default)
+            assert isinstance(value, expected), f"{name}: {value!r} is not a {expected.__name__}"
     assert all(f.metadata.get("description") for f in fields.values()), "every parameter needs a description"
 
 

@@ -101,7 +101,8 @@ def print_help(node_name: str, doc: str, config_cls=None) -> None:
     print((doc or "").strip() + "\n")
     if config_cls is not None:
         print("parameters (ROS parameters, defaults from config/%s.yaml when present):" % node_name)
-        print(parameter_table(config_cls))
+        for cls in config_cls if isinstance(config_cls, (list, tuple)) else [config_cls]:
+            print(parameter_table(cls))
 
 
 def ros_args_with_default_config(node_name: str, argv: Sequence[str]) -> list[str]:

@@ -1,0 +1,153 @@
+"""foreground_segmentation: per-camera background subtraction for the body tracker (thesis sec. 2.4).
+
+One node serves a list of cameras. For each camera a
+:class:`~hmocap_ros.segmentation.BackgroundModel` (per-pixel single Gaussian after Xu et al.,
+shadow and illumination-change suppression, morphological clean-up) learns the empty room
+from the first frames, then adapts slowly where there is no foreground.
+
+Subscriptions:
+  ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8, sensor-data QoS), per camera.
+Publications:
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id).
+  ``diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames,
+  milliseconds per frame and state (learning or segmenting) per camera.
+Services:
+  ``~/relearn`` (std_srvs/Trigger): forget the background of every camera and learn it again.
+Parameters: ``cameras``, ``diagnostics_period`` and every field of
+:class:`~hmocap_ros.segmentation.ForegroundParams` (``foreground_segmentation --help``).
+
+Frames of the wrong encoding or of a size other than the one learnt are refused with a
+logged error; after ``relearn_after_size_errors`` consecutive size errors the camera
+relearns at the new size (a camera driver was reconfigured).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+from std_srvs.srv import Trigger
+
+from hmocap_ros.io.conversions import ConversionError, image_to_rgb, numpy_to_image
+from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
+from hmocap_ros.nodes.common import RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node
+from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
+
+NODE_NAME = "foreground_segmentation"
+
+
+@dataclass(frozen=True)
+class ForegroundNodeConfig:
+    cameras: list[str] = param(["cam_1", "cam_2", "cam_3", "cam_4"],
+                               "Camera names: the node subscribes <camera>/image_raw, publishes <camera>/foreground.")
+    diagnostics_period: float = param(1.0, "Seconds between diagnostics messages (0 = none).")
+    relearn_after_size_errors: int = param(25, "Relearn a camera's background after this many consecutive "
+                                               "frames of a size other than the learnt one (0 = never).")
+
+
+class _CameraState:
+    def __init__(self, params: ForegroundParams):
+        self.model = BackgroundModel(params)
+        self.frames = 0
+        self.seconds = 0.0
+        self.size_errors = 0
+
+
+class ForegroundSegmentation(Node):
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        self.config = declare_parameters(self, ForegroundNodeConfig)
+        self.params = declare_parameters(self, ForegroundParams)
+        self.factory = RclpyFactory()
+        self._warm_up()
+        self.cameras = {name: _CameraState(self.params) for name in self.config.cameras}
+        self.mask_pubs = {}
+        for name in self.cameras:
+            self.mask_pubs[name] = self.create_publisher(Image, f"{name}/foreground", SENSOR_QOS)
+            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), SENSOR_QOS)
+        self.create_service(Trigger, "~/relearn", self._relearn)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        if self.config.diagnostics_period > 0:
+            self.create_timer(self.config.diagnostics_period, self._publish_diagnostics)
+        self.get_logger().info(
+            f"segmenting {len(self.cameras)} cameras ({', '.join(self.cameras)}); learning the background "
+            f"from the first {self.params.learn_frames} frames")
+
+    def _warm_up(self) -> None:
+        """Compile the numba kernels now, not on the first frames (they would be dropped meanwhile)."""
+        model = BackgroundModel(dataclasses.replace(self.params, learn_frames=1))
+        frame = np.zeros((8, 8, 3), np.uint8)
+        model.apply(frame, 0)
+        model.apply(frame, 1)
+
+    def _callback(self, name: str):
+        state = self.cameras[name]
+        log = self.get_logger()
+
+        def on_image(msg: Image) -> None:
+            try:
+                rgb = image_to_rgb(msg)
+            except ConversionError as err:
+                log.error(f"{name}/image_raw: {err}", throttle_duration_sec=5.0)
+                return
+            if state.model.shape is not None and rgb.shape[:2] != tuple(state.model.shape):
+                state.size_errors += 1
+                limit = self.config.relearn_after_size_errors
+                if limit and state.size_errors >= limit:
+                    log.warning(f"{name}: image size changed to {rgb.shape[1]}x{rgb.shape[0]}; relearning")
+                    state.model.relearn()
+                    state.size_errors = 0
+                else:
+                    log.error(f"{name}/image_raw is {rgb.shape[1]}x{rgb.shape[0]}, the background was learnt at "
+                              f"{state.model.shape[1]}x{state.model.shape[0]}: frame refused",
+                              throttle_duration_sec=5.0)
+                    return
+            state.size_errors = 0
+            stamp = stamp_to_ns(msg.header.stamp)
+            t0 = time.perf_counter()
+            try:
+                mask = state.model.apply(rgb, stamp)
+            except ValueError as err:  # e.g. a stamp older than the last (a bag restarted)
+                log.error(f"{name}: {err}; relearning", throttle_duration_sec=5.0)
+                state.model.relearn()
+                return
+            state.seconds += time.perf_counter() - t0
+            state.frames += 1
+            self.mask_pubs[name].publish(numpy_to_image(mask, "mono8", stamp, msg.header.frame_id, self.factory))
+
+        return on_image
+
+    def _relearn(self, _request, response):
+        for state in self.cameras.values():
+            state.model.relearn()
+        response.success = True
+        response.message = f"relearning the background of {len(self.cameras)} cameras"
+        self.get_logger().info(response.message)
+        return response
+
+    def _publish_diagnostics(self) -> None:
+        out = DiagnosticArray()
+        out.header.stamp = self.get_clock().now().to_msg()
+        for name, state in self.cameras.items():
+            ms = 1e3 * state.seconds / state.frames if state.frames else 0.0
+            learning = state.model.is_learning
+            out.status.append(DiagnosticStatus(
+                level=DiagnosticStatus.OK, name=f"{NODE_NAME}: {name}", hardware_id=name,
+                message="learning background" if learning else "segmenting",
+                values=[KeyValue(key="frames", value=str(state.frames)),
+                        KeyValue(key="ms_per_frame", value=f"{ms:.2f}")]))
+        self.diag_pub.publish(out)
+
+
+def main(args=None) -> int:
+    return run_node(ForegroundSegmentation, NODE_NAME, __doc__, (ForegroundNodeConfig, ForegroundParams), args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
