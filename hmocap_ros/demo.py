@@ -18,8 +18,8 @@ from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.processes import loopback_dds_env, replay_through_nodes
 
 DATA_DIR = Path(__file__).resolve().parent / "data" / "demo"
-DEMO_BAG = DATA_DIR / "room_4cam.mcap"
-DEMO_RIG = DATA_DIR / "room_4cam_rig.yaml"
+DEMO_BAG = DATA_DIR / "mocap_4cam.mcap"
+DEMO_RIG = DATA_DIR / "mocap_4cam_rig.yaml"
 
 
 def _image_topics(bag: Path) -> list[str]:
