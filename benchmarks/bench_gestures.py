@@ -1,0 +1,112 @@
+"""Benchmark of gesture localization (thesis sec. 3.2): training samples/s and detection fps, one core.
+
+Targets: 15 trees of depth 20 trained on ~100k samples in a few minutes; detection at >= 30 fps
+on 640x480 depth frames with such a forest. Run:
+``python benchmarks/bench_gestures.py [--width 640 --height 480 --trees 15 --depth 20 --quick]``.
+
+Two forests of the same size are timed on the same toy depth scenes (``gestures.synthetic``:
+clutter, a person, palm / tee hand shapes, Kinect-like noise and holes):
+
+- ``trained``: boosted training (sec. 3.2.3) on the toy gestures. Its trees stop where the
+  classes are separated, and most background pixels are decided early: the realistic case.
+- ``deep``: the same samples with random labels, so that every tree grows to the maximum depth
+  with uncertain leaves (about 15k nodes per tree, mean path 18 at depth 20): the worst case for
+  detection (no pixel is decided early) and for training.
+
+numba and OpenCV are limited to one thread. Detection is timed per frame over a stream
+(``GestureDetector.update``: depth conversion, forest votes, Parzen density, smoothing,
+localization), for several grid strides; median and best of the frames are printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import cv2
+import numba
+import numpy as np
+
+from hmocap_ros.gestures import DetectorParams, ForestParams, GestureDetector, collect_samples
+from hmocap_ros.gestures.forest import frames_to_metres, train_forest_on_samples
+from hmocap_ros.gestures.params import FeatureParams, PatchParams, TrainParams
+from hmocap_ros.gestures.synthetic import TOY_CLASSES, focal_scale, toy_sequence
+
+
+def train(samples, params: TrainParams, rng, label: str):
+    t0 = time.perf_counter()
+    forest = train_forest_on_samples(samples, params.forest, params.features, rng, TOY_CLASSES)
+    seconds = time.perf_counter() - t0
+    meta = forest.meta["training"]
+    nodes = [t.n_nodes for t in forest.trees]
+    depths = [t.max_depth for t in forest.trees]
+    print(f"  {label:8s} {len(forest.trees)} trees in {seconds:6.1f} s: {meta['bag_samples_total']} bag samples, "
+          f"{meta['bag_samples_per_s']:8.0f} samples/s, nodes/tree {np.mean(nodes):7.0f}, "
+          f"max depth {max(depths)}, OOB error {meta['trees'][-1]['forest_oob_error']:.3f}")
+    return forest
+
+
+def time_detection(forest, frames, stride: int, scale: float):
+    params = DetectorParams(stride=stride, parzen_sigma_px=6.0 * scale, volume_radius_px_m=20.0 * scale,
+                            suppression_radius_px_m=60.0 * scale)
+    det = GestureDetector(forest, params)
+    det.update(frames[0], 0)  # compile / warm caches, not timed
+    times = []
+    for i, frame in enumerate(frames):
+        t0 = time.perf_counter()
+        det.update(frame, (i + 1) * 33_333_333)
+        times.append(time.perf_counter() - t0)
+    return np.median(times) * 1e3, np.min(times) * 1e3
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--width", type=int, default=640)
+    ap.add_argument("--height", type=int, default=480)
+    ap.add_argument("--trees", type=int, default=15)
+    ap.add_argument("--depth", type=int, default=20)
+    ap.add_argument("--train-frames", type=int, default=300)
+    ap.add_argument("--samples-per-class", type=int, default=35000,
+                    help="balanced bag per class and tree (3 classes: ~100k samples per tree)")
+    ap.add_argument("--frames", type=int, default=40, help="detection frames per stride")
+    ap.add_argument("--strides", type=int, nargs="+", default=[3, 4, 5])
+    ap.add_argument("--threads", type=int, default=1, help="numba and OpenCV threads (default 1)")
+    ap.add_argument("--quick", action="store_true", help="5 trees, 120 training frames (a smoke run)")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.trees, args.train_frames, args.samples_per_class, args.frames = 5, 120, 10000, 15
+    numba.set_num_threads(args.threads)
+    cv2.setNumThreads(args.threads)
+    shape = (args.height, args.width)
+    scale = focal_scale(shape)
+    rng = np.random.default_rng(0)
+
+    print(f"toy depth scenes {args.width}x{args.height}, {args.trees} trees, max depth {args.depth}, "
+          f"{args.threads} thread(s)")
+    frames, labels = toy_sequence(rng, args.train_frames, shape)
+    params = TrainParams(
+        features=FeatureParams(patch_half_size_px_m=85.0 * scale),
+        patches=PatchParams(n_positive=200, n_negative=300, box_half_size_px_m=20.0 * scale),
+        forest=ForestParams(n_trees=args.trees, max_depth=args.depth, samples_per_class=args.samples_per_class))
+    samples = collect_samples(frames_to_metres(frames, params), labels, params.patches, params.features, rng,
+                              len(TOY_CLASSES))
+    print(f"training: {len(samples)} samples from {args.train_frames} frames, "
+          f"per class {samples.class_counts().tolist()}")
+    trained = train(samples, params, rng, "trained")
+    noise = samples.subset(np.arange(len(samples)))
+    noise.label = rng.integers(0, len(TOY_CLASSES), len(samples)).astype(np.int32)
+    deep = train(noise, params, rng, "deep")
+
+    test_frames, _ = toy_sequence(np.random.default_rng(1), args.frames, shape)
+    print(f"detection, {args.frames} frames per run, ms per frame (median / best) and fps (median):")
+    for stride in args.strides:
+        row = []
+        for name, forest in (("trained", trained), ("deep", deep)):
+            med, best = time_detection(forest, test_frames, stride, scale)
+            row.append(f"{name} {med:6.1f} / {best:6.1f} ms {1e3 / med:6.1f} fps")
+        gh, gw = (args.height + stride - 1) // stride, (args.width + stride - 1) // stride
+        print(f"  stride {stride} ({gw}x{gh} grid): " + "   ".join(row))
+
+
+if __name__ == "__main__":
+    main()

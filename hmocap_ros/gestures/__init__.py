@@ -1,0 +1,44 @@
+"""Gesture localization on depth images with random forests (thesis ch. 3, sec. 3.2).
+
+- :mod:`~hmocap_ros.gestures.depth_features`: depth binary tests, plain (eq. 3.3) and
+  depth-clipped (eq. 3.6), and raw depth -> metres.
+- :mod:`~hmocap_ros.gestures.patches`: patch (sample) collection from annotated frames.
+- :mod:`~hmocap_ros.gestures.trees`: the forest model (flat node arrays), shared with online forests.
+- :mod:`~hmocap_ros.gestures.forest`: offline training with information gain (eq. 3.2) and
+  boosted tree-by-tree learning (sec. 3.2.3).
+- :mod:`~hmocap_ros.gestures.detection`: per-frame localization: votes, Parzen density,
+  temporal smoothing (eq. 3.4), volume test (eq. 3.5).
+- :mod:`~hmocap_ros.gestures.forest_file`: the versioned ``.npz`` forest file format.
+- :mod:`~hmocap_ros.gestures.synthetic`: toy depth scenes for tests and benchmarks.
+
+Typical use::
+
+    forest = train_forest(depth_frames, labels, TrainParams(), np.random.default_rng(0))
+    save_forest(forest, "gestures.forest.npz")
+    detector = GestureDetector(load_forest("gestures.forest.npz"), DetectorParams())
+    for depth, stamp_ns in stream:
+        for det in detector.update(depth, stamp_ns):
+            print(det.name, det.u, det.v, det.depth_m, det.score)
+"""
+
+from hmocap_ros.gestures.depth_features import depth_to_metres, evaluate_tests, random_offsets
+from hmocap_ros.gestures.detection import Detection, GestureDetector
+from hmocap_ros.gestures.forest import TreeReport, grow_tree, train_forest, train_forest_on_samples
+from hmocap_ros.gestures.forest_file import ForestFileError, load_forest, read_header, save_forest
+from hmocap_ros.gestures.params import (
+    DepthFormat,
+    DetectorParams,
+    FeatureParams,
+    ForestParams,
+    PatchParams,
+    TrainParams,
+)
+from hmocap_ros.gestures.patches import SampleSet, collect_samples
+from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
+
+__all__ = [
+    "DepthFormat", "Detection", "DetectorParams", "FeatureParams", "Forest", "ForestFileError", "ForestParams",
+    "GestureDetector", "PatchParams", "PendingTests", "SampleSet", "TrainParams", "Tree", "TreeReport",
+    "collect_samples", "depth_to_metres", "evaluate_tests", "grow_tree", "load_forest", "random_offsets",
+    "read_header", "save_forest", "train_forest", "train_forest_on_samples",
+]

@@ -1,0 +1,383 @@
+"""Gesture localization with a forest on whole depth frames (thesis sec. 3.2.4).
+
+Per frame ``I_t`` (:meth:`GestureDetector.update`):
+
+1. The forest is evaluated on a grid of every ``stride``-th pixel with valid depth; a grid
+   pixel votes for gesture class ``c > 0`` when ``p(c | I_t, x)`` (eq. 3.1) beats background and
+   every other class (ties go to background).
+2. The vote image of each class is turned into a density ``p(c | I_t)`` by a Parzen estimator
+   with a Gaussian kernel (``parzen_sigma_px``): the blurred 0/1 vote image, i.e. the kernel-
+   weighted fraction of grid pixels around ``x`` that vote for ``c`` (a pseudo-probability in
+   [0, 1], independent of the stride).
+3. Temporal smoothing (eq. 3.4): ``p'(c | I_t) = alpha p(c | I_t) + (1 - alpha) p'(c | I_{t-1})``,
+   one map per class kept across frames; the state starts at zero (so a gesture must be
+   seen on more than one frame to reach full strength) and restarts when the image size
+   changes, the stamps go back in time or jump by more than ``max_gap_s``.
+4. The location ``g_c`` is the maximum of ``p'``, refined to sub-grid precision (the centre of
+   its plateau when a flat vote region makes several cells equal, else the centroid of its 3x3
+   neighbourhood); its depth is the median depth of the grid pixels around it that voted for ``c``.
+5. Volume test (eq. 3.5): ``V = sum_{x in S} p'(c | I_t(x))`` over the disk ``S`` centred at
+   ``g_c`` of radius ``volume_radius_px_m / depth`` pixels (shrinking with depth, so the test
+   covers the same part of the body at any distance). ``volume`` is ``V / |S|``, the mean
+   density over the disk, in [0, 1] and depth-invariant; ``score`` is ``p'(g_c)``. A class is
+   detected when ``score >= min_score`` and ``volume >= min_volume``.
+6. One place shows one gesture: a detection within ``suppression_radius_px_m / depth`` pixels
+   of a higher-scoring detection of another class is dropped (not in the thesis, whose votes
+   are already exclusive per pixel; here the spill-over of near-miss shapes is suppressed).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numba as nb
+import numpy as np
+
+from hmocap_ros.gestures.depth_features import depth_to_metres
+from hmocap_ros.gestures.params import DetectorParams
+from hmocap_ros.gestures.trees import FlatForest, Forest
+
+__all__ = ["Detection", "GestureDetector", "forest_grid_proba", "forest_grid_votes", "pad_background"]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One localized gesture: class, pixel (column u, row v), depth [m], score and volume (sec. 3.2.4)."""
+
+    class_id: int
+    name: str
+    u: float
+    v: float
+    depth_m: float
+    score: float
+    volume: float
+    stamp_ns: int
+
+
+#: Pixels walked down a tree together (interleaved): their independent memory fetches overlap
+#: instead of each tree walk waiting on one node fetch at a time.
+_BATCH = 8
+
+
+@nb.njit(inline="always")
+def _probe_padded(img, x, y, ox, oy, inv_d):
+    """``probe`` on an image with a 1-pixel background border: the clamp to the border replaces
+    the bounds test (same rounding as ``probe_index``)."""
+    px = int(min(max(x + ox * inv_d + 0.5, -1.0), img.shape[1] - 1.5) + 1.0)
+    py = int(min(max(y + oy * inv_d + 0.5, -1.0), img.shape[0] - 1.5) + 1.0)
+    return img[py, px]
+
+
+@nb.njit(cache=True, nogil=True)
+def _grid_votes(padded, stride, offset, nodes, links, proba, roots, max_depth, clipped, kappa, background,
+                early_exit, class_map, grid_depth, proba_out):
+    """Forest votes on the stride grid of ``padded`` (the metres image with a background border).
+
+    Trees outer, pixels inner (one tree's records stay in cache while the grid walks it),
+    ``_BATCH`` pixels interleaved. With ``early_exit``, from the middle tree on, a pixel whose
+    background sum leads every gesture class by more than the trees left could give is dropped:
+    it can only vote background (exact, not an approximation). ``proba_out`` (gh, gw, C), unless
+    empty, receives eq. 3.1 at every grid pixel (complete only without ``early_exit``).
+    """
+    gh, gw = class_map.shape
+    n_classes = proba.shape[1]
+    n_trees = roots.shape[0]
+    kappa = np.float32(kappa)
+    background = np.float32(background)
+    px = np.empty(gh * gw, np.int32)
+    py = np.empty(gh * gw, np.int32)
+    n = 0
+    for gy in range(gh):
+        y = offset + gy * stride
+        for gx in range(gw):
+            x = offset + gx * stride
+            d = padded[y + 1, x + 1]
+            grid_depth[gy, gx] = d
+            if d < background:
+                px[n] = x
+                py[n] = y
+                class_map[gy, gx] = 0
+                n += 1
+            else:
+                class_map[gy, gx] = -1
+    acc = np.zeros((n, n_classes), np.float32)
+    active = np.arange(n)
+    n_active = n
+    node = np.empty(_BATCH, np.int32)
+    lo = np.empty(_BATCH, np.float32)
+    hi = np.empty(_BATCH, np.float32)
+    inv_d = np.empty(_BATCH, np.float64)
+    fx = np.empty(_BATCH, np.float64)
+    fy = np.empty(_BATCH, np.float64)
+    for t in range(n_trees):
+        for p0 in range(0, n_active, _BATCH):
+            nb_ = min(_BATCH, n_active - p0)
+            for k in range(nb_):
+                p = active[p0 + k]
+                d = padded[py[p] + 1, px[p] + 1]
+                node[k] = roots[t]
+                # Plain tests clip to +-inf, which leaves the probe as it is (eq. 3.3).
+                lo[k] = d - kappa if clipped else np.float32(-np.inf)
+                hi[k] = d + kappa if clipped else np.float32(np.inf)
+                inv_d[k] = 1.0 / np.float64(d)
+                fx[k] = px[p]
+                fy[k] = py[p]
+            for _ in range(max_depth):
+                moving = 0
+                for k in range(nb_):
+                    nd = node[k]
+                    left = links[nd, 5]
+                    if left >= 0:
+                        a = _probe_padded(padded, fx[k], fy[k], nodes[nd, 0], nodes[nd, 1], inv_d[k])
+                        b = _probe_padded(padded, fx[k], fy[k], nodes[nd, 2], nodes[nd, 3], inv_d[k])
+                        a = max(min(a, hi[k]), lo[k])
+                        b = max(min(b, hi[k]), lo[k])
+                        # Children sit in adjacent columns: indexing by the test result is a
+                        # load, not an (unpredictable, pipeline-flushing) branch.
+                        node[k] = links[nd, 5 + np.int32(a - b >= nodes[nd, 4])]
+                        moving += 1
+                if moving == 0:
+                    break
+            for k in range(nb_):
+                p = active[p0 + k]
+                for c in range(n_classes):
+                    acc[p, c] += proba[node[k], c]
+        remaining = np.float32(n_trees - t - 1)
+        if early_exit and remaining < n_trees / 2:
+            m = 0
+            for i in range(n_active):
+                p = active[i]
+                best = acc[p, 1]
+                for c in range(2, n_classes):
+                    best = max(best, acc[p, c])
+                if acc[p, 0] - best <= remaining + np.float32(1e-3):  # margin for rounding
+                    active[m] = p
+                    m += 1
+            n_active = m
+    for p in range(n):
+        best = 0
+        for c in range(1, n_classes):
+            if acc[p, c] > acc[p, best]:
+                best = c
+        class_map[(py[p] - offset) // stride, (px[p] - offset) // stride] = best
+    if proba_out.shape[0] > 0:
+        proba_out[:, :, :] = 0.0
+        for p in range(n):
+            for c in range(n_classes):
+                proba_out[(py[p] - offset) // stride, (px[p] - offset) // stride, c] = acc[p, c] / n_trees
+
+
+def grid_shape(height: int, width: int, stride: int) -> tuple[int, int, int]:
+    """(rows, columns, offset) of the evaluation grid: pixels ``offset + k * stride``."""
+    offset = stride // 2
+    return (height - offset + stride - 1) // stride, (width - offset + stride - 1) // stride, offset
+
+
+def pad_background(depth_m: np.ndarray, background: float, out: np.ndarray | None = None) -> np.ndarray:
+    """``depth_m`` with a 1-pixel border of ``background`` (what :func:`forest_grid_votes` takes)."""
+    h, w = depth_m.shape
+    if out is None or out.shape != (h + 2, w + 2):
+        out = np.empty((h + 2, w + 2), np.float32)
+    out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = np.float32(background)
+    out[1:-1, 1:-1] = depth_m
+    return out
+
+
+def forest_grid_votes(flat: FlatForest, padded: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel forest votes (sec. 3.2.4) on the stride grid of a metres image.
+
+    ``padded``: a ``depth_to_metres`` image with a 1-pixel border of background
+    (:func:`pad_background`). Returns ``class_map`` (gh, gw) int8: -1 invalid depth,
+    0 background, ``c`` a vote for class ``c``; and ``grid_depth`` (gh, gw) float32.
+    """
+    padded = np.ascontiguousarray(padded, dtype=np.float32)
+    gh, gw, offset = grid_shape(padded.shape[0] - 2, padded.shape[1] - 2, stride)
+    class_map = np.empty((gh, gw), np.int8)
+    grid_depth = np.empty((gh, gw), np.float32)
+    _grid_votes(padded, stride, offset, flat.nodes, flat.links, flat.proba, flat.roots, flat.max_depth,
+                flat.clipped, flat.kappa, flat.background, True, class_map, grid_depth,
+                np.zeros((0, 0, flat.n_classes), np.float32))
+    return class_map, grid_depth
+
+
+def forest_grid_proba(flat: FlatForest, padded: np.ndarray, stride: int) -> np.ndarray:
+    """Eq. 3.1 on the stride grid: (gh, gw, C) mean leaf distributions, zeros at invalid pixels.
+
+    Slower than :func:`forest_grid_votes` (no pixel is decided early); for the on-the-fly
+    hard negative mining of the online trainer (sec. 3.3.2) and for inspection.
+    """
+    padded = np.ascontiguousarray(padded, dtype=np.float32)
+    gh, gw, offset = grid_shape(padded.shape[0] - 2, padded.shape[1] - 2, stride)
+    out = np.empty((gh, gw, flat.n_classes), np.float32)
+    _grid_votes(padded, stride, offset, flat.nodes, flat.links, flat.proba, flat.roots, flat.max_depth,
+                flat.clipped, flat.kappa, flat.background, False, np.empty((gh, gw), np.int8),
+                np.empty((gh, gw), np.float32), out)
+    return out
+
+
+def parzen_density(votes: np.ndarray, sigma_cells: float) -> np.ndarray:
+    """Gaussian Parzen estimate of (gh, gw, K) 0/1 vote images, zero outside the image."""
+    if sigma_cells <= 0 or votes.size == 0:
+        return votes.copy()
+    k = int(2 * np.ceil(3 * sigma_cells) + 1)
+    kernel = cv2.getGaussianKernel(k, sigma_cells).astype(np.float32)
+    out = np.empty_like(votes)
+    for c in range(votes.shape[2]):  # per channel: OpenCV filters at most 4 channels at once
+        out[:, :, c] = cv2.sepFilter2D(votes[:, :, c], -1, kernel, kernel, borderType=cv2.BORDER_CONSTANT)
+    return out
+
+
+def smooth_density(previous: np.ndarray | None, current: np.ndarray, alpha: float) -> np.ndarray:
+    """Eq. 3.4: ``alpha * current + (1 - alpha) * previous`` (``previous`` None = zeros)."""
+    if previous is None:
+        return np.float32(alpha) * current
+    return np.float32(alpha) * current + np.float32(1.0 - alpha) * previous
+
+
+def _window(shape, gy: int, gx: int, reach: int) -> tuple[int, int, int, int]:
+    """Row and column bounds of the (2 reach + 1)^2 window at ``(gy, gx)``, clipped to ``shape``."""
+    return max(gy - reach, 0), min(gy + reach + 1, shape[0]), max(gx - reach, 0), min(gx + reach + 1, shape[1])
+
+
+def refine_maximum(dens: np.ndarray, gy: int, gx: int, reach: int) -> tuple[float, float]:
+    """Sub-cell location of the maximum at ``(gy, gx)``: the centre of its plateau (cells within
+    ``reach`` equal to the maximum, as a flat vote region blurred by a truncated kernel gives),
+    else the density-weighted centroid of its 3x3 neighbourhood."""
+    top = dens[gy, gx]
+    y0, y1, x0, x1 = _window(dens.shape, gy, gx, reach)
+    plateau = dens[y0:y1, x0:x1] >= top - np.float32(1e-6) * max(float(top), 1.0)
+    if np.count_nonzero(plateau) > 1:
+        ys, xs = np.nonzero(plateau)
+        return float(ys.mean() + y0), float(xs.mean() + x0)
+    y0, y1, x0, x1 = _window(dens.shape, gy, gx, 1)
+    w = dens[y0:y1, x0:x1].astype(np.float64)
+    ys, xs = np.mgrid[y0:y1, x0:x1]
+    return float((w * ys).sum() / w.sum()), float((w * xs).sum() / w.sum())
+
+
+def suppress_other_classes(detections: list, radius_px_m: float) -> list:
+    """Best score first; drops a detection within ``radius_px_m / depth`` pixels of a better one
+    of another class (the votes of one hand shape spill over to similar classes nearby)."""
+    kept = []
+    for det in sorted(detections, key=lambda d: -d.score):
+        if all(math.hypot(det.u - k.u, det.v - k.v) >= radius_px_m / k.depth_m for k in kept):
+            kept.append(det)
+    return kept
+
+
+class GestureDetector:
+    """Gesture localization on a stream of depth frames of one camera (thesis sec. 3.2.4).
+
+    ``update(depth, stamp_ns)`` takes a raw depth image (unit and invalid value per
+    ``params``) and returns the detections of that frame; between calls it keeps the
+    temporally smoothed densities (eq. 3.4). ``density`` (gh, gw, C-1) is that state and
+    :meth:`probability_image` the full-resolution debug map.
+    """
+
+    def __init__(self, forest: Forest, params: DetectorParams | None = None):
+        self.params = params if params is not None else DetectorParams()
+        self.set_forest(forest)
+
+    def set_forest(self, forest: Forest) -> None:
+        """Use ``forest`` from the next frame on (an online forest that grew); keeps the state
+        when the classes are the same."""
+        if self.params.max_depth_m >= forest.features.background_depth_m:
+            raise ValueError("DetectorParams.max_depth_m must be below the forest's background_depth_m")
+        if forest.n_classes > 127:
+            raise ValueError("at most 127 classes (the vote map is int8)")
+        same = hasattr(self, "forest") and self.forest.class_names == forest.class_names
+        self.forest = forest
+        self._flat = forest.flat()
+        if not same:
+            self.reset()
+
+    def reset(self) -> None:
+        """Forget the temporal state (eq. 3.4 restarts from zero)."""
+        self.density: np.ndarray | None = None
+        self.class_map: np.ndarray | None = None
+        self.grid_depth: np.ndarray | None = None
+        self._shape: tuple | None = None
+        self._last_stamp: int | None = None
+        self._padded: np.ndarray | None = None
+
+    @property
+    def grid_offset(self) -> int:
+        return self.params.stride // 2
+
+    def update(self, depth: np.ndarray, stamp_ns: int) -> list[Detection]:
+        """Detections in one depth frame (raw units, see ``DetectorParams``), best score first."""
+        p = self.params
+        stamp_ns = int(stamp_ns)
+        background = self.forest.features.background_depth_m
+        depth_m = depth_to_metres(depth, p.depth_format, background)
+        if (self._shape != depth_m.shape or self._last_stamp is None or stamp_ns < self._last_stamp
+                or stamp_ns - self._last_stamp > p.max_gap_s * 1e9):
+            self.density = None
+        self._shape = depth_m.shape
+        self._last_stamp = stamp_ns
+
+        self._padded = pad_background(depth_m, background, self._padded)
+        self.class_map, self.grid_depth = forest_grid_votes(self._flat, self._padded, p.stride)
+        n_gestures = self.forest.n_classes - 1
+        votes = (self.class_map[:, :, None] == np.arange(1, n_gestures + 1, dtype=np.int8)).astype(np.float32)
+        current = parzen_density(votes, p.parzen_sigma_px / p.stride)
+        self.density = smooth_density(self.density, current, p.alpha)
+        if self.density.size == 0:  # an image smaller than the grid offset
+            return []
+
+        detections = []
+        for k in range(n_gestures):
+            det = self._localize(k + 1, stamp_ns)
+            if det is not None:
+                detections.append(det)
+        return suppress_other_classes(detections, p.suppression_radius_px_m)
+
+    def _localize(self, class_id: int, stamp_ns: int) -> Detection | None:
+        p = self.params
+        dens = self.density[:, :, class_id - 1]
+        flat_max = int(np.argmax(dens))
+        gy, gx = divmod(flat_max, dens.shape[1])
+        score = float(dens[gy, gx])
+        if score <= 0.0 or score < p.min_score:
+            return None
+        depth_m = self._depth_at(class_id, gy, gx)
+        if depth_m is None:
+            return None
+        r = p.volume_radius_px_m / depth_m / p.stride  # disk radius in grid cells
+        cy, cx = refine_maximum(dens, gy, gx, max(1, int(np.ceil(r))))
+        # Eq. 3.5 over the disk of radius volume_radius / depth pixels (at least the centre cell).
+        gy, gx = int(round(cy)), int(round(cx))
+        y0, y1, x0, x1 = _window(dens.shape, gy, gx, int(np.floor(r)))
+        ys, xs = np.ogrid[y0:y1, x0:x1]
+        disk = (ys - gy) ** 2 + (xs - gx) ** 2 <= r * r
+        volume = float(dens[y0:y1, x0:x1][disk].mean())
+        if volume < p.min_volume:
+            return None
+        off, s = self.grid_offset, p.stride
+        return Detection(class_id, self.forest.class_names[class_id], off + cx * s, off + cy * s, depth_m,
+                         score, volume, stamp_ns)
+
+    def _depth_at(self, class_id: int, gy: int, gx: int) -> float | None:
+        """Median depth of the grid pixels within 2 cells of the maximum that voted for the class,
+        else of the valid ones; None when there are none."""
+        y0, y1, x0, x1 = max(gy - 2, 0), gy + 3, max(gx - 2, 0), gx + 3
+        cls = self.class_map[y0:y1, x0:x1]
+        dep = self.grid_depth[y0:y1, x0:x1]
+        for sel in (cls == class_id, cls >= 0):
+            if np.any(sel):
+                return float(np.median(dep[sel]))
+        return None
+
+    def probability_image(self, class_id: int | None = None) -> np.ndarray:
+        """Debug map (H, W) float32 in [0, 1]: the smoothed density p' of ``class_id`` (default:
+        the maximum over the gesture classes) resampled to the image size; zeros before any frame."""
+        if self.density is None or self._shape is None:
+            return np.zeros(self._shape or (1, 1), np.float32)
+        dens = self.density.max(axis=2) if class_id is None else self.density[:, :, class_id - 1]
+        s, h, w = self.params.stride, *self._shape
+        big = cv2.resize(dens, (dens.shape[1] * s, dens.shape[0] * s), interpolation=cv2.INTER_LINEAR)
+        out = np.zeros((h, w), np.float32)
+        out[: min(h, big.shape[0]), : min(w, big.shape[1])] = big[:h, :w]
+        return out

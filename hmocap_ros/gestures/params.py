@@ -1,0 +1,215 @@
+"""Parameters of gesture localization (thesis sec. 3.2): frozen dataclasses, one per concern.
+
+- :class:`DepthFormat`: how a camera's raw depth image maps to metres (unit, invalid value, range).
+- :class:`FeatureParams`: the depth binary tests (eq. 3.3 / clipped eq. 3.6); stored in the forest.
+- :class:`PatchParams`: patch (sample) collection from annotated frames (sec. 3.2.3, "Patch collection").
+- :class:`ForestParams`: offline forest growth and boosted tree-by-tree learning (sec. 3.2.1, 3.2.3).
+- :class:`TrainParams`: the four above, what :func:`hmocap_ros.gestures.train_forest` takes.
+- :class:`DetectorParams`: per-frame localization (sec. 3.2.4), what the node declares.
+
+The fields carry a ``description`` in their metadata, so a node can declare them as ROS
+parameters without this module importing rclpy. Lengths are metres; offsets and radii that
+scale with depth are in pixel*metres ("pixels at 1 m": at depth d they span value/d pixels).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FEATURE_TYPES = ("clipped", "plain")
+
+
+def _param(default, description: str):
+    return field(default=default, metadata={"description": description, "read_only": False})
+
+
+def _check(checks, name):
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(f"{name}: {message}")
+
+
+@dataclass(frozen=True)
+class DepthFormat:
+    """How raw depth images of one camera become metres (float32) for the forest.
+
+    A pixel is invalid when it equals ``invalid_value``, is NaN/inf, or its depth lies outside
+    ``[min_depth_m, max_depth_m]``; invalid pixels are never reference pixels and read as the
+    forest's ``background_depth_m`` when a test probes them (see ``depth_features``).
+    """
+
+    unit_m: float = _param(
+        0.0, "Metres per raw depth unit: 0.001 for millimetres (16UC1), 0.000125 for 1/8 mm, "
+             "1.0 for metres (32FC1); 0 = REP 118: integer images in mm, float images in m.")
+    invalid_value: float = _param(
+        0.0, "Raw value that marks a pixel without depth (NaN and inf are always invalid).")
+    min_depth_m: float = _param(
+        0.3, "Nearer depths are invalid (sensor minimum; bounds the test offsets in pixels).")
+    max_depth_m: float = _param(
+        8.0, "Farther depths are invalid (sensor maximum; must be below the forest's "
+             "background_depth_m).")
+
+    def __post_init__(self):
+        _check([(self.unit_m >= 0.0, "unit_m must be >= 0 (0 = REP 118 by dtype)"),
+                (0.0 < self.min_depth_m < self.max_depth_m, "need 0 < min_depth_m < max_depth_m")],
+               "DepthFormat")
+
+    def unit_for(self, dtype) -> float:
+        """Metres per unit for images of ``dtype`` (resolves ``unit_m = 0`` by REP 118)."""
+        if self.unit_m > 0.0:
+            return float(self.unit_m)
+        return 0.001 if np.issubdtype(np.dtype(dtype), np.integer) else 1.0
+
+
+@dataclass(frozen=True)
+class FeatureParams:
+    """The depth binary tests of the forest (thesis eq. 3.3 and 3.6); saved in the forest file."""
+
+    feature_type: str = _param(
+        "clipped", "'clipped': depth-clipped pixel-pair tests (eq. 3.6); 'plain': eq. 3.3.")
+    kappa_m: float = _param(
+        0.15, "Clipping parameter kappa (eq. 3.6): probe depths are clipped to d(x) +- kappa "
+              "(thesis best: 0.15 m). Ignored by plain tests.")
+    patch_half_size_px_m: float = _param(
+        85.0, "Half side of the square of test offsets u, v in pixel*metres: at reference depth d "
+              "the probes lie within +-value/d pixels (85 = the thesis' 85x85 px patch at 2 m).")
+    background_depth_m: float = _param(
+        10.0, "Depth read by a probe that falls on an invalid pixel or outside the image: "
+              "far background (with clipping it reads d(x) + kappa like any far clutter).")
+
+    def __post_init__(self):
+        _check([(self.feature_type in FEATURE_TYPES, f"feature_type must be one of {FEATURE_TYPES}"),
+                (self.kappa_m > 0.0, "kappa_m must be > 0"),
+                (self.patch_half_size_px_m > 0.0, "patch_half_size_px_m must be > 0"),
+                (self.background_depth_m > 0.0, "background_depth_m must be > 0")],
+               "FeatureParams")
+
+    @property
+    def clipped(self) -> bool:
+        return self.feature_type == "clipped"
+
+
+@dataclass(frozen=True)
+class PatchParams:
+    """Patch collection from annotated frames (thesis sec. 3.2.3, "Patch collection")."""
+
+    n_positive: int = _param(
+        64, "N+: positive samples per gesture frame, drawn in the box around the annotated point.")
+    n_negative: int = _param(
+        128, "N-: negative samples per frame: outside the box in gesture frames, anywhere in "
+             "negative frames.")
+    box_half_size_px_m: float = _param(
+        20.0, "Half side of the positive box in pixel*metres, scaled by the annotated point's "
+              "depth (20 = +-10 px at 2 m).")
+    positive_depth_tolerance_m: float = _param(
+        0.10, "Box pixels whose depth differs from the annotated point's by more are not "
+              "positives (background seen through the box); 0 disables the check.")
+    negative_exclusion_scale: float = _param(
+        1.0, "Negatives of gesture frames are drawn outside the box scaled by this factor "
+             "(1 = just outside the box, as in the thesis).")
+
+    def __post_init__(self):
+        _check([(self.n_positive >= 1 and self.n_negative >= 0, "need n_positive >= 1, n_negative >= 0"),
+                (self.box_half_size_px_m > 0.0, "box_half_size_px_m must be > 0"),
+                (self.positive_depth_tolerance_m >= 0.0, "positive_depth_tolerance_m must be >= 0"),
+                (self.negative_exclusion_scale >= 1.0, "negative_exclusion_scale must be >= 1")],
+               "PatchParams")
+
+
+@dataclass(frozen=True)
+class ForestParams:
+    """Offline forest growth (sec. 3.2.1) and boosted tree-by-tree learning (sec. 3.2.3)."""
+
+    n_trees: int = _param(15, "Trees M of the forest (thesis: 15).")
+    max_depth: int = _param(20, "Maximum depth D of a tree (root = 0; thesis: 20).")
+    n_tests: int = _param(
+        100, "Random candidate tests (offset pairs u, v) drawn per node.")
+    n_thresholds: int = _param(
+        16, "Random thresholds per candidate test, drawn among the node's feature values.")
+    min_samples_leaf: int = _param(5, "A split must leave at least this many samples on each side.")
+    min_gain: float = _param(1e-4, "Nodes whose best information gain (eq. 3.2, nats) is lower stay leaves.")
+    samples_per_class: int = _param(
+        10000, "Balanced bag: samples of each class drawn with replacement per tree (thesis: "
+               "about 20000).")
+    boosted: bool = _param(
+        True, "Boosted learning (sec. 3.2.3): the out-of-bag samples a tree misclassifies join "
+              "the next tree's bag; false = independent balanced bags.")
+    max_boost_fraction: float = _param(
+        0.5, "Cap on the misclassified out-of-bag samples carried to the next tree, as a "
+             "fraction of the balanced bag size.")
+
+    def __post_init__(self):
+        _check([(self.n_trees >= 1, "n_trees must be >= 1"),
+                (1 <= self.max_depth <= 64, "max_depth must be in [1, 64]"),
+                (self.n_tests >= 1 and self.n_thresholds >= 1, "need n_tests, n_thresholds >= 1"),
+                (self.min_samples_leaf >= 1, "min_samples_leaf must be >= 1"),
+                (self.min_gain >= 0.0, "min_gain must be >= 0"),
+                (self.samples_per_class >= 1, "samples_per_class must be >= 1"),
+                (0.0 <= self.max_boost_fraction <= 10.0, "max_boost_fraction must be in [0, 10]")],
+               "ForestParams")
+
+
+@dataclass(frozen=True)
+class TrainParams:
+    """Everything :func:`hmocap_ros.gestures.train_forest` needs besides data and a Generator."""
+
+    depth: DepthFormat = field(default_factory=DepthFormat)
+    features: FeatureParams = field(default_factory=FeatureParams)
+    patches: PatchParams = field(default_factory=PatchParams)
+    forest: ForestParams = field(default_factory=ForestParams)
+
+    def __post_init__(self):
+        _check([(self.depth.max_depth_m < self.features.background_depth_m,
+                 "depth.max_depth_m must be below features.background_depth_m")], "TrainParams")
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """Per-frame gesture localization (thesis sec. 3.2.4) on one depth camera."""
+
+    depth_unit_m: float = _param(
+        0.0, "Metres per raw depth unit (0.001 = mm, 0.000125 = 1/8 mm, 1 = m); 0 = REP 118: "
+             "16UC1 in mm, 32FC1 in m.")
+    invalid_value: float = _param(0.0, "Raw depth value of pixels without depth (NaN is always invalid).")
+    min_depth_m: float = _param(0.3, "Nearer depths are invalid and cast no vote.")
+    max_depth_m: float = _param(8.0, "Farther depths are invalid and cast no vote.")
+    stride: int = _param(
+        4, "Grid step in pixels: the forest is evaluated at every stride-th pixel of every "
+           "stride-th row (4 = 160x120 votes at 640x480).")
+    parzen_sigma_px: float = _param(
+        6.0, "Standard deviation (pixels) of the Gaussian Parzen kernel over the vote image.")
+    alpha: float = _param(
+        0.8, "Adaptation rate of the temporal smoothing p' = alpha p + (1 - alpha) p'_prev (eq. 3.4).")
+    volume_radius_px_m: float = _param(
+        20.0, "Radius of the disk S of the volume test (eq. 3.5) in pixel*metres: value/d pixels "
+              "at the maximum's depth d (20 = 10 px at 2 m, about 4 cm at f = 525 px; like the "
+              "positive box of training).")
+    min_score: float = _param(
+        0.3, "A class is detected when its smoothed density at the maximum is at least this.")
+    min_volume: float = _param(
+        0.25, "... and the mean smoothed density over the disk S (eq. 3.5 / |S|) at least this.")
+    suppression_radius_px_m: float = _param(
+        60.0, "A detection closer than value/d pixels (d its depth) to a higher-scoring detection "
+              "of another class is dropped: one place shows one gesture. 0 keeps all.")
+    max_gap_s: float = _param(
+        1.0, "The smoothing state restarts when consecutive stamps are further apart than this, "
+             "or go back in time (a replayed bag looping), or the image size changes.")
+
+    def __post_init__(self):
+        _check([(self.depth_unit_m >= 0.0, "depth_unit_m must be >= 0"),
+                (0.0 < self.min_depth_m < self.max_depth_m, "need 0 < min_depth_m < max_depth_m"),
+                (1 <= self.stride <= 64, "stride must be in [1, 64]"),
+                (self.parzen_sigma_px >= 0.0, "parzen_sigma_px must be >= 0"),
+                (0.0 < self.alpha <= 1.0, "alpha must be in (0, 1]"),
+                (self.volume_radius_px_m > 0.0, "volume_radius_px_m must be > 0"),
+                (self.min_score >= 0.0 and self.min_volume >= 0.0, "thresholds must be >= 0"),
+                (self.suppression_radius_px_m >= 0.0, "suppression_radius_px_m must be >= 0"),
+                (self.max_gap_s > 0.0, "max_gap_s must be > 0")],
+               "DetectorParams")
+
+    @property
+    def depth_format(self) -> DepthFormat:
+        return DepthFormat(unit_m=self.depth_unit_m, invalid_value=self.invalid_value,
+                           min_depth_m=self.min_depth_m, max_depth_m=self.max_depth_m)

@@ -1,0 +1,126 @@
+"""Patch (training sample) collection from annotated depth frames (thesis sec. 3.2.3, "Patch collection").
+
+A sample is a reference pixel of a frame with a class label; its "patch" is whatever the tests
+probe around it, so only the frame stack and pixel indices are stored, never pixel copies.
+
+Per gesture frame (label ``(c, u, v)``, ``c > 0``): up to ``N+`` positives of class ``c`` drawn
+without replacement in the box of half side ``box_half_size_px_m / d`` pixels centred on the
+annotated point (``d`` its depth), keeping only box pixels within ``positive_depth_tolerance_m``
+of ``d`` (the background visible through the box is not the gesture), and ``N-`` negatives
+(class 0) drawn from the valid pixels outside the box. Per negative frame (``c = 0``): ``N-``
+negatives from all valid pixels. Class balance is not made here but per tree, when the trainer
+draws its bag (:mod:`hmocap_ros.gestures.forest`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hmocap_ros.gestures.params import FeatureParams, PatchParams
+
+__all__ = ["SampleSet", "collect_samples", "frame_labels"]
+
+
+@dataclass(eq=False)
+class SampleSet:
+    """Training samples: pixel ``(x[i], y[i])`` (column, row) of ``frames[frame[i]]`` with class ``label[i]``.
+
+    ``frames`` (F, H, W) float32 metres as made by ``depth_to_metres`` (shared, not copied, by
+    :meth:`subset`).
+    """
+
+    frames: np.ndarray
+    frame: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    label: np.ndarray
+    n_classes: int
+
+    def __len__(self) -> int:
+        return int(self.label.shape[0])
+
+    def class_counts(self) -> np.ndarray:
+        return np.bincount(self.label, minlength=self.n_classes)
+
+    def subset(self, index) -> "SampleSet":
+        index = np.asarray(index)
+        return SampleSet(self.frames, self.frame[index], self.x[index], self.y[index], self.label[index],
+                         self.n_classes)
+
+
+def frame_labels(labels, n_frames: int) -> np.ndarray:
+    """Labels as an (F, 3) int array ``(class, u, v)``; ``None`` rows (or class 0) are negative frames."""
+    rows = [(0, -1, -1) if lab is None else tuple(lab)[:3] for lab in labels]
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+    if arr.shape[0] != n_frames:
+        raise ValueError(f"{arr.shape[0]} labels for {n_frames} frames")
+    if not np.all(np.isfinite(arr)) or np.any(arr[:, 0] < 0):
+        raise ValueError("labels must be finite (class, u, v) with class >= 0")
+    return np.rint(arr).astype(np.int64)
+
+
+def _annotated_depth(depth_m: np.ndarray, valid: np.ndarray, u: int, v: int) -> float | None:
+    """Depth of the annotated point: the pixel itself, else the median of valid pixels within 3 px."""
+    h, w = depth_m.shape
+    if not (0 <= u < w and 0 <= v < h):
+        return None
+    if valid[v, u]:
+        return float(depth_m[v, u])
+    win = depth_m[max(v - 3, 0):v + 4, max(u - 3, 0):u + 4][valid[max(v - 3, 0):v + 4, max(u - 3, 0):u + 4]]
+    return float(np.median(win)) if win.size else None
+
+
+def _choose(rng: np.random.Generator, flat_index: np.ndarray, n: int) -> np.ndarray:
+    if flat_index.size <= n:
+        return flat_index
+    return rng.choice(flat_index, size=n, replace=False)
+
+
+def collect_samples(frames_m: np.ndarray, labels, params: PatchParams, features: FeatureParams,
+                    rng: np.random.Generator, n_classes: int | None = None) -> SampleSet:
+    """Samples of every frame of ``frames_m`` (F, H, W) float32 metres, labels ``(class, u, v)`` per frame.
+
+    A gesture frame whose annotated point lies outside the image or has no valid depth within
+    3 px gives no samples at all (without the point's depth there is no box to sample around,
+    nor to keep negatives out of).
+    """
+    frames_m = np.ascontiguousarray(frames_m, dtype=np.float32)
+    if frames_m.ndim != 3:
+        raise ValueError("frames_m must be (F, H, W)")
+    lab = frame_labels(labels, frames_m.shape[0])
+    n_classes = int(n_classes if n_classes is not None else max(int(lab[:, 0].max(initial=0)) + 1, 2))
+    if lab[:, 0].max(initial=0) >= n_classes:
+        raise ValueError(f"a label's class is >= n_classes = {n_classes}")
+    h, w = frames_m.shape[1:]
+    bg = np.float32(features.background_depth_m)
+    parts = []
+    for f in range(frames_m.shape[0]):
+        depth = frames_m[f]
+        valid = depth < bg
+        cls, u, v = (int(a) for a in lab[f])
+        if cls == 0:
+            neg = _choose(rng, np.flatnonzero(valid), params.n_negative)
+            parts.append((f, neg, 0))
+            continue
+        d0 = _annotated_depth(depth, valid, u, v)
+        if d0 is None:
+            continue
+        half = params.box_half_size_px_m / d0
+        ys, xs = np.ogrid[:h, :w]
+        in_box = (np.abs(xs - u) <= half) & (np.abs(ys - v) <= half)
+        pos_ok = valid & in_box
+        if params.positive_depth_tolerance_m > 0:
+            pos_ok &= np.abs(depth - np.float32(d0)) <= np.float32(params.positive_depth_tolerance_m)
+        parts.append((f, _choose(rng, np.flatnonzero(pos_ok), params.n_positive), cls))
+        ex = half * params.negative_exclusion_scale
+        outside = valid & ~((np.abs(xs - u) <= ex) & (np.abs(ys - v) <= ex))
+        parts.append((f, _choose(rng, np.flatnonzero(outside), params.n_negative), 0))
+    if parts:
+        frame = np.concatenate([np.full(p[1].size, p[0], np.int32) for p in parts])
+        flat = np.concatenate([p[1] for p in parts]).astype(np.int64)
+        label = np.concatenate([np.full(p[1].size, p[2], np.int32) for p in parts])
+    else:
+        frame, flat, label = np.zeros(0, np.int32), np.zeros(0, np.int64), np.zeros(0, np.int32)
+    return SampleSet(frames_m, frame, (flat % w).astype(np.int32), (flat // w).astype(np.int32), label, n_classes)
