@@ -10,6 +10,8 @@ CONSOLE_SCRIPTS = [
     "hmocap = hmocap_ros.cli:main",
     "camera_rig_publisher = hmocap_ros.nodes.camera_rig_publisher:main",
     "foreground_segmentation = hmocap_ros.nodes.foreground_segmentation:main",
+    "gesture_detection = hmocap_ros.nodes.gesture_detection:main",
+    "body_tracker = hmocap_ros.nodes.body_tracker:main",
 ]
 
 setup(

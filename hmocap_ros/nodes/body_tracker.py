@@ -1,0 +1,227 @@
+"""body_tracker: the 3D body pose of the person in the room from N foreground masks (thesis ch. 2).
+
+Synchronises the foreground masks of the rig cameras by stamp and runs
+:class:`~hmocap_ros.tracking.BodyTracker` on each set: layered particle filtering (APF, HPF
+or HPF with approximate partitioning of observations) of a skinned body with the silhouette
+XOR weighting, anthropometry estimated when a person appears.
+
+Subscriptions:
+  ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
+  is set; the masks are expected at the rig's resolution.
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, sensor-data QoS), per rig camera.
+Publications (all with the stamp of the frame set):
+  ``joint_states`` (sensor_msgs/JointState): the pose parameters (root translation in metres,
+  angles in radians) by DoF name.
+  ``skeleton`` (hmocap_interfaces/Skeleton): 3D joints in the room frame.
+  ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove.
+  ``body_shape`` (hmocap_interfaces/BodyShape, latched): the estimated anthropometry.
+  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): state, seconds per frame, ESS per layer,
+  time per stage, views used and dropped.
+Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``seed``, ``body_id`` and every
+field of :class:`~hmocap_ros.tracking.TrackerParams` (``body_tracker --help``).
+
+A dropped camera is tracked on the remaining views; a frame without a person publishes
+nothing but diagnostics; a fit that collapses re-initialises from the visual hull.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point
+from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
+from hmocap_interfaces.msg import CameraRig, Skeleton
+from rclpy.node import Node
+from sensor_msgs.msg import Image, JointState
+from visualization_msgs.msg import Marker, MarkerArray
+
+from hmocap_ros.body.model import load_body_model
+from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.nodes.common import LATCHED_QOS, RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node
+from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
+from hmocap_ros.stamp_sync import StampSynchronizer
+from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+
+NODE_NAME = "body_tracker"
+
+
+@dataclass(frozen=True)
+class BodyTrackerNodeConfig:
+    rig_file: str = param("", "Rig calibration YAML; empty = take the rig from the latched camera_rig topic.")
+    slop_ms: float = param(5.0, "Largest stamp difference (ms) between the masks of one frame set.")
+    min_views_to_sync: int = param(2, "Frame sets with at least this many cameras are processed when a "
+                                      "camera drops out (after max_wait_ms).")
+    max_wait_ms: float = param(200.0, "How long (ms) a frame set waits for a missing camera.")
+    seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
+    body_id: str = param("body_0", "Body id in the published messages (REP-155 style).")
+
+
+class BodyTrackerNode(Node):
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        self.config = declare_parameters(self, BodyTrackerNodeConfig)
+        self.params = declare_parameters(self, TrackerParams)
+        self.model = load_body_model("tracking")
+        self.rng = np.random.default_rng(self.config.seed)
+        self.tracker: BodyTracker | None = None
+        self.sync: StampSynchronizer | None = None
+        self.rig: Rig | None = None
+        self.frame_id = "room"
+        self.last_shape = None
+        self.frames = 0
+        self.pub_joints = self.create_publisher(JointState, "joint_states", RESULT_QOS)
+        self.pub_skeleton = self.create_publisher(Skeleton, "skeleton", RESULT_QOS)
+        self.pub_markers = self.create_publisher(MarkerArray, "skeleton_markers", RESULT_QOS)
+        self.pub_shape = self.create_publisher(BodyShapeMsg, "body_shape", LATCHED_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        if self.config.rig_file:
+            try:
+                self._set_rig(load_rig(self.config.rig_file))
+            except (RigError, OSError) as err:
+                self.get_logger().fatal(f"cannot load the rig: {err}")
+                raise SystemExit(2) from err
+        else:
+            self.create_subscription(CameraRig, "camera_rig", self._on_rig, LATCHED_QOS)
+            self.get_logger().info("waiting for the rig on camera_rig")
+
+    def _on_rig(self, msg: CameraRig) -> None:
+        try:
+            rig = rig_from_msg(msg)
+        except (RigError, ValueError) as err:
+            self.get_logger().error(f"camera_rig: {err}")
+            return
+        if self.rig is not None and rig.isclose(self.rig):
+            return
+        self._set_rig(rig)
+
+    def _set_rig(self, rig: Rig) -> None:
+        first = self.rig is None
+        self.rig = rig
+        self.frame_id = rig.frame_id
+        self.tracker = BodyTracker(self.model, rig, self.params, self.rng)
+        self.sync = StampSynchronizer(
+            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6), queue_size=10, allow_partial=True,
+            min_keys=min(self.config.min_views_to_sync, len(rig)), max_delay_ns=int(self.config.max_wait_ms * 1e6))
+        if first:
+            for name in rig.names:
+                self.create_subscription(Image, f"{name}/foreground", self._on_mask(name), SENSOR_QOS)
+        self.get_logger().info(f"tracking with {len(rig)} cameras ({', '.join(rig.names)}), method "
+                               f"{self.params.method}")
+
+    def _on_mask(self, name: str):
+        def on_mask(msg: Image) -> None:
+            if self.sync is None or name not in self.rig:
+                return
+            try:
+                mask = image_to_numpy(msg)
+            except ConversionError as err:
+                self.get_logger().error(f"{name}/foreground: {err}", throttle_duration_sec=5.0)
+                return
+            if mask.ndim != 2:
+                self.get_logger().error(f"{name}/foreground must be mono8, got {msg.encoding}",
+                                        throttle_duration_sec=5.0)
+                return
+            for synced in self.sync.add(name, stamp_to_ns(msg.header.stamp), mask):
+                self._process(synced.stamp_ns, synced.items)
+
+        return on_mask
+
+    def _process(self, stamp_ns: int, items: dict) -> None:
+        log = self.get_logger()
+        masks = []
+        for cam in self.rig.cameras:
+            mask = items.get(cam.name)
+            if mask is not None and mask.shape != (cam.height, cam.width):
+                log.error(f"{cam.name}/foreground is {mask.shape[1]}x{mask.shape[0]}, the rig says "
+                          f"{cam.width}x{cam.height}: view dropped", throttle_duration_sec=5.0)
+                mask = None
+            masks.append(mask)
+        t0 = time.perf_counter()
+        try:
+            result = self.tracker.update(masks, stamp_ns)
+        except Exception as err:  # a tracker bug must not take the room's node down
+            log.error(f"tracking failed on frame {stamp_ns}: {err!r}; restarting the track")
+            self.tracker.reset(forget_shape=False)
+            return
+        seconds = time.perf_counter() - t0
+        self.frames += 1
+        if result.has_pose:
+            self._publish_pose(stamp_ns, result)
+        self._publish_diagnostics(stamp_ns, result, seconds)
+
+    def _header(self, msg, stamp_ns: int):
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        msg.header.frame_id = self.frame_id
+        return msg
+
+    def _publish_pose(self, stamp_ns: int, result) -> None:
+        skel = self.model.skeleton
+        js = self._header(JointState(), stamp_ns)
+        js.name = list(skel.dof_names)
+        js.position = [float(x) for x in result.params]
+        self.pub_joints.publish(js)
+
+        sk = self._header(Skeleton(), stamp_ns)
+        sk.body_id = self.config.body_id
+        sk.joint_names = list(result.joint_names)
+        sk.positions = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in result.joints]
+        sk.parents = [int(i) for i in self.model.parents]
+        sk.fit_error = float(result.fit_cost)
+        self.pub_skeleton.publish(sk)
+        self.pub_markers.publish(self._markers(stamp_ns, result.joints))
+
+        if result.shape is not None and result.shape is not self.last_shape:
+            self.last_shape = result.shape
+            shape = result.shape
+            msg = self._header(BodyShapeMsg(), stamp_ns)
+            msg.body_id = self.config.body_id
+            msg.entity_names = list(shape.entity_names)
+            msg.bone_scale = [float(x) for x in np.ravel(shape.bone_scale)]
+            msg.radial_scale = [float(x) for x in np.ravel(shape.radial_scale)]
+            msg.global_scale = float(shape.global_scale)
+            msg.height = float(shape.height(self.model))
+            self.pub_shape.publish(msg)
+
+    def _markers(self, stamp_ns: int, joints: np.ndarray) -> MarkerArray:
+        spheres = self._header(Marker(), stamp_ns)
+        spheres.ns, spheres.id, spheres.type, spheres.action = self.config.body_id, 0, Marker.SPHERE_LIST, Marker.ADD
+        spheres.scale.x = spheres.scale.y = spheres.scale.z = 0.06
+        spheres.color.r, spheres.color.g, spheres.color.a = 1.0, 0.3, 1.0
+        spheres.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in joints]
+        bones = self._header(Marker(), stamp_ns)
+        bones.ns, bones.id, bones.type, bones.action = self.config.body_id, 1, Marker.LINE_LIST, Marker.ADD
+        bones.scale.x = 0.02
+        bones.color.g, bones.color.b, bones.color.a = 0.8, 1.0, 1.0
+        for child, parent in enumerate(self.model.parents):
+            if parent >= 0:
+                bones.points += [spheres.points[parent], spheres.points[child]]
+        for m in (spheres, bones):
+            m.lifetime.nanosec = 500_000_000  # disappear when tracking stops
+        return MarkerArray(markers=[spheres, bones])
+
+    def _publish_diagnostics(self, stamp_ns: int, result, seconds: float) -> None:
+        values = [KeyValue(key="state", value=result.state),
+                  KeyValue(key="seconds_per_frame", value=f"{seconds:.3f}"),
+                  KeyValue(key="fit_cost", value=f"{result.fit_cost:.4f}"),
+                  KeyValue(key="views", value=" ".join(self.rig.names[i] for i in result.views)),
+                  KeyValue(key="dropped", value=" ".join(self.rig.names[i] for i in result.dropped)),
+                  KeyValue(key="ess_per_layer", value=" ".join(f"{e:.0f}" for e in result.ess))]
+        values += [KeyValue(key=f"time_{k}", value=f"{v:.4f}") for k, v in sorted(result.timings.items())]
+        level = DiagnosticStatus.OK if result.state in ("tracking", "initialising", "searching") else \
+            DiagnosticStatus.WARN
+        diag = self._header(DiagnosticArray(), stamp_ns)
+        diag.status = [DiagnosticStatus(level=level, name=f"{NODE_NAME}: {self.config.body_id}",
+                                        message=result.state, values=values)]
+        self.pub_diag.publish(diag)
+
+
+def main(args=None) -> int:
+    return run_node(BodyTrackerNode, NODE_NAME, __doc__, (BodyTrackerNodeConfig, TrackerParams), args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
