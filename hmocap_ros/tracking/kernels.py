@@ -47,3 +47,40 @@ def clip_to_bounds(particles: np.ndarray, lower: np.ndarray | None,
     if lower is not None or upper is not None:
         np.clip(particles, lower, upper, out=particles)
     return particles
+
+
+def rejection_kernel(particles: np.ndarray, std: np.ndarray, rng: np.random.Generator, *,
+                     log_prior: Callable[[np.ndarray], np.ndarray], tau: float = 0.7,
+                     max_trials: int = 10, prior_dims: np.ndarray | None = None) -> np.ndarray:
+    """Gaussian kernel with rejection sampling against a prior, thesis sec. 2.3.3 (eq. 2.13).
+
+    For every particle: draw a candidate ``x + N(0, diag(std^2))`` and accept it when
+    ``P(candidate) >= tau * P(x)``, i.e. ``log_prior(candidate) >= log(tau) + log_prior(x)``
+    (eq. 2.13 is the product of Gaussian entity-size terms; the thesis' acceptance test
+    "P(x) > tau P(x)" compares the candidate with the current particle, tau = 0.7). Rejected
+    particles draw again, all of them in one vectorised step, for at most ``max_trials``
+    rounds; a particle still rejected then keeps its current values in ``prior_dims`` (the
+    dimensions the prior constrains, default all) and its last candidate elsewhere.
+
+    ``log_prior(particles (n, D)) -> (n,)``; bind it (and tau, max_trials) with
+    ``functools.partial`` to obtain a :data:`Kernel`.
+    """
+    if not 0.0 < tau <= 1.0:
+        raise ValueError(f"tau must lie in (0, 1], got {tau}")
+    current = particles.copy()
+    threshold = np.log(tau) + np.asarray(log_prior(current), dtype=np.float64)
+    out = particles
+    pending = np.arange(particles.shape[0])
+    for _ in range(max(int(max_trials), 1)):
+        cand = gaussian_kernel(current[pending].copy(), std, rng)
+        ok = np.asarray(log_prior(cand), dtype=np.float64) >= threshold[pending]
+        out[pending] = cand
+        pending = pending[~ok]
+        if pending.size == 0:
+            break
+    if pending.size:
+        dims = slice(None) if prior_dims is None else prior_dims
+        rows = out[pending]
+        rows[:, dims] = current[pending][:, dims]
+        out[pending] = rows
+    return out

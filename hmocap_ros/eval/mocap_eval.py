@@ -1,0 +1,442 @@
+"""``hmocap eval mocap``: replay a multi-view bag through the body tracker and score it.
+
+    hmocap eval mocap BAG [--method apf|hpf|hpf-apo ...] [--compare] [--particles N]
+        [--layers L] [--frames N] [--seed S] [--silhouettes fg|gt] [--json OUT] [--plot OUT.png]
+
+No DDS: the bag is read with :class:`~hmocap_ros.io.bag_reader.BagReader` and every frame set
+goes through the same code as the live nodes, in order: foreground segmentation
+(:class:`~hmocap_ros.segmentation.BackgroundModel`, one per camera, learning from the bag's
+empty-room frames) and :meth:`BodyTracker.update <hmocap_ros.tracking.body_tracker.BodyTracker.update>`.
+Runs are deterministic for a given ``--seed``.
+
+Inputs: any bag in the documented layout (:mod:`hmocap_ros.io.topics`): ``/camera_rig``
+(latched CameraRig; the camera names give the image topics ``/<name>/image_raw``), the ground
+truth ``/ground_truth/skeleton`` (joints matched by name) and, if present,
+``/ground_truth/body_shape`` and ``/ground_truth/<name>/silhouette``. Frame sets are grouped
+by ``header.stamp``; a camera missing from a set is passed to the tracker as a dropped view.
+
+Silhouettes: ``fg`` (default) segments the images; the background model learns from the frames
+before the first ground-truth skeleton (the empty room). A bag without such frames cannot
+teach a background model: the evaluation then falls back to ``gt`` (the bag's exact
+silhouettes) and says so in its output and in the JSON (``silhouettes_fallback``).
+
+Output (``--json``): per method the overall mean and standard deviation of the per-frame mean
+joint error (mm; thesis table 2.3), per-joint mean and std, per-frame errors, frames with and
+without a pose, tracker seconds per frame and frames per second (also including segmentation),
+mean time per stage, evaluations per frame, and the estimated against the true anthropometry
+(entity sizes, :func:`hmocap_ros.body.entity_sizes`). ``--plot``: error over time, one line per
+method.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
+
+__all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames",
+           "main_from_args", "plot_errors", "run_method"]
+
+log = logging.getLogger(__name__)
+
+METHODS = ("apf", "hpf", "hpf-apo")
+
+
+@dataclass
+class BagFrames:
+    """Everything the evaluation needs from a bag, masks computed once for all methods.
+
+    rig: the cameras; stamps: (F,) frame-set stamps in order; masks: per frame a list of one
+    packed mask per camera (``np.packbits`` of ``mask != 0``) or None; truth: (F, J, 3) metres
+    (NaN where the frame has no skeleton); joint_names: names of ``truth``'s joints;
+    body_shape: the subject's BodyShape or None; silhouettes / fallback: what was used and why.
+    segmentation_s: seconds of foreground segmentation per frame set.
+    """
+
+    rig: object
+    stamps: np.ndarray
+    masks: list
+    truth: np.ndarray
+    joint_names: tuple
+    body_shape: object | None
+    silhouettes: str
+    fallback: str = ""
+    segmentation_s: float = 0.0
+    shape_hw: tuple = ()
+
+    def mask_list(self, k: int) -> list:
+        h, w = self.shape_hw
+        out = []
+        for packed in self.masks[k]:
+            if packed is None:
+                out.append(None)
+            else:
+                out.append(np.unpackbits(packed, count=h * w).reshape(h, w))
+        return out
+
+    @property
+    def has_truth(self) -> np.ndarray:
+        return np.isfinite(self.truth).all(axis=(1, 2))
+
+
+@dataclass
+class EvalResult:
+    """Scores of one method on one bag (see the module docstring for the JSON)."""
+
+    method: str
+    summary: dict
+    seconds_per_frame: float
+    fps: float
+    fps_with_segmentation: float
+    evaluations_per_frame: float
+    stage_seconds: dict
+    states: list
+    fit_costs: list
+    anthropometry: dict | None
+    params: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------- bag
+
+
+def _body_shape_from_msg(msg):
+    from hmocap_ros.body import ENTITY_NAMES, BodyShape
+
+    names = list(msg.entity_names)
+    bone = np.ones(len(ENTITY_NAMES))
+    radial = np.ones(len(ENTITY_NAMES))
+    for k, n in enumerate(names):
+        if n in ENTITY_NAMES:
+            bone[ENTITY_NAMES.index(n)] = float(msg.bone_scale[k])
+            radial[ENTITY_NAMES.index(n)] = float(msg.radial_scale[k])
+    return BodyShape(bone, radial, float(msg.global_scale))
+
+
+def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None = None,
+                slop_ns: int = 0, fg_params: dict | None = None, out=None) -> BagFrames:
+    """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
+
+    max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
+    ForegroundParams fields to override (``learn_frames`` is set from the bag).
+    """
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.conversions import image_to_numpy, image_to_rgb
+    from hmocap_ros.io.msg_factory import stamp_to_ns
+    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
+
+    out = sys.stderr if out is None else out
+    if silhouettes not in ("fg", "gt"):
+        raise ValueError("silhouettes must be 'fg' or 'gt'")
+    with BagReader(bag) as reader:
+        available = reader.topics()
+        rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
+        if rig_msg is None:
+            raise ValueError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown")
+        rig = rig_from_msg(rig_msg)
+        if topics.GT_SKELETON not in available:
+            raise ValueError(f"{bag}: no {topics.GT_SKELETON}: nothing to score against")
+        truth_by_stamp = {}
+        joint_names: tuple = ()
+        for item in reader.messages([topics.GT_SKELETON]):
+            msg = item.msg
+            joint_names = tuple(str(n) for n in msg.joint_names)
+            truth_by_stamp[stamp_to_ns(msg.header.stamp)] = np.array(
+                [[p.x, p.y, p.z] for p in msg.positions], dtype=np.float64)
+        body_shape = None
+        if topics.GT_BODY_SHAPE in available:
+            shape_msg = reader.first(topics.GT_BODY_SHAPE)
+            if shape_msg is not None:
+                body_shape = _body_shape_from_msg(shape_msg)
+        names = rig.names
+        image_topics = [topics.camera_image(n) for n in names]
+        gt_topics = [topics.gt_silhouette(n) for n in names]
+        missing = [t for t in image_topics if t not in available]
+        if len(missing) == len(image_topics) and silhouettes == "fg":
+            raise ValueError(f"{bag}: none of the image topics {image_topics} is in the bag")
+        first_truth = min(truth_by_stamp) if truth_by_stamp else None
+        fallback = ""
+        if silhouettes == "fg":
+            n_empty = 0
+            for stamp, _ in reader.frame_sets([t for t in image_topics if t in available],
+                                              slop_ns, allow_partial=True, min_topics=1):
+                if first_truth is not None and stamp >= first_truth:
+                    break
+                n_empty += 1
+            if n_empty == 0:
+                fallback = ("the bag has no empty-room frames before the subject appears, so no "
+                            "background model can learn: using the ground-truth silhouettes")
+                silhouettes = "gt"
+                print(f"hmocap eval mocap: {fallback}", file=out)
+        use = gt_topics if silhouettes == "gt" else image_topics
+        use_present = [t for t in use if t in available]
+        if not use_present:
+            raise ValueError(f"{bag}: no {'silhouette' if silhouettes == 'gt' else 'image'} "
+                             f"topics ({use})")
+        bg = None
+        if silhouettes == "fg":
+            learn = int(np.clip(n_empty, 1, 100))
+            kw = dict(fg_params or {})
+            kw["learn_frames"] = learn
+            bg = [BackgroundModel(ForegroundParams(**kw)) for _ in names]
+        stamps, masks, truth = [], [], []
+        shape_hw: tuple = ()
+        seg_time = 0.0
+        n_truth = 0
+        for stamp, msgs in reader.frame_sets(use_present, slop_ns, allow_partial=True,
+                                             min_topics=1):
+            row = []
+            t0 = time.perf_counter()
+            for k, topic in enumerate(use):
+                msg = msgs.get(topic)
+                if msg is None:
+                    row.append(None)
+                    continue
+                try:
+                    if bg is not None:
+                        mask = bg[k].apply(image_to_rgb(msg), stamp)
+                    else:
+                        mask = image_to_numpy(msg)
+                        mask = mask[..., 0] if mask.ndim == 3 else mask
+                except ValueError as err:
+                    log.warning("frame %d, %s: %s (view dropped)", stamp, topic, err)
+                    row.append(None)
+                    continue
+                shape_hw = shape_hw or mask.shape[:2]
+                row.append(np.packbits(mask != 0) if mask.shape[:2] == shape_hw else None)
+            seg_time += time.perf_counter() - t0
+            stamps.append(stamp)
+            masks.append(row)
+            gt = truth_by_stamp.get(stamp)
+            truth.append(gt if gt is not None else np.full((len(joint_names), 3), np.nan))
+            if gt is not None:
+                n_truth += 1
+                if max_frames is not None and n_truth >= max_frames:
+                    break
+    return BagFrames(rig=rig, stamps=np.asarray(stamps, dtype=np.int64), masks=masks,
+                     truth=np.stack(truth) if truth else np.zeros((0, len(joint_names), 3)),
+                     joint_names=joint_names, body_shape=body_shape, silhouettes=silhouettes,
+                     fallback=fallback, segmentation_s=seg_time / max(len(stamps), 1),
+                     shape_hw=tuple(shape_hw))
+
+
+# ----------------------------------------------------------------------------- runs
+
+
+def _anthropometry(model, estimate, truth) -> dict | None:
+    from hmocap_ros.body import ENTITY_NAMES, entity_sizes
+
+    if estimate is None:
+        return None
+    est = entity_sizes(model, estimate)
+    out = {"estimated_m": dict(zip(ENTITY_NAMES, map(float, est))),
+           "global_scale": float(estimate.global_scale)}
+    if truth is not None:
+        true = entity_sizes(model, truth)
+        neutral = entity_sizes(model, None)
+        out["true_m"] = dict(zip(ENTITY_NAMES, map(float, true)))
+        out["error_mm"] = {n: 1000.0 * float(a - b) for n, a, b in zip(ENTITY_NAMES, est, true)}
+        out["mean_abs_error_mm"] = 1000.0 * float(np.abs(est - true).mean())
+        out["neutral_mean_abs_error_mm"] = 1000.0 * float(np.abs(neutral - true).mean())
+        out["true_global_scale"] = float(truth.global_scale)
+    return out
+
+
+def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int = 0,
+               layers: int = 0, overrides: dict | None = None, given_shape: bool = False,
+               progress=None) -> EvalResult:
+    """Track every frame set of ``frames`` with one method and score the frames with truth."""
+    from hmocap_ros.body import load_body_model
+    from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+
+    model = load_body_model("tracking")
+    params = TrackerParams(method=method, n_particles=particles, n_layers=layers,
+                           **(overrides or {}))
+    shape = frames.body_shape if given_shape else None
+    tracker = BodyTracker(model, frames.rig, params, np.random.default_rng(seed), shape=shape)
+    est_idx, true_idx = match_joints(model.joint_names, frames.joint_names)
+    names = [model.joint_names[i] for i in est_idx]
+    has_truth = frames.has_truth
+    estimates = np.full((len(frames.stamps), len(est_idx), 3), np.nan)
+    states, costs = [], []
+    times, stage, evals = [], {}, []
+    for k, stamp in enumerate(frames.stamps):
+        result = tracker.update(frames.mask_list(k), int(stamp))
+        if has_truth[k]:
+            states.append(result.state)
+            costs.append(None if not np.isfinite(result.fit_cost) else float(result.fit_cost))
+            times.append(result.timings["total"])
+            evals.append(result.timings["evaluations"])
+            for key in ("observe", "hull", "init", "filter", "skinning", "projection", "xor"):
+                stage[key] = stage.get(key, 0.0) + result.timings.get(key, 0.0)
+        if result.has_pose:
+            estimates[k] = result.joints[est_idx]
+        if progress is not None:
+            progress(k, len(frames.stamps), result)
+    errors = joint_errors(estimates[has_truth], frames.truth[has_truth][:, true_idx])
+    summary = summarize_errors(errors, names)
+    n = max(len(times), 1)
+    spf = float(np.sum(times) / n)
+    seg = frames.segmentation_s
+    return EvalResult(
+        method=method, summary=summary, seconds_per_frame=spf,
+        fps=1.0 / spf if spf > 0 else float("inf"),
+        fps_with_segmentation=1.0 / (spf + seg) if spf + seg > 0 else float("inf"),
+        evaluations_per_frame=float(np.mean(evals)) if evals else 0.0,
+        stage_seconds={k: v / n for k, v in stage.items()}, states=states, fit_costs=costs,
+        anthropometry=_anthropometry(model, tracker.shape, frames.body_shape),
+        params={f.name: getattr(params, f.name) for f in fields(params)})
+
+
+def evaluate(bag: str | Path, methods=("hpf-apo",), *, silhouettes: str = "fg",
+             max_frames: int | None = None, seed: int = 0, particles: int = 0, layers: int = 0,
+             overrides: dict | None = None, given_shape: bool = False,
+             fg_params: dict | None = None, out=None) -> dict:
+    """Evaluate ``methods`` on one bag; returns the JSON-ready report."""
+    out = sys.stderr if out is None else out
+    t0 = time.perf_counter()
+    frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out)
+    report = {
+        "bag": str(bag),
+        "silhouettes": frames.silhouettes,
+        "silhouettes_fallback": frames.fallback,
+        "frame_sets": int(len(frames.stamps)),
+        "frames_with_truth": int(frames.has_truth.sum()),
+        "cameras": list(frames.rig.names),
+        "image_size": list(frames.shape_hw[::-1]),
+        "segmentation_seconds_per_frame": frames.segmentation_s,
+        "seed": seed,
+        "given_shape": bool(given_shape),
+        "methods": {},
+    }
+    for method in methods:
+        res = run_method(frames, method, seed=seed, particles=particles, layers=layers,
+                         overrides=overrides, given_shape=given_shape)
+        s = res.summary
+        report["methods"][method] = {
+            "mean_mm": s["mean_mm"], "std_mm": s["std_mm"], "median_mm": s["median_mm"],
+            "frames": s["frames"], "frames_with_pose": s["frames_with_pose"],
+            "per_joint": s["per_joint"], "per_frame_mm": s["per_frame_mm"],
+            "seconds_per_frame": res.seconds_per_frame, "fps": res.fps,
+            "fps_with_segmentation": res.fps_with_segmentation,
+            "evaluations_per_frame": res.evaluations_per_frame,
+            "stage_seconds_per_frame": res.stage_seconds, "states": res.states,
+            "fit_costs": res.fit_costs, "anthropometry": res.anthropometry,
+            "params": res.params,
+        }
+        print(f"{Path(bag).name} {method:8s} mean {s['mean_mm']:.1f} mm (std {s['std_mm']:.1f}) "
+              f"over {s['frames_with_pose']}/{s['frames']} frames, "
+              f"{res.seconds_per_frame:.2f} s/frame", file=out)
+    report["wall_seconds"] = time.perf_counter() - t0
+    return report
+
+
+# ----------------------------------------------------------------------------- plot
+
+
+def plot_errors(report: dict, path: str | Path, title: str | None = None) -> None:
+    """Per-frame mean joint error over time, one line per method (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3.5), dpi=120)
+    for method, res in report["methods"].items():
+        y = np.array([np.nan if v is None else v for v in res["per_frame_mm"]])
+        x = np.arange(len(y)) / 25.0
+        ax.plot(x, y, label=f"{method} (mean {res['mean_mm']:.0f} mm)")
+    ax.set_xlabel("time since the subject appeared (s, 25 fps)")
+    ax.set_ylabel("mean 3D joint error (mm)")
+    ax.set_title(title or Path(report["bag"]).name)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def _overrides(items) -> dict:
+    from hmocap_ros.tracking.body_tracker import TrackerParams
+
+    known = {f.name: f for f in fields(TrackerParams)}
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise ValueError(f"--param expects KEY=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        if key not in known:
+            raise ValueError(f"unknown tracker parameter {key!r}; known: {sorted(known)}")
+        default = known[key].default
+        if isinstance(default, bool):
+            out[key] = value.lower() in ("1", "true", "yes", "on")
+        else:
+            out[key] = type(default)(value)
+    return out
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="bag (.mcap or rosbag2 folder) in the documented layout")
+    parser.add_argument("--method", action="append", choices=METHODS,
+                        help="tracker method; repeat to compare several (default hpf-apo)")
+    parser.add_argument("--compare", action="store_true", help="run apf, hpf and hpf-apo")
+    parser.add_argument("--particles", type=int, default=0,
+                        help="particles per layer (default: the method's, ~3500 evaluations)")
+    parser.add_argument("--layers", type=int, default=0, help="APF layers (default 14)")
+    parser.add_argument("--frames", type=int, default=None,
+                        help="score at most this many frames with ground truth")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the tracker (default 0)")
+    parser.add_argument("--silhouettes", choices=("fg", "gt"), default="fg",
+                        help="fg: segment the images (default); gt: the bag's exact silhouettes")
+    parser.add_argument("--given-shape", action="store_true",
+                        help="track with the bag's true body shape (no anthropometry estimation)")
+    parser.add_argument("--param", action="append", metavar="KEY=VALUE",
+                        help="override a TrackerParams field (repeatable)")
+    parser.add_argument("--threads", type=int, default=None, help="numba threads")
+    parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
+    parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
+
+
+def main_from_args(ns: argparse.Namespace) -> int:
+    if ns.threads:
+        import numba
+
+        numba.set_num_threads(ns.threads)
+    methods = list(METHODS) if ns.compare else (ns.method or ["hpf-apo"])
+    methods = list(dict.fromkeys(methods))
+    try:
+        overrides = _overrides(ns.param)
+        report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
+                          seed=ns.seed, particles=ns.particles, layers=ns.layers,
+                          overrides=overrides, given_shape=ns.given_shape)
+    except (ValueError, OSError, RuntimeError) as err:
+        print(f"hmocap eval mocap: {err}", file=sys.stderr)
+        return 2
+    if ns.json:
+        Path(ns.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(ns.json).write_text(json.dumps(report, indent=1, default=_json_default))
+    if ns.plot:
+        plot_errors(report, ns.plot)
+    return 0
+
+
+def _json_default(obj):
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, tuple):
+        return list(obj)
+    return str(obj)

@@ -1,0 +1,447 @@
+"""Markerless body tracker: foreground masks of a calibrated rig in, a 3D body pose out.
+
+One :class:`BodyTracker` per rig; ``update(masks, stamp_ns)`` per synchronised frame set. No
+rclpy: the ``body_tracker`` node, the bag evaluator (``hmocap eval mocap``) and the tests call
+the same method. States:
+
+``searching``
+    no person: too little foreground in too few views, or no visual hull. No pose.
+``initialising``
+    a person appeared: visual hull, Powell fit and the layered anthropometry estimation of
+    thesis sec. 2.3 (:mod:`.anthropometry_estimation`) over the first ``shape_frames`` frames
+    (or a pose-only start when the shape is given or already known). A pose is reported.
+``tracking``
+    layered particle filtering per frame with the chosen schedule (:mod:`.body_layers`: APF,
+    HPF, or HPF with approximate partitioning of observations, sec. 2.4) and the silhouette
+    XOR weighting (:mod:`.body_fitness`, eq. 2.8 / 2.15).
+``lost``
+    the fit cost of the estimate stayed above ``lost_cost`` for ``lost_frames`` frames; the
+    next frame starts again from the visual hull (keeping the estimated shape).
+
+Robustness: a mask that is None or of the wrong size drops that view for the frame (the cost
+sums over the others); an empty frame set resets to ``searching``; weighting errors (no
+finite cost) count as a collapsed fit. The estimated shape is kept while the person is away
+for fewer than ``forget_shape_frames`` frames, then estimated anew for the next person.
+
+Inter-frame prediction: the thesis' kernel is a zero-mean Gaussian. Optionally
+(``root_velocity_gain`` > 0) the particles' root position is shifted by that fraction of the
+last frame-to-frame displacement of the estimate before the filter runs (a constant-velocity
+prior on the pelvis only), which lets the torso layer follow a walking person.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator, EstimationParams
+from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
+from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
+from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
+from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths, layer_boxes,
+                                                   layer_vertex_indices, part_boxes_3d,
+                                                   reach_box)
+from hmocap_ros.tracking.visual_hull import room_bounds, visual_hull
+
+__all__ = ["STATES", "BodyTracker", "TrackResult", "TrackerParams"]
+
+log = logging.getLogger(__name__)
+
+STATES = ("searching", "initialising", "tracking", "lost")
+
+
+def _param(default, description: str):
+    return dataclasses.field(default=default, metadata={"description": description,
+                                                        "read_only": False})
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Tunables of :class:`BodyTracker` (each field's metadata has a ``description`` for the
+    ROS node's parameter declarations). Defaults: 4 cameras at 640x480, 25 fps."""
+
+    method: str = _param("hpf-apo", "Layered filter: 'apf' (annealing, 14 x 250), 'hpf' "
+                                    "(hierarchical, 7 x 500) or 'hpf-apo' (hierarchical with "
+                                    "approximate partitioning of observations, 8 x 438).")
+    n_particles: int = _param(0, "Particles per layer; 0 uses the method's default (about 3500 "
+                                 "weight evaluations per frame).")
+    n_layers: int = _param(0, "Layers of the APF; 0 uses the default (14). The hierarchical "
+                              "methods have one layer per body part.")
+    working_scale: float = _param(0.25, "Image scale at which silhouettes are compared "
+                                        "(0.25: 640x480 -> 160x120).")
+    sigma_scale: float = _param(1.0, "Factor on the per-DoF inter-frame motion std sigma0 "
+                                     "(motion statistics, see body_layers).")
+    survival_rate: float = _param(0.5, "Particle survival rate that sets each layer's annealing "
+                                       "exponent beta (eq. 2.9).")
+    apf_alpha: float = _param(0.7, "APF variance decay rate per layer (eq. 2.10).")
+    refine_nu: float = _param(0.25, "HPF decay of the re-diffusion of already filtered blocks "
+                                    "(alg. 3); 0 disables it.")
+    jump_fraction: float = _param(0.1, "Fraction of the particles that each kernel diffuses "
+                                       "with jump_scale times the std (a scale mixture that "
+                                       "lets joints leave a wrong mode of the silhouette cost); "
+                                       "0: plain Gaussian.")
+    jump_scale: float = _param(4.0, "Std factor of the wide component of the kernel.")
+    reseed_fraction: float = _param(0.1, "Fraction of the particles whose limb DoFs being "
+                                          "diffused are drawn uniformly within the joint "
+                                          "limits (lets a lost limb be found again).")
+    velocity_gain: float = _param(0.0, "Fraction of the last frame-to-frame change of every "
+                                       "DoF of the estimate added to the particles before "
+                                       "filtering (a damped constant-velocity prediction; 0: "
+                                       "zero-velocity Gaussian as in the thesis).")
+    arm_chain: bool = _param(True, "Hierarchical methods: each shoulder layer samples its "
+                                    "elbow too (the elbow layer then refines it).")
+    box_reach: float = _param(1.05, "Observation boxes of the limb layers: half-size as a "
+                                    "multiple of the length of the chain the layer moves, "
+                                    "around the joint it rotates (eq. 2.15); 0: boxes around "
+                                    "the particles' parts instead.")
+    box_spread: float = _param(2.0, "Observation boxes around parts (torso layer): standard "
+                                    "deviations of the particles' part positions added "
+                                    "around the mean part.")
+    box_margin: float = _param(0.05, "Observation boxes: margin in metres around the parts.")
+    root_velocity_gain: float = _param(0.0, "Fraction of the last frame-to-frame pelvis "
+                                            "displacement added to the particles before "
+                                            "filtering (0: zero-velocity Gaussian as in the "
+                                            "thesis).")
+    estimator: str = _param("mean", "Pose estimate: 'mean' (weighted mean of the final layer) "
+                                    "or 'max' (its best particle).")
+    min_views: int = _param(2, "Views with enough foreground needed to start (and to carve "
+                               "the visual hull).")
+    min_foreground: int = _param(40, "Foreground pixels at the working resolution for a view "
+                                     "to count as seeing a person.")
+    voxel_size: float = _param(0.03, "Voxel edge (m) of the fine visual hull grid.")
+    min_hull_height: float = _param(0.9, "Smallest hull top (m) accepted as a person.")
+    hull_max_misses: int = _param(0, "Views in which a hull voxel may project onto background "
+                                     "(tolerates holes in the foreground).")
+    estimate_shape: bool = _param(True, "Estimate the anthropometry at start (sec. 2.3); "
+                                        "False keeps the model's proportions, scaled to the "
+                                        "visual hull.")
+    shape_frames: int = _param(4, "Frames of layered filtering over shape and pose at start.")
+    shape_particles: int = _param(250, "Particles per layer of the start-up filter.")
+    shape_working_scale: float = _param(0.5, "Image scale of the start-up (anthropometry) "
+                                             "weighting.")
+    rejection_tau: float = _param(0.7, "Acceptance ratio tau of the rejection-sampling shape "
+                                       "kernel (eq. 2.13).")
+    rejection_trials: int = _param(8, "Trials of the rejection-sampling kernel per layer.")
+    lost_cost: float = _param(0.6, "Mean per-view silhouette XOR / foreground (eq. 2.8 divided "
+                                   "by the views) above which a frame counts as a failed fit.")
+    lost_frames: int = _param(8, "Consecutive failed fits after which the track is lost and "
+                                 "restarts from the visual hull.")
+    forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
+                                          "shape is forgotten.")
+
+    def __post_init__(self):
+        checks = [
+            (self.method in METHODS, f"method must be one of {METHODS}"),
+            (self.n_particles >= 0 and self.n_layers >= 0, "n_particles, n_layers must be >= 0"),
+            (0.0 < self.working_scale <= 1.0, "working_scale must lie in (0, 1]"),
+            (0.0 < self.shape_working_scale <= 1.0, "shape_working_scale must lie in (0, 1]"),
+            (self.sigma_scale > 0.0, "sigma_scale must be > 0"),
+            (0.0 < self.survival_rate <= 1.0, "survival_rate must lie in (0, 1]"),
+            (0.0 < self.apf_alpha <= 1.0, "apf_alpha must lie in (0, 1]"),
+            (0.0 <= self.refine_nu < 1.0, "refine_nu must lie in [0, 1)"),
+            (0.0 <= self.jump_fraction <= 1.0 and self.jump_scale >= 1.0,
+             "need 0 <= jump_fraction <= 1 and jump_scale >= 1"),
+            (0.0 <= self.reseed_fraction <= 1.0, "reseed_fraction must lie in [0, 1]"),
+            (0.0 <= self.velocity_gain <= 1.0 and 0.0 <= self.root_velocity_gain <= 1.0,
+             "velocity gains must lie in [0, 1]"),
+            (self.estimator in ("mean", "max"), "estimator must be 'mean' or 'max'"),
+            (self.min_views >= 1, "min_views must be >= 1"),
+            (0.0 < self.rejection_tau <= 1.0, "rejection_tau must lie in (0, 1]"),
+            (self.shape_frames >= 1 and self.shape_particles >= 2, "shape_frames >= 1, "
+                                                                   "shape_particles >= 2"),
+            (self.lost_frames >= 1, "lost_frames must be >= 1"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"TrackerParams: {message}")
+
+
+@dataclass(frozen=True, eq=False)
+class TrackResult:
+    """What one ``update`` produced.
+
+    state: one of :data:`STATES` after this frame.
+    params: (D,) pose parameters (tracking DoF set) or None; joints: (J, 3) joint positions in
+    metres in the room frame or None; joint_names: their names; shape: the body shape used.
+    fit_cost: eq. 2.8 cost of the estimate divided by the number of views (NaN without pose).
+    views: rig indices used; dropped: rig indices whose mask was missing or invalid.
+    layers: per-layer diagnostics (ESS, beta, times) of the filter run, if one ran.
+    timings: seconds per stage ("total", "observe", "hull", "init", "filter", "skinning",
+    "projection", "xor") and "evaluations".
+    """
+
+    stamp_ns: int
+    state: str
+    params: np.ndarray | None = None
+    joints: np.ndarray | None = None
+    joint_names: tuple = ()
+    shape: BodyShape | None = None
+    fit_cost: float = float("nan")
+    views: tuple = ()
+    dropped: tuple = ()
+    layers: tuple = ()
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def has_pose(self) -> bool:
+        return self.joints is not None
+
+    @property
+    def ess(self) -> tuple:
+        return tuple(d.ess for d in self.layers)
+
+
+class BodyTracker:
+    """Layered-filter body tracker for one rig (see the module docstring).
+
+    model: ``load_body_model("tracking")``. rig: the calibrated cameras (a Rig or list of
+    PinholeCamera at the masks' resolution). params: :class:`TrackerParams`. rng: the only
+    source of randomness (seed it for repeatable runs). shape: a known body shape (skips the
+    anthropometry estimation).
+    """
+
+    def __init__(self, model, rig: Sequence, params: TrackerParams | None = None,
+                 rng: np.random.Generator | None = None, shape: BodyShape | None = None):
+        self.model = model
+        self.skel = model.skeleton
+        self.cameras = tuple(rig)
+        if not self.cameras:
+            raise ValueError("the rig has no cameras")
+        self.params = params or TrackerParams()
+        self.rng = rng if rng is not None else np.random.default_rng()
+        self.given_shape = shape
+        p = self.params
+        self.fitness = SilhouetteFitness(model, self.cameras, p.working_scale)
+        self.shape_fitness = (self.fitness if p.shape_working_scale == p.working_scale else
+                              SilhouetteFitness(model, self.cameras, p.shape_working_scale))
+        self.room = room_bounds(self.cameras)
+        self.schedule: BodySchedule = make_schedule(
+            p.method, self.skel, n_particles=p.n_particles or None, n_layers=p.n_layers or None,
+            sigma_scale=p.sigma_scale, survival_rate=p.survival_rate, apf_alpha=p.apf_alpha,
+            refine_nu=p.refine_nu, jump_fraction=p.jump_fraction, jump_scale=p.jump_scale,
+            reseed_fraction=p.reseed_fraction, arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
+        self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
+                                for blocks, boxed in zip(self.schedule.layer_blocks,
+                                                         self.schedule.boxed)]
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+
+    def reset(self, forget_shape: bool = True) -> None:
+        """Back to ``searching``; optionally forget the estimated shape."""
+        self.state = "searching"
+        self.particles: np.ndarray | None = None
+        self.estimate: np.ndarray | None = None
+        self._previous_estimate: np.ndarray | None = None
+        self._estimator: AnthropometryEstimator | None = None
+        self._bad_frames = 0
+        self._absent_frames = 0
+        if forget_shape:
+            self.shape: BodyShape | None = self.given_shape
+
+    @property
+    def shape_known(self) -> bool:
+        return self.shape is not None
+
+    # ------------------------------------------------------------------ weighting
+
+    def weight_fn(self, obs: Observation, shape: BodyShape):
+        """The schedule's weighting: eq. 2.8, or eq. 2.15 in the layer's observation boxes."""
+        rest = self.fitness.rest(shape)
+        sched, p = self.schedule, self.params
+        lengths = chain_lengths(self.model, rest)
+
+        def weight(particles: np.ndarray, layer: int) -> np.ndarray:
+            verts, joints = self.fitness.pose(particles, rest)
+            uv = self.fitness.project(verts, obs)
+            boxes = None
+            if sched.boxed[layer]:
+                block = sched.layer_blocks[layer][0]
+                if block in LAYER_ANCHORS and p.box_reach > 0:
+                    anchor = joints[:, self.model.joint_index(LAYER_ANCHORS[block][0])]
+                    lo, hi = reach_box(anchor.mean(axis=0), lengths[block], p.box_reach,
+                                       p.box_margin)
+                else:
+                    lo, hi = part_boxes_3d(verts, self._layer_vertices[layer], p.box_spread,
+                                           p.box_margin)
+                boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
+            return self.fitness.costs_from_uv(uv, obs, boxes)
+
+        return weight
+
+    # ------------------------------------------------------------------ update
+
+    def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int) -> TrackResult:
+        """Process one frame set: one foreground mask per rig camera (None where missing)."""
+        t_start = time.perf_counter()
+        self.fitness.times.reset()
+        if self.shape_fitness is not self.fitness:
+            self.shape_fitness.times.reset()
+        timings = {"observe": 0.0, "hull": 0.0, "init": 0.0, "filter": 0.0}
+        masks = list(masks) if masks is not None else [None] * len(self.cameras)
+        if len(masks) != len(self.cameras):
+            log.error("expected %d masks, got %d: frame skipped", len(self.cameras), len(masks))
+            masks = (masks + [None] * len(self.cameras))[:len(self.cameras)]
+        t0 = time.perf_counter()
+        obs = self.fitness.observe(masks, stamp_ns)
+        timings["observe"] = time.perf_counter() - t0
+        if obs.dropped:
+            log.debug("frame %d: views %s missing or invalid", stamp_ns, obs.dropped)
+        seeing = int(np.sum(obs.counts >= self.params.min_foreground))
+        result_layers: tuple = ()
+        if seeing == 0 or (self.state in ("searching", "lost") and seeing < self.params.min_views):
+            self._person_absent()
+            return self._result(stamp_ns, obs, t_start, timings)
+        self._absent_frames = 0
+        if self.state in ("searching", "lost"):
+            t0 = time.perf_counter()
+            started = self._start(masks, obs, stamp_ns)
+            timings["hull"] = time.perf_counter() - t0
+            if not started:
+                self.state = "searching"
+                return self._result(stamp_ns, obs, t_start, timings)
+        if self.state == "initialising":
+            t0 = time.perf_counter()
+            shape_obs = (obs if self.shape_fitness is self.fitness
+                         else self.shape_fitness.observe(masks, stamp_ns))
+            diags = self._estimator.step(shape_obs)
+            result_layers = diags[0].layers if diags else ()
+            if self._estimator.done:
+                self._finish_start()
+            else:
+                best = self._estimator.best()
+                self.estimate = best.estimate[:self.skel.n_dofs].copy()
+            timings["init"] = time.perf_counter() - t0
+            fit_cost = self._fit_cost(obs)
+            return self._result(stamp_ns, obs, t_start, timings, fit_cost, result_layers)
+        # tracking
+        t0 = time.perf_counter()
+        try:
+            self._predict()
+            res = lpf_run(self.particles, self.schedule.filter, self.weight_fn(obs, self.shape),
+                          self.rng)
+        except ValueError as err:
+            log.warning("frame %d: filter failed (%s); restarting from the visual hull",
+                        stamp_ns, err)
+            self.state = "lost"
+            self.particles = None
+            return self._result(stamp_ns, obs, t_start, timings)
+        timings["filter"] = time.perf_counter() - t0
+        self.particles = res.particles
+        self._previous_estimate = self.estimate
+        if self.params.estimator == "max":
+            self.estimate = res.weighted_particles[int(np.argmax(res.weights))].copy()
+        else:
+            self.estimate = res.estimate.copy()
+        fit_cost = self._fit_cost(obs)
+        if not np.isfinite(fit_cost) or fit_cost > self.params.lost_cost:
+            self._bad_frames += 1
+        else:
+            self._bad_frames = 0
+        if self._bad_frames >= self.params.lost_frames:
+            log.info("frame %d: fit cost %.2f above %.2f for %d frames: track lost", stamp_ns,
+                     fit_cost, self.params.lost_cost, self._bad_frames)
+            self.state = "lost"
+            self._bad_frames = 0
+        return self._result(stamp_ns, obs, t_start, timings, fit_cost, res.layers)
+
+    # ------------------------------------------------------------------ steps
+
+    def _person_absent(self) -> None:
+        self._absent_frames += 1
+        forget = self._absent_frames >= self.params.forget_shape_frames
+        if self.state != "searching" or forget:
+            self.reset(forget_shape=forget)
+
+    def _start(self, masks, obs: Observation, stamp_ns: int) -> bool:
+        """Visual hull and Powell fit; True when a person was found and the start-up began."""
+        p = self.params
+        hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
+                           fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
+                           max_misses=p.hull_max_misses)
+        if hull is None or hull.top < p.min_hull_height:
+            return False
+        shape_obs = (obs if self.shape_fitness is self.fitness
+                     else self.shape_fitness.observe(masks, stamp_ns))
+        est_params = EstimationParams(
+            n_particles=p.shape_particles,
+            frames=p.shape_frames if (p.estimate_shape and self.shape is None) else 1,
+            estimate_shape=p.estimate_shape, rejection_tau=p.rejection_tau,
+            rejection_trials=p.rejection_trials, survival_rate=p.survival_rate)
+        self._estimator = AnthropometryEstimator(self.shape_fitness, est_params, self.rng,
+                                                 room=self.room, fixed_shape=self.shape)
+        self._estimator.start(shape_obs, hull)
+        best = min(self._estimator.hypotheses,
+                   key=lambda h: float(self.shape_fitness.costs(
+                       h.estimate[None, :self.skel.n_dofs], shape_obs,
+                       self.shape if self.shape is not None else None)[0]))
+        self.estimate = best.estimate[:self.skel.n_dofs].copy()
+        self._previous_estimate = None
+        self.state = "initialising"
+        return True
+
+    def _finish_start(self) -> None:
+        est = self._estimator
+        best = est.best()
+        if self.shape is None:
+            self.shape = est.shape()
+        self.estimate = best.estimate[:self.skel.n_dofs].copy()
+        n = self.schedule.n_particles
+        pose = est.pose_particles()
+        idx = self.rng.choice(len(pose), size=n, replace=len(pose) < n)
+        self.particles = pose[idx]
+        self._previous_estimate = None
+        self._estimator = None
+        self._bad_frames = 0
+        self.state = "tracking"
+
+    def _predict(self) -> None:
+        if self._previous_estimate is None or self.estimate is None:
+            return
+        step = self.estimate - self._previous_estimate
+        gain = np.full(self.skel.n_dofs, self.params.velocity_gain)
+        gain[self.skel.translation_dofs] = max(self.params.root_velocity_gain,
+                                               self.params.velocity_gain)
+        if np.any(gain > 0):
+            self.particles += gain * step
+
+    def _fit_cost(self, obs: Observation) -> float:
+        if self.estimate is None or obs.n_views == 0:
+            return float("nan")
+        shape = self.shape if self.shape is not None else (
+            self._estimator.shape() if self._estimator is not None else None)
+        cost = self.fitness.costs(self.estimate[None], obs, shape)[0]
+        return float(self.fitness.mean_view_cost(cost, obs))
+
+    def _current_shape(self) -> BodyShape | None:
+        if self.shape is not None:
+            return self.shape
+        if self._estimator is not None:
+            return self._estimator.shape()
+        return None
+
+    def _result(self, stamp_ns: int, obs: Observation, t_start: float, timings: dict,
+                fit_cost: float = float("nan"), layers: tuple = ()) -> TrackResult:
+        times = self.fitness.times
+        extra = self.shape_fitness.times if self.shape_fitness is not self.fitness else None
+        timings = dict(timings)
+        timings["skinning"] = times.skinning + (extra.skinning if extra else 0.0)
+        timings["projection"] = times.projection + (extra.projection if extra else 0.0)
+        timings["xor"] = times.xor + (extra.xor if extra else 0.0)
+        timings["evaluations"] = times.evaluations + (extra.evaluations if extra else 0)
+        timings["total"] = time.perf_counter() - t_start
+        params = joints = None
+        shape = self._current_shape()
+        if self.state in ("initialising", "tracking") and self.estimate is not None:
+            params = self.estimate.copy()
+            _, j = self.fitness.pose(params[None], shape)
+            joints = np.asarray(j[0], dtype=np.float64)
+        return TrackResult(stamp_ns=int(stamp_ns), state=self.state, params=params,
+                           joints=joints, joint_names=tuple(self.model.joint_names), shape=shape,
+                           fit_cost=fit_cost, views=tuple(int(v) for v in obs.views),
+                           dropped=tuple(obs.dropped), layers=tuple(layers), timings=timings)

@@ -1,0 +1,350 @@
+"""Body tracking (thesis sec. 2.2-2.4): XOR weighting, observation boxes, visual hull,
+anthropometry estimation, layer schedules and the tracker on synthetic multi-view scenes.
+
+Scenes are built here with known ground truth: a retargeted CMU clip poses the body model
+(optionally with a sampled body shape), and exact silhouettes are rendered in the cameras of
+``config/rig_example.yaml`` scaled to 320x240 (working resolution 160x120). Fast: small
+particle budgets, a few frames.
+"""
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hmocap_ros.body import (BodyShape, entity_sizes, load_body_model, local_rotations_to_pose,
+                             rest_pose)
+from hmocap_ros.render import project_batch, render_silhouettes
+from hmocap_ros.render.reference import silhouette_reference
+from hmocap_ros.rig import Rig, load_rig
+from hmocap_ros.sim.retarget import load_motion, place_in_room
+from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_PARAMS, AnthropometryEstimator,
+                                                          EstimationParams, shape_from_state,
+                                                          shape_to_state)
+from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
+from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, body_sigma0, clip_body_pose,
+                                             make_schedule)
+from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
+from hmocap_ros.tracking.kernels import rejection_kernel
+from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
+                                                   layer_vertex_indices, part_boxes_3d)
+from hmocap_ros.tracking.visual_hull import room_bounds, visual_hull
+
+ROOT = Path(__file__).resolve().parents[1]
+CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"
+STAMP0 = 1_700_000_000_000_000_000
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_body_model("tracking")
+
+
+@pytest.fixture(scope="module")
+def rig():
+    full = load_rig(ROOT / "config" / "rig_example.yaml")
+    return Rig(full.frame_id, tuple(c.scaled(0.5) for c in full))
+
+
+def camera_arrays(rig):
+    K = np.stack([c.K for c in rig])
+    R = np.stack([c.R for c in rig])
+    t = np.stack([c.t for c in rig])
+    D = np.stack([np.pad(np.ravel(c.D), (0, 8))[:8] for c in rig])
+    return K, R, t, D
+
+
+def render_masks(model, rig, params, shape=None):
+    """Exact silhouettes (F, M, H, W) uint8 0/255 and joints (F, J, 3) of poses (F, D)."""
+    verts, joints = model.pose(np.atleast_2d(params), shape)
+    uv, _ = project_batch(verts, *camera_arrays(rig))
+    masks = render_silhouettes(uv, model.faces, rig[0].height, rig[0].width)
+    return masks * np.uint8(255), joints
+
+
+def clip_poses(model, start, n, shape=None, position=(0.3, -0.2), heading=0.7):
+    from hmocap_ros.body.anthropometry import apply_shape
+
+    rest = apply_shape(model, shape)
+    motion = load_motion(CLIP, rest.joints, model.parents, model.joint_names, rest.end_sites,
+                         model.end_site_parents, model.end_site_names, fps=25)
+    motion = place_in_room(motion, position, heading)
+    sl = slice(start, start + n)
+    return local_rotations_to_pose(model.skeleton, motion.local_rotations[sl],
+                                   motion.root_translation[sl])
+
+
+def subject_shape():
+    """A subject visibly unlike the model: taller, long legs, short forearms, big head."""
+    shape = BodyShape.neutral()
+    for name, bone in (("legs", 1.06), ("lowerarms", 0.9), ("head", 1.1), ("upperarms", 1.06)):
+        shape = shape.with_entity(name, bone=bone)
+    return BodyShape(shape.bone_scale, shape.radial_scale, 1.05)
+
+
+# ----------------------------------------------------------------------------- weighting
+
+
+def test_downsample_mask_by_area():
+    mask = np.zeros((8, 8), np.uint8)
+    mask[0:2, 0:2] = 255  # a full 2x2 block -> one pixel
+    mask[4, 4] = 7  # a quarter of a block -> nothing
+    mask[6:8, 4:5] = 1  # half a block -> foreground (threshold 1/2 inclusive)
+    out = downsample_mask(mask, 4, 4)
+    assert out.dtype == np.uint8 and out.shape == (4, 4)
+    assert out[0, 0] == 1 and out[2, 2] == 0 and out[3, 2] == 1
+    assert out.sum() == 2
+
+
+def test_xor_cost_matches_reference_rasteriser(model, rig):
+    """Eq. 2.8 and eq. 2.15 costs against the slow exact rasteriser, pixel for pixel."""
+    rng = np.random.default_rng(0)
+    truth = clip_poses(model, 40, 1)[0]
+    masks, _ = render_masks(model, rig, truth)
+    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
+    obs = fitness.observe(list(masks[0]))
+    particles = truth + rng.normal(0.0, 0.08, (3, truth.size)) * (np.arange(truth.size) >= 3)
+    verts, _ = fitness.pose(particles)
+    uv = fitness.project(verts, obs)
+    boxes = np.array([[10, 5, 90, 100], [30, 0, 160, 70], [0, 20, 70, 120], [50, 50, 51, 60]])
+    counts = fitness.view_xor(uv, obs)
+    boxed = fitness.view_xor(uv, obs, boxes)
+    for b in range(len(particles)):
+        for m in range(obs.n_views):
+            ref = silhouette_reference(uv[b, m], model.faces, obs.height, obs.width)
+            diff = ref != obs.masks[m]
+            assert counts[b, m] == diff.sum()
+            x0, y0, x1, y1 = boxes[m]
+            assert boxed[b, m] == diff[y0:y1, x0:x1].sum()
+    cost = fitness.costs(particles, obs)
+    np.testing.assert_allclose(cost, (counts / np.maximum(obs.counts, fitness.min_count)).sum(1))
+    areas = (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+    np.testing.assert_allclose(fitness.costs(particles, obs, boxes=boxes),
+                               (boxed / np.maximum(areas, fitness.min_count)).sum(1))
+    # the true pose fits far better than the perturbed ones
+    assert fitness.costs(truth[None], obs)[0] < cost.min()
+
+
+def test_missing_and_wrong_size_views_are_dropped(model, rig):
+    truth = rest_pose(model.skeleton)
+    masks, _ = render_masks(model, rig, truth)
+    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
+    views = list(masks[0])
+    views[1] = None
+    views[3] = np.zeros((7, 9), np.uint8)
+    obs = fitness.observe(views)
+    assert obs.views.tolist() == [0, 2] and obs.dropped == (1, 3)
+    assert obs.masks.shape == (2, 120, 160)
+    full = fitness.observe(list(masks[0]))
+    c2 = fitness.costs(truth[None] + 0.05, obs)
+    c4 = fitness.costs(truth[None] + 0.05, full)
+    assert 0 < c2[0] < c4[0]
+
+
+# ----------------------------------------------------------------------------- boxes
+
+
+def test_observation_boxes_contain_the_layers_projected_parts(model, rig):
+    rng = np.random.default_rng(1)
+    truth = clip_poses(model, 10, 1)[0]
+    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
+    masks, _ = render_masks(model, rig, truth)
+    obs = fitness.observe(list(masks[0]))
+    particles = clip_body_pose(model.skeleton,
+                               truth + rng.normal(0, 1, (200, truth.size)) * body_sigma0(model.skeleton))
+    verts, _ = fitness.pose(particles)
+    uv = fitness.project(verts, obs)
+    areas = {}
+    for block in BODY_BLOCKS:
+        idx = layer_vertex_indices(model, (block,))
+        joints = {model.joint_index(j) for j in LAYER_PARTS[block]}
+        assert len(idx) and set(np.asarray(model.vertex_part)[idx]) <= joints
+        lo, hi = part_boxes_3d(verts, idx, spread=2.0, margin=0.05)
+        boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
+        px = np.floor(uv[:, :, idx] + 0.5)  # pixel of each part vertex, per particle and view
+        inside = ((px[..., 0] >= boxes[None, :, None, 0]) & (px[..., 0] < boxes[None, :, None, 2])
+                  & (px[..., 1] >= boxes[None, :, None, 1]) & (px[..., 1] < boxes[None, :, None, 3]))
+        assert inside.mean() > 0.99, block  # the parts of (nearly) every particle
+        mean_uv = uv[:, :, idx].mean(axis=0)
+        assert np.all((mean_uv[..., 0] >= boxes[:, None, 0]) & (mean_uv[..., 0] < boxes[:, None, 2]))
+        areas[block] = ((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])).sum()
+    # a forearm's box is smaller than its whole arm's, which is smaller than the image
+    assert areas["l_elbow"] < areas["l_shoulder"] < 4 * obs.width * obs.height
+
+
+# ----------------------------------------------------------------------------- visual hull
+
+
+def test_visual_hull_centroid_height_and_heading(model, rig):
+    shape = subject_shape()
+    params = model.rest_pose(shape)
+    params[model.skeleton.translation_dofs[[0, 2]]] = [0.6, -0.4]
+    params[model.skeleton.dof_index("root_yaw")] = 0.5
+    masks, _ = render_masks(model, rig, params, shape)
+    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
+    obs = fitness.observe(list(masks[0]))
+    hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, room_bounds(rig))
+    verts, _ = model.pose(params, shape)
+    top = verts[:, 1].max()
+    assert hull is not None
+    assert abs(hull.top - top) < 0.04
+    # the volume centroid of a standing person is near the pelvis
+    assert np.linalg.norm(hull.centroid[[0, 2]] - [0.6, -0.4]) < 0.05
+    assert abs(hull.centroid[1] - params[model.skeleton.translation_dofs[1]]) < 0.1
+    err = (hull.heading - 0.5 + np.pi / 2) % np.pi - np.pi / 2  # heading is known mod pi
+    assert abs(err) < np.deg2rad(20)
+    empty = fitness.observe([np.zeros_like(m) for m in masks[0]])
+    assert visual_hull(empty.masks, empty.K, empty.R, empty.t, empty.D, room_bounds(rig)) is None
+
+
+# ----------------------------------------------------------------------------- anthropometry
+
+
+def test_shape_state_round_trip():
+    shape = subject_shape()
+    state = shape_to_state(shape)
+    assert state.shape == (len(SHAPE_PARAMS),)
+    back = shape_from_state(state)
+    np.testing.assert_allclose(back.bone_scale, shape.bone_scale)
+    assert back.global_scale == pytest.approx(1.05)
+    assert shape_from_state(np.tile(state, (3, 1))).batched
+
+
+def test_rejection_kernel_eq_2_13():
+    rng = np.random.default_rng(2)
+    x = np.zeros((400, 2))
+    x[:, 1] = rng.normal(0, 1, 400)
+
+    def log_prior(p):  # a Gaussian prior on dimension 1 only
+        return -0.5 * p[:, 1] ** 2
+
+    before = log_prior(x)
+    out = rejection_kernel(x.copy(), np.array([0.5, 0.8]), rng, log_prior=log_prior, tau=0.7,
+                           max_trials=6, prior_dims=np.array([1]))
+    after = log_prior(out)
+    moved = out[:, 1] != x[:, 1]
+    assert moved.mean() > 0.5
+    assert np.all(after[moved] >= np.log(0.7) + before[moved] - 1e-12)
+    assert np.all(out[:, 0] != 0.0)  # the unconstrained dimension always diffuses
+
+
+def test_anthropometry_estimation_reduces_entity_size_error(model, rig):
+    shape = subject_shape()
+    params = clip_poses(model, 0, 2, shape)
+    masks, _ = render_masks(model, rig, params, shape)
+    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
+    obs = [fitness.observe(list(m)) for m in masks]
+    hull = visual_hull(obs[0].masks, obs[0].K, obs[0].R, obs[0].t, obs[0].D, room_bounds(rig))
+    est = AnthropometryEstimator(fitness, EstimationParams(n_particles=120, frames=2),
+                                 np.random.default_rng(0), room=room_bounds(rig))
+    est.start(obs[0], hull)
+    for o in obs:
+        est.step(o)
+    true = entity_sizes(model, shape)
+    err_est = np.abs(entity_sizes(model, est.shape()) - true).mean()
+    err_neutral = np.abs(entity_sizes(model, None) - true).mean()
+    assert err_est < 0.75 * err_neutral
+    assert est.shape().global_scale == pytest.approx(1.05, abs=0.03)
+
+
+# ----------------------------------------------------------------------------- schedules
+
+
+def test_schedules_spend_about_equal_evaluations(model):
+    skel = model.skeleton
+    counts = {m: make_schedule(m, skel).evaluations_per_frame for m in METHODS}
+    assert counts["apf"] == 3500 and counts["hpf"] == 3500
+    assert abs(counts["hpf-apo"] - 3500) <= 10
+    hpf = make_schedule("hpf", skel, arm_chain=False)
+    assert hpf.n_weightings == 7
+    dims = [layer.dims for layer in hpf.filter.layers]
+    for block, d in zip(BODY_BLOCKS, dims):
+        np.testing.assert_array_equal(d, skel.group_dofs(block))
+    apo = make_schedule("hpf-apo", skel)
+    assert apo.n_weightings == 8 and apo.boxed == (True,) * 7 + (False,)
+    assert make_schedule("apf", skel).n_weightings == 14
+    # partitioned sampling: the kernel of layer l diffuses block l + 1 at sigma0
+    sigma0 = body_sigma0(skel)
+    for l in range(6):
+        nxt = skel.group_dofs(BODY_BLOCKS[l + 1])
+        np.testing.assert_allclose(hpf.filter.stds[l][nxt], sigma0[nxt])
+    with pytest.raises(ValueError):
+        make_schedule("pso", skel)
+
+
+def test_pose_kernel_respects_joint_limits(model):
+    skel = model.skeleton
+    sched = make_schedule("apf", skel, n_particles=50, jump_fraction=0.5)
+    kernel = sched.filter.layers[0].kernel
+    rng = np.random.default_rng(3)
+    x = np.tile(rest_pose(skel), (50, 1))
+    out = kernel(x, np.full(skel.n_dofs, 3.0), rng)
+    free = np.ones(skel.n_dofs, bool)
+    free[skel.wrap_dofs] = False
+    assert np.all(out[:, free] >= skel.lower[free] - 1e-12)
+    assert np.all(out[:, free] <= skel.upper[free] + 1e-12)
+
+
+# ----------------------------------------------------------------------------- tracker
+
+
+def test_tracker_params_are_described():
+    for f in dataclasses.fields(TrackerParams):
+        assert f.metadata.get("description"), f.name
+    with pytest.raises(ValueError):
+        TrackerParams(method="kalman")
+
+
+def small_tracker(model, rig, shape=None, **kw):
+    params = TrackerParams(n_particles=120, working_scale=0.5, shape_working_scale=0.5,
+                           shape_particles=80, shape_frames=2, min_foreground=30, **kw)
+    return BodyTracker(model, rig, params, np.random.default_rng(0), shape=shape)
+
+
+def test_tracker_follows_a_short_sequence(model, rig):
+    shape = subject_shape()
+    params = clip_poses(model, 60, 8, shape, position=(-0.4, 0.3), heading=-1.0)
+    masks, joints = render_masks(model, rig, params, shape)
+    tracker = small_tracker(model, rig, shape=shape)
+    errors, states = [], []
+    for f in range(len(masks)):
+        res = tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
+        states.append(res.state)
+        assert res.has_pose and res.joints.shape == (19, 3)
+        errors.append(1000 * np.linalg.norm(res.joints - joints[f], axis=1).mean())
+        assert res.timings["evaluations"] > 0 and res.timings["total"] > 0
+    assert states[0] == "initialising" and states[-1] == "tracking"
+    assert np.mean(errors) < 60.0, errors
+    assert len(res.layers) == tracker.schedule.n_weightings
+    assert all(1.0 <= e <= 120 for e in res.ess)
+
+
+def test_tracker_survives_dropped_cameras_empty_frames_and_no_person(model, rig):
+    shape = subject_shape()
+    params = clip_poses(model, 0, 4, shape)
+    masks, joints = render_masks(model, rig, params, shape)
+    tracker = small_tracker(model, rig, shape=shape, lost_frames=1)
+    empty = [np.zeros_like(m) for m in masks[0]]
+    res = tracker.update(empty, STAMP0)
+    assert res.state == "searching" and not res.has_pose
+    res = tracker.update([None] * 4, STAMP0 + 1)
+    assert res.state == "searching" and res.dropped == (0, 1, 2, 3)
+    for f in range(2):
+        res = tracker.update(list(masks[f]), STAMP0 + 2 + f)
+    assert res.state == "tracking"
+    dropped = list(masks[2])
+    dropped[1] = None
+    dropped[2] = np.zeros((5, 5), np.uint8)  # wrong size: dropped too
+    res = tracker.update(dropped, STAMP0 + 10)
+    assert res.has_pose and res.views == (0, 3) and res.dropped == (1, 2)
+    assert np.linalg.norm(res.joints - joints[2], axis=1).mean() < 0.1
+    res = tracker.update(empty, STAMP0 + 11)  # the person left
+    assert res.state == "searching" and not res.has_pose
+    assert tracker.shape is not None  # the shape is kept for a while
+    res = tracker.update(list(masks[3]), STAMP0 + 12)
+    assert res.state in STATES and res.has_pose
+    with pytest.raises(ValueError):
+        BodyTracker(model, [], TrackerParams())
