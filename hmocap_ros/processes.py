@@ -82,6 +82,22 @@ class NodeProcess:
         return self.proc.returncode
 
 
+#: Topics that nodes publish on a timer, not per input: their traffic says nothing about a backlog.
+PERIODIC_TOPICS = ("/diagnostics", "/rosout", "/parameter_events")
+
+
+def _written(recorder: NodeProcess, topics: Sequence[str]) -> int:
+    """Messages recorded on ``topics`` so far, from the recorder's last ``--progress`` line."""
+    lines = [ln for ln in recorder.output().splitlines() if ln.startswith("written: ")]
+    if not lines:
+        return 0
+    counts = {}
+    for item in lines[-1].split(": ", 2)[2].split(", "):
+        topic, _, n = item.rpartition(" ")
+        counts[topic] = int(n)
+    return sum(counts.get(t, 0) for t in topics)
+
+
 def replay_through_nodes(
     bag: Path,
     nodes: Sequence[tuple[str, str, Sequence[str], str]],
@@ -94,19 +110,29 @@ def replay_through_nodes(
     ready_timeout: float = 60.0,
     settle: float = 1.0,
     replay_timeout: float = 600.0,
+    drain_timeout: float = 120.0,
+    drain_topics: Sequence[str] | None = None,
 ) -> dict[str, NodeProcess]:
     """Replay ``bag`` into ``nodes`` (separate processes over DDS) while recording ``record_topics``.
 
     ``nodes`` are ``(name, module, args, ready_text)``: each is started with ``python -m module
-    args`` and waited for until ``ready_text`` appears in its output. The recorder starts first,
-    the replay waits for a subscriber on each replayed topic, and after the replay ends and
-    ``settle`` seconds pass, nodes and recorder are stopped with SIGINT (the recorder last, so it
-    flushes everything). Returns the processes (stopped) so callers can read their logs.
+    args`` and waited for until ``ready_text`` appears in its output. The recorder starts first;
+    the replay starts once the recorder has matched a publisher of every recorded topic (both
+    sides of discovery: a best-effort link drops what comes before), and waits itself for a
+    subscriber on each replayed topic (``--wait-subscribers 1``, plus its ``--settle``).
+    After the replay ends, the nodes may still be working through a backlog (a slow or loaded
+    machine): they are stopped only once nothing new has been recorded on ``drain_topics``
+    (default: the recorded topics but :data:`PERIODIC_TOPICS`) for ``settle`` seconds (at most
+    ``drain_timeout`` s), then the recorder last, so it flushes everything.
+    Returns the processes (stopped) so callers can read their logs.
     Raises RuntimeError, with the log of the process at fault, when something does not start.
     """
     procs: dict[str, NodeProcess] = {}
+    if drain_topics is None:
+        drain_topics = [t for t in record_topics if t not in PERIODIC_TOPICS]
     recorder = NodeProcess.module("record", "hmocap_ros.cli",
-                                  ["record", "-o", str(out_bag), *record_topics], env, log_dir)
+                                  ["record", "-o", str(out_bag), "--progress", "0.2", *record_topics],
+                                  env, log_dir)
     procs["record"] = recorder
     try:
         for name, module, args, ready in nodes:
@@ -114,20 +140,28 @@ def replay_through_nodes(
         for name, _module, _args, ready in nodes:
             if not procs[name].wait_for_output(ready, ready_timeout):
                 raise RuntimeError(f"{name} did not start:\n{procs[name].output()}")
-        # Outputs are published only once the replay feeds the nodes: make sure the recorder has
-        # subscribed to each of them first (its discovery logs "recording <topic> [type]").
+        # Outputs are published only once the replay feeds the nodes: make sure the recorder's
+        # subscriptions have matched their publishers first.
         for topic in record_topics:
-            if not recorder.wait_for_output(f"recording {topic} [", ready_timeout):
-                raise RuntimeError(f"the recorder never saw a publisher of {topic}:\n{recorder.output()}")
-        time.sleep(0.5)  # DDS matches the new subscriptions to the publishers
-        replay_args = ["replay", str(bag), "--rate", str(replay_rate), "--wait-subscribers", "1"]
+            if not recorder.wait_for_output(f"receiving {topic} from", ready_timeout):
+                raise RuntimeError(f"the recorder never matched a publisher of {topic}:\n{recorder.output()}")
+        replay_args = ["replay", str(bag), "--rate", str(replay_rate), "--wait-subscribers", "1",
+                       "--wait-timeout", str(ready_timeout)]
         if replay_topics:
             replay_args += ["--topics", *replay_topics]
         replay = NodeProcess.module("replay", "hmocap_ros.cli", replay_args, env, log_dir)
         procs["replay"] = replay
         if replay.wait(replay_timeout) is None:
             raise RuntimeError(f"the replay did not finish in {replay_timeout:.0f} s")
-        time.sleep(settle)
+        if replay.proc.returncode != 0:
+            raise RuntimeError(f"the replay failed:\n{replay.output()}")
+        last, quiet_since = _written(recorder, drain_topics), time.monotonic()
+        end = quiet_since + drain_timeout
+        while time.monotonic() - quiet_since < settle and time.monotonic() < end:
+            time.sleep(0.1)
+            count = _written(recorder, drain_topics)
+            if count != last:
+                last, quiet_since = count, time.monotonic()
     finally:
         for name, proc in procs.items():
             if name != "record":

@@ -27,7 +27,7 @@ pub = node.create_publisher(Image, "/cam_1/image_raw", QoSProfile(depth=100))
 end = time.monotonic() + 30
 while pub.get_subscription_count() < 1 and time.monotonic() < end:
     time.sleep(0.05)
-time.sleep(0.5)
+time.sleep(1.0)                                      # the node matches us in turn
 f = RclpyFactory()
 stamp = 1
 def send(msg):
@@ -54,8 +54,10 @@ def test_masks_for_every_frame_with_input_stamps(tmp_path):
     out = tmp_path / "fg.mcap"
     procs = replay_through_nodes(DEMO_BAG, [NODE], [f"/{c}/foreground" for c in CAMERAS], out,
                                  loopback_dds_env(), tmp_path / "logs",
-                                 replay_topics=[f"/{c}/image_raw" for c in CAMERAS])
-    assert "Traceback" not in procs["foreground_segmentation"].output()
+                                 replay_topics=[f"/{c}/image_raw" for c in CAMERAS],
+                                 replay_rate=0.5)  # 50 frames/s in all: a loaded 2-core machine keeps up
+    log = procs["foreground_segmentation"].output()
+    assert "Traceback" not in log, log
     with BagReader(DEMO_BAG) as reader:
         stamps = {(m.topic.split("/")[1], stamp_to_ns(m.msg.header.stamp))
                   for m in reader.messages([f"/{c}/image_raw" for c in CAMERAS])}
@@ -79,7 +81,7 @@ def test_bad_input_is_logged_and_survived(tmp_path):
                               ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=5",
                                "-p", "min_blob_area:=4", "-p", "relearn_after_size_errors:=0"], env, tmp_path)
     assert node.wait_for_output("segmenting", 30), node.output()
-    assert rec.wait_for_output("recording /cam_1/foreground [", 30), rec.output()
+    assert rec.wait_for_output("receiving /cam_1/foreground from", 30), rec.output()
     pub = NodeProcess("pub", [sys.executable, "-c", BAD_INPUT_PUBLISHER], env, tmp_path)
     assert pub.wait_for_output("sent", 60), pub.output()
     pub.stop()

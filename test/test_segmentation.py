@@ -13,7 +13,8 @@ import cv2
 import numpy as np
 import pytest
 
-from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, mask_scores
+from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels, mask_scores
+from hmocap_ros.segmentation import background_model, mask_cleanup
 from hmocap_ros.segmentation.mask_cleanup import (
     clean_mask,
     fill_small_holes,
@@ -264,6 +265,25 @@ def test_same_input_gives_the_same_masks_bit_for_bit(room):
 
     (m1, mean1), (m2, mean2) = run(), run()
     assert np.array_equal(m1, m2) and np.array_equal(mean1, mean2)
+
+
+def test_compile_kernels_compiles_everything_segmenting_calls(rng, room):
+    # A node compiles before it subscribes; a kernel left to compile on the first frames with a
+    # person stalls it for seconds on a fresh checkout, and frames are dropped meanwhile.
+    compile_kernels()
+    kernels = [background_model.learn_step, background_model.estimate_gain,
+               background_model.classify_and_update, mask_cleanup.component_areas,
+               mask_cleanup._mark_border_labels, mask_cleanup._keep_labels, mask_cleanup._fill_labels]
+    compiled = {k.__name__: len(k.signatures) for k in kernels}
+    assert all(compiled.values()), compiled
+    model = learned_model(rng, room, ForegroundParams(learn_frames=3, min_blob_area=50, max_hole_area=100))
+    truth = disc_mask(240, 320, (160, 120), 30)
+    scene = with_blob(room, truth)
+    scene[118:123, 158:163] = room[118:123, 158:163]  # an enclosed hole
+    scene[20:25, 20:25] = BLOB_RGB                     # a speck under min_blob_area
+    mask = model.apply(camera_frame(scene, rng), 10 * FRAME_NS)
+    assert mask[120, 160] == 255 and mask[22, 22] == 0
+    assert {k.__name__: len(k.signatures) for k in kernels} == compiled
 
 
 def test_params_are_validated_frozen_and_described():

@@ -34,6 +34,20 @@ from hmocap_ros.config_files import default_config_file
 
 #: Images and other high-rate sensor data: best effort, keep last 5.
 SENSOR_QOS = qos_profile_sensor_data
+
+
+def sensor_qos(depth: int) -> QoSProfile:
+    """Sensor-data QoS (best effort, volatile) that keeps the last ``depth`` messages.
+
+    A best-effort subscription silently drops what overflows its queue. A node that must answer
+    every frame (and is fast enough on average) subscribes with a queue that holds the burst of
+    a stall: a moment of CPU starvation, or a publisher catching up; ``depth`` of one second of
+    frames costs only memory. Matches reliable and best-effort publishers alike.
+    """
+    if depth < 1:
+        raise ValueError(f"queue depth must be >= 1, got {depth}")
+    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
 #: Latched topics (camera_rig, body_shape): reliable, transient local, keep last 1.
 LATCHED_QOS = QoSProfile(
     depth=1,

@@ -6,14 +6,17 @@ shadow and illumination-change suppression, morphological clean-up) learns the e
 from the first frames, then adapts slowly where there is no foreground.
 
 Subscriptions:
-  ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8, sensor-data QoS), per camera.
+  ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8), per camera: sensor-data QoS (best
+  effort) with a queue of ``queue_depth`` frames, so that a stall (CPU starvation, a publisher
+  catching up) loses no frame as long as the node keeps up on average.
 Publications:
   ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id).
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames,
   milliseconds per frame and state (learning or segmenting) per camera.
 Services:
   ``~/relearn`` (std_srvs/Trigger): forget the background of every camera and learn it again.
-Parameters: ``cameras``, ``diagnostics_period`` and every field of
+Parameters: ``cameras``, ``queue_depth``, ``diagnostics_period``, ``relearn_after_size_errors``
+and every field of
 :class:`~hmocap_ros.segmentation.ForegroundParams` (``foreground_segmentation --help``).
 
 Frames of the wrong encoding or of a size other than the one learnt are refused with a
@@ -23,11 +26,8 @@ relearns at the new size (a camera driver was reconfigured).
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
-
-import numpy as np
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
@@ -36,8 +36,8 @@ from std_srvs.srv import Trigger
 
 from hmocap_ros.io.conversions import ConversionError, image_to_rgb, numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node
-from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
+from hmocap_ros.nodes.common import RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node, sensor_qos
+from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
 
 NODE_NAME = "foreground_segmentation"
 
@@ -46,6 +46,8 @@ NODE_NAME = "foreground_segmentation"
 class ForegroundNodeConfig:
     cameras: list[str] = param(["cam_1", "cam_2", "cam_3", "cam_4"],
                                "Camera names: the node subscribes <camera>/image_raw, publishes <camera>/foreground.")
+    queue_depth: int = param(25, "Frames queued per camera while the node is busy (best effort: what overflows "
+                                 "is dropped); 25 holds one second at 25 fps.")
     diagnostics_period: float = param(1.0, "Seconds between diagnostics messages (0 = none).")
     relearn_after_size_errors: int = param(25, "Relearn a camera's background after this many consecutive "
                                                "frames of a size other than the learnt one (0 = never).")
@@ -65,12 +67,14 @@ class ForegroundSegmentation(Node):
         self.config = declare_parameters(self, ForegroundNodeConfig)
         self.params = declare_parameters(self, ForegroundParams)
         self.factory = RclpyFactory()
-        self._warm_up()
+        # Before subscribing: compiling on the first frames with a person would drop frames.
+        compile_kernels(self.params)
         self.cameras = {name: _CameraState(self.params) for name in self.config.cameras}
         self.mask_pubs = {}
+        image_qos = sensor_qos(max(1, self.config.queue_depth))
         for name in self.cameras:
             self.mask_pubs[name] = self.create_publisher(Image, f"{name}/foreground", SENSOR_QOS)
-            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), SENSOR_QOS)
+            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), image_qos)
         self.create_service(Trigger, "~/relearn", self._relearn)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
         if self.config.diagnostics_period > 0:
@@ -78,13 +82,6 @@ class ForegroundSegmentation(Node):
         self.get_logger().info(
             f"segmenting {len(self.cameras)} cameras ({', '.join(self.cameras)}); learning the background "
             f"from the first {self.params.learn_frames} frames")
-
-    def _warm_up(self) -> None:
-        """Compile the numba kernels now, not on the first frames (they would be dropped meanwhile)."""
-        model = BackgroundModel(dataclasses.replace(self.params, learn_frames=1))
-        frame = np.zeros((8, 8, 3), np.uint8)
-        model.apply(frame, 0)
-        model.apply(frame, 1)
 
     def _callback(self, name: str):
         state = self.cameras[name]
@@ -131,6 +128,11 @@ class ForegroundSegmentation(Node):
         self.get_logger().info(response.message)
         return response
 
+    def log_totals(self) -> None:
+        """Frames segmented per camera (printed at shutdown, to compare with what was sent)."""
+        self.get_logger().info("frames segmented: " + ", ".join(
+            f"{name} {state.frames}" for name, state in self.cameras.items()))
+
     def _publish_diagnostics(self) -> None:
         out = DiagnosticArray()
         out.header.stamp = self.get_clock().now().to_msg()
@@ -146,7 +148,8 @@ class ForegroundSegmentation(Node):
 
 
 def main(args=None) -> int:
-    return run_node(ForegroundSegmentation, NODE_NAME, __doc__, (ForegroundNodeConfig, ForegroundParams), args)
+    return run_node(ForegroundSegmentation, NODE_NAME, __doc__, (ForegroundNodeConfig, ForegroundParams), args,
+                    on_shutdown=lambda node: node.log_totals())
 
 
 if __name__ == "__main__":

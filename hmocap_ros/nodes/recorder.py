@@ -6,6 +6,11 @@ images), transient local when a publisher is latched (``camera_rig``), reliable 
 Messages are written as the serialized CDR bytes DDS delivered, so nothing is decoded.
 Publications: none. Parameters: none (command-line options).
 
+Once a subscription has matched a publisher on its own side of DDS discovery (from then on
+nothing that publisher sends is dropped for being unknown), the recorder logs
+``receiving <topic> from N publisher(s)``: a script that starts a source after the recorder
+waits for that line.
+
 Ctrl-C or SIGTERM stops the recording: the node first takes every message already
 delivered, then flushes and closes the bag, and prints what it recorded.
 """
@@ -37,9 +42,10 @@ class Recorder(Node):
         self.requested = [self._absolute(t) for t in topics]
         self.record_all = record_all
         self._subs = {}
+        self._matched: set[str] = set()
         self._unknown_types: set[str] = set()
         self._discover()
-        self.create_timer(0.2, self._discover)
+        self.create_timer(0.1, self._discover)
 
     def _absolute(self, topic: str) -> str:
         return topic if topic.startswith("/") else "/" + topic
@@ -60,6 +66,10 @@ class Recorder(Node):
         return qos, stored
 
     def _discover(self) -> None:
+        for topic, sub in self._subs.items():
+            if topic not in self._matched and sub.get_publisher_count() > 0:
+                self._matched.add(topic)
+                self.get_logger().info(f"receiving {topic} from {sub.get_publisher_count()} publisher(s)")
         for topic, types in self.get_topic_names_and_types():
             if topic in self._subs:
                 continue
@@ -96,8 +106,12 @@ class Recorder(Node):
 
 
 def record(output: str, topics: list[str], record_all: bool = False, duration: float | None = None,
-           ros_args: list[str] | None = None, quiet: bool = False) -> dict[str, int]:
-    """Record until Ctrl-C/SIGTERM (or ``duration`` seconds); return messages written per topic."""
+           ros_args: list[str] | None = None, quiet: bool = False, progress: float = 0.0) -> dict[str, int]:
+    """Record until Ctrl-C/SIGTERM (or ``duration`` seconds); return messages written per topic.
+
+    With ``progress`` > 0, print ``written: N messages: /topic n, ...`` (the counts so far)
+    whenever they changed, at most every ``progress`` seconds: a script waits on it for the
+    outputs to come to rest."""
     flag = ShutdownFlag()
     rclpy.init(args=["hmocap_record", *(ros_args or [])], signal_handler_options=SignalHandlerOptions.NO)
     flag.install()
@@ -109,9 +123,18 @@ def record(output: str, topics: list[str], record_all: bool = False, duration: f
         print(f"recording to {output}: {'all topics' if record_all else ' '.join(topics)} (Ctrl-C to stop)",
               flush=True)
     t_end = None if duration is None else time.monotonic() + duration
+    shown = 0
+    next_progress = time.monotonic()
     try:
         while not flag.requested and (t_end is None or time.monotonic() < t_end):
             executor.spin_once(timeout_sec=0.05)
+            if progress > 0 and time.monotonic() >= next_progress:
+                total = sum(writer.counts.values())
+                if total != shown:
+                    per_topic = ", ".join(f"{t} {n}" for t, n in sorted(writer.counts.items()))
+                    print(f"written: {total} messages: {per_topic}", flush=True)
+                    shown = total
+                next_progress = time.monotonic() + progress
         # Take what DDS has already delivered to us before closing the bag.
         drain_end = time.monotonic() + 0.3
         while time.monotonic() < drain_end:
@@ -136,10 +159,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("topics", nargs="*", help="topics to record (relative names are taken from /)")
     parser.add_argument("-a", "--all", action="store_true", help="record every topic that appears")
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    parser.add_argument("--progress", type=float, default=0.0, metavar="SECONDS",
+                        help="print the number of messages written when it changed, at most every SECONDS")
 
 
 def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
     if not ns.topics and not ns.all:
         raise SystemExit("hmocap record: name the topics to record, or pass --all")
-    record(ns.output, ns.topics, ns.all, ns.duration, ros_args)
+    record(ns.output, ns.topics, ns.all, ns.duration, ros_args, progress=ns.progress)
     return 0

@@ -3,9 +3,16 @@
 Publications: every topic of the bag (or those of ``--topics``), with the bag's message
 types, published as the stored serialized bytes (nothing is decoded): topics recorded as
 latched are published transient-local (reliable, keep last 1), the others reliable with
-keep-last 10, which best-effort subscribers (sensor-data QoS) accept too.
+keep-last ``VOLATILE_DEPTH``, which best-effort subscribers (sensor-data QoS) accept too.
 Subscriptions: none. Parameters: none (command-line options ``--rate``, ``--loop``,
-``--topics``, ``--wait-subscribers``).
+``--topics``, ``--wait-subscribers``, ``--settle``).
+
+Starting a replay into freshly started nodes: ``--wait-subscribers N`` holds the first message
+until every replayed topic has N matched subscriptions. That is the publisher's side of DDS
+discovery only; a best-effort subscriber drops messages from a publisher that it has not
+matched in turn, so the replay then waits ``--settle`` seconds more for the other side.
+When the replay falls behind (a loaded machine), it publishes the overdue messages at once:
+subscribers need a queue that holds such a burst (see ``nodes.common.sensor_qos``).
 """
 
 from __future__ import annotations
@@ -21,6 +28,10 @@ from rclpy.signals import SignalHandlerOptions
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
 
+#: History of the reliable volatile publishers: a reliable subscriber that falls behind gets
+#: the messages again from it, so it must hold a burst: two seconds of a 25 fps topic.
+VOLATILE_DEPTH = 50
+
 
 class Replayer(Node):
     """Holds one publisher per replayed topic."""
@@ -35,7 +46,7 @@ class Replayer(Node):
                 self.get_logger().error(f"skipping {topic}: {err}")
                 continue
             qos = QoSProfile(
-                depth=1 if info.latched else 10,
+                depth=1 if info.latched else VOLATILE_DEPTH,
                 reliability=ReliabilityPolicy.RELIABLE,
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if info.latched else DurabilityPolicy.VOLATILE,
             )
@@ -55,8 +66,11 @@ class Replayer(Node):
 
 def replay(bag: str, rate: float = 1.0, loop: bool = False, topics: list[str] | None = None,
            wait_subscribers: int = 0, wait_timeout: float = 10.0, linger: float = 0.5,
-           ros_args: list[str] | None = None, quiet: bool = False) -> dict[str, int]:
-    """Publish the bag's messages at ``rate`` times the recorded pace; return counts per topic."""
+           ros_args: list[str] | None = None, quiet: bool = False, settle: float = 1.0) -> dict[str, int]:
+    """Publish the bag's messages at ``rate`` times the recorded pace; return counts per topic.
+
+    With ``wait_subscribers`` > 0, wait (at most ``wait_timeout`` s) for that many subscribers on
+    every topic, then ``settle`` s more (see the module doc)."""
     if rate <= 0:
         raise ValueError(f"--rate must be positive, got {rate}")
     flag = ShutdownFlag()
@@ -75,6 +89,9 @@ def replay(bag: str, rate: float = 1.0, loop: bool = False, topics: list[str] | 
                 short = node.wait_for_subscribers(wait_subscribers, wait_timeout, flag)
                 if short and not quiet:
                     print(f"warning: no subscriber after {wait_timeout:.0f} s on: {', '.join(short)}")
+                end = time.monotonic() + settle
+                while time.monotonic() < end and not flag.requested:
+                    time.sleep(0.02)
             if not quiet:
                 print(f"replaying {bag}: {len(node.publishers_by_topic)} topics at rate {rate:g}"
                       + (" (looping)" if loop else ""), flush=True)
@@ -116,11 +133,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait-subscribers", type=int, default=0, metavar="N",
                         help="wait until every replayed topic has N subscribers before starting")
     parser.add_argument("--wait-timeout", type=float, default=10.0, help="seconds to wait for subscribers")
+    parser.add_argument("--settle", type=float, default=1.0,
+                        help="with --wait-subscribers: seconds to wait after they matched, for the "
+                             "subscribers to match the replay in turn (default 1)")
     parser.add_argument("--linger", type=float, default=0.5,
                         help="seconds to keep publishers alive after the last message")
 
 
 def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
     topics = [t if t.startswith("/") else "/" + t for t in ns.topics] if ns.topics else None
-    replay(ns.bag, ns.rate, ns.loop, topics, ns.wait_subscribers, ns.wait_timeout, ns.linger, ros_args)
+    replay(ns.bag, ns.rate, ns.loop, topics, ns.wait_subscribers, ns.wait_timeout, ns.linger, ros_args,
+           settle=ns.settle)
     return 0

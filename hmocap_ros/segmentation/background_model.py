@@ -39,13 +39,16 @@ cameras can run in threads).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numba as nb
 import numpy as np
 
 from hmocap_ros.segmentation.mask_cleanup import clean_mask, structuring_element
 from hmocap_ros.segmentation.params import ForegroundParams
 
-__all__ = ["BackgroundModel", "ForegroundParams", "classify_and_update", "estimate_gain", "learn_step"]
+__all__ = ["BackgroundModel", "ForegroundParams", "classify_and_update", "compile_kernels", "estimate_gain",
+           "learn_step"]
 
 #: Background colours with a smaller squared norm (about 8 levels per channel) are too dark
 #: for a brightness ratio to mean anything: no shadow and no gain sample there.
@@ -287,3 +290,30 @@ class BackgroundModel:
             self.raw_mask, self.shadow_mask)
         self._mask = clean_mask(self.raw_mask, self._opening, self._closing, p.min_blob_area, p.max_hole_area)
         return self._mask.copy()
+
+
+def compile_kernels(params: ForegroundParams | None = None) -> None:
+    """Compile (or load from numba's cache) every kernel a segmenting model calls, now.
+
+    numba compiles a kernel on its first call. On a fresh checkout (no cache yet) that is
+    seconds per kernel, and the clean-up kernels run only once a mask holds a small blob or
+    an enclosed hole, i.e. on the first frames with a person: a live node would stall there
+    and drop the frames that arrive meanwhile. This runs a tiny synthetic sequence that takes
+    every branch (learning, gain, classification with shadow test, small blob removed, hole
+    filled) with the argument types of ``params`` (defaults if None).
+    """
+    base = params if params is not None else ForegroundParams()
+    p = dataclasses.replace(base, learn_frames=2, opening_size=0, closing_size=0,
+                            min_blob_area=8, max_hole_area=16)
+    model = BackgroundModel(p)
+    frame = np.full((32, 32, 3), 120, np.uint8)
+    frame[::2, ::2] = 124  # some texture, so the variance is not all zero
+    model.apply(frame, 0)
+    model.apply(frame, 1)
+    scene = frame.copy()
+    scene[8:24, 8:24] = (230, 40, 40)   # a blob with an enclosed hole ...
+    scene[14:17, 14:17] = frame[14:17, 14:17]
+    scene[2:4, 28:30] = (20, 200, 20)   # ... a speck below min_blob_area ...
+    scene[26:30, 2:8] = 60              # ... and a shadow-like darker patch
+    model.apply(scene, 2)
+    model.apply(scene, 3)
