@@ -11,8 +11,8 @@ import pytest
 from hmocap_ros.demo import DEMO_BAG, DEMO_RIG, run_demo
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
-from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
-from hmocap_ros.processes import NodeProcess, loopback_dds_env
+from hmocap_ros.io.msg_factory import RosbagsFactory, make_header, stamp_to_ns
+from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
 from hmocap_ros.rig import load_rig
 
 PUBLISHER = r"""
@@ -43,16 +43,35 @@ def test_environment_is_loopback():
 
 
 def test_replay_node_record_pipeline(tmp_path):
-    assert run_demo(tmp_path) == 0
+    # replay -> camera_rig_publisher -> record, three processes over DDS: one CameraInfo per
+    # image, with the image's stamp and the rig's intrinsics, and the rig latched.
     rig = load_rig(DEMO_RIG)
-    with BagReader(tmp_path / "demo_out.mcap") as reader:
-        infos = {m.topic: m.msg for m in reader.messages() if m.topic.endswith("camera_info")}
+    images = [f"/{c}/image_raw" for c in rig.names]
+    out = tmp_path / "out.mcap"
+    node = ("camera_rig_publisher", "hmocap_ros.nodes.camera_rig_publisher",
+            ["--ros-args", "-p", f"rig_file:={DEMO_RIG}"], "serving rig")
+    replay_through_nodes(DEMO_BAG, [node], ["/camera_rig", *(f"/{c}/camera_info" for c in rig.names)], out,
+                         loopback_dds_env(), tmp_path / "logs", replay_topics=images, replay_rate=0.5)
+    with BagReader(DEMO_BAG) as reader:
+        sent = {(m.topic.split("/")[1], stamp_to_ns(m.msg.header.stamp)) for m in reader.messages(images)}
+    with BagReader(out) as reader:
+        infos = {(m.topic.split("/")[1], stamp_to_ns(m.msg.header.stamp)): m.msg
+                 for m in reader.messages() if m.topic.endswith("camera_info")}
         rig_msg = reader.first("/camera_rig")
+        assert reader.topics()["/camera_rig"].latched
+    assert set(infos) == sent
     for cam in rig.cameras:
-        msg = infos[f"/{cam.name}/camera_info"]
+        msg = next(m for (name, _), m in infos.items() if name == cam.name)
         assert (msg.width, msg.height) == (cam.width, cam.height)
         np.testing.assert_allclose(np.asarray(msg.k).reshape(3, 3), cam.K)
     assert list(rig_msg.camera_names) == list(rig.names)
+
+
+@pytest.mark.slow
+def test_demo_runs_every_node_and_reports(tmp_path, capsys):
+    assert run_demo(tmp_path) == 0
+    out = capsys.readouterr().out
+    assert "foreground: 28/28 masks per camera" in out and "demo: OK" in out
 
 
 @pytest.mark.parametrize("stop_signal", ["SIGINT", "SIGTERM"])

@@ -6,10 +6,12 @@ CameraInfo with the image's stamp, as a camera driver's info manager would, afte
 that the image has the calibrated size.
 
 Subscriptions:
-  ``<camera>/image_raw`` (sensor_msgs/Image, sensor-data QoS), for each rig camera.
+  ``<camera>/image_raw`` (sensor_msgs/Image, sensor-data QoS with a queue of ``queue_depth``),
+  for each rig camera.
 Publications:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the whole rig.
-  ``<camera>/camera_info`` (sensor_msgs/CameraInfo): intrinsics, stamp and frame of each image.
+  ``<camera>/camera_info`` (sensor_msgs/CameraInfo, reliable, keep last ``queue_depth``):
+  intrinsics, stamp and frame of each image.
 Parameters: see :class:`CameraRigPublisherConfig` (``camera_rig_publisher --help``).
 """
 
@@ -19,12 +21,13 @@ from dataclasses import dataclass
 
 from hmocap_interfaces.msg import CameraRig
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
 from hmocap_ros.config_files import find_config_file
 from hmocap_ros.io.conversions import dict_to_camera_info
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import LATCHED_QOS, RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node
+from hmocap_ros.nodes.common import LATCHED_QOS, declare_parameters, param, run_node, sensor_qos
 from hmocap_ros.rig import RigError, load_rig, rig_to_msg
 
 NODE_NAME = "camera_rig_publisher"
@@ -36,6 +39,8 @@ class CameraRigPublisherConfig:
     cameras: list[str] = param([], "Rig cameras to serve (names); empty = every camera of the rig.")
     check_image_size: bool = param(True, "Refuse (log an error, publish no CameraInfo for) images "
                                          "whose size differs from the calibration.")
+    queue_depth: int = param(25, "Images queued per camera while the node is busy, and CameraInfo messages kept "
+                                 "for a slow reliable subscriber; 25 holds one second at 25 fps.")
 
 
 class CameraRigPublisher(Node):
@@ -59,10 +64,12 @@ class CameraRigPublisher(Node):
         self.rig_pub.publish(rig_to_msg(self.rig, stamp, self.factory))
         self.info_pubs = {}
         self.info_dicts = {}
+        depth = max(1, self.config.queue_depth)
+        info_qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
         for name, camera in self.cameras.items():
             self.info_dicts[name] = camera.to_camera_info_dict()
-            self.info_pubs[name] = self.create_publisher(CameraInfo, f"{name}/camera_info", RESULT_QOS)
-            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), SENSOR_QOS)
+            self.info_pubs[name] = self.create_publisher(CameraInfo, f"{name}/camera_info", info_qos)
+            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), sensor_qos(depth))
         self.get_logger().info(f"serving rig {path} ({len(self.cameras)} cameras: {', '.join(self.cameras)})")
 
     def _callback(self, name: str):
