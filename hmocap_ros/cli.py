@@ -1,4 +1,4 @@
-"""The ``hmocap`` command: demo, bag record/replay and info (later: sim, eval, bench).
+"""The ``hmocap`` command: demo, bag record/replay and info, sim, eval, train and bench.
 
 ROS arguments go after ``--ros-args`` as usual, e.g. ``hmocap replay run.mcap --ros-args -r __ns:=/room``.
 """
@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 
 def _split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
@@ -47,6 +48,34 @@ def _cmd_demo(ns, _ros_args):
     return demo.run_demo(ns.out, domain_id=ns.domain_id)
 
 
+BENCH_DIR = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def _benchmarks() -> list[str]:
+    return sorted(p.stem[len("bench_"):] for p in BENCH_DIR.glob("bench_*.py"))
+
+
+def _cmd_bench(ns, _ros_args):
+    import subprocess
+
+    available = _benchmarks()
+    if not available:
+        print(f"hmocap bench: no benchmarks/ folder next to the package ({BENCH_DIR}): the benchmark "
+              "scripts live in the source checkout", file=sys.stderr)
+        return 2
+    names = ns.names or available
+    unknown = [n for n in names if n not in available]
+    if unknown:
+        print(f"hmocap bench: unknown {', '.join(unknown)}; available: {', '.join(available)}", file=sys.stderr)
+        return 2
+    for name in names:
+        print(f"== benchmarks/bench_{name}.py", flush=True)
+        rc = subprocess.call([sys.executable, str(BENCH_DIR / f"bench_{name}.py"), *ns.extra])
+        if rc:
+            return rc
+    return 0
+
+
 def _cmd_group(ns, _ros_args):
     import importlib
 
@@ -83,9 +112,12 @@ COMMAND_GROUPS = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``hmocap`` parser. Of the ``sim``/``eval``/``train`` kinds only the one ``argv`` names
+    is imported (to add its options): ``hmocap record`` must not depend on the gesture trainer."""
     from hmocap_ros.nodes import recorder, replayer
 
+    argv = list(argv or [])
     parser = argparse.ArgumentParser(
         prog="hmocap",
         description="hmocap_ros: multi-view body tracking and depth gestures for smart rooms.",
@@ -117,15 +149,19 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(group, help=group_help, description=group_description)
         group_sub = p.add_subparsers(dest=f"{group}_kind", metavar="KIND", required=True)
         for kind, (module_name, help_text) in kinds.items():
-            try:
-                module = importlib.import_module(module_name)
-            except ModuleNotFoundError as err:
-                if not (err.name and (module_name == err.name or module_name.startswith(err.name + "."))):
-                    raise
-                continue  # not built yet: leave the command out (any other import error is a bug: raise)
             sp = group_sub.add_parser(kind, help=help_text, description=help_text)
-            module.add_arguments(sp)
             sp.set_defaults(func=_cmd_group, group_module=module_name)
+            if argv[:2] == [group, kind]:
+                module = importlib.import_module(module_name)
+                module.add_arguments(sp)
+
+    p = sub.add_parser("bench", help="run the benchmark scripts (source checkout)",
+                       description="Run benchmarks/bench_NAME.py of the source checkout with this "
+                                   "interpreter (all of them when no NAME is given); the scripts "
+                                   "print what they measure. Options after -- go to the script.")
+    p.add_argument("names", nargs="*", metavar="NAME",
+                   help=f"benchmarks to run ({', '.join(_benchmarks()) or 'none found'})")
+    p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser("info", help="list a bag's topics, types and counts")
     p.add_argument("bag", help=".mcap file or rosbag2 directory")
@@ -136,7 +172,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     own, ros_args = _split_ros_args(argv)
-    ns = build_parser().parse_args(own)
+    extra = []
+    if own[:1] == ["bench"] and "--" in own:
+        i = own.index("--")
+        own, extra = own[:i], own[i + 1:]
+    ns = build_parser(own).parse_args(own)
+    ns.extra = extra
     return int(ns.func(ns, ros_args) or 0)
 
 

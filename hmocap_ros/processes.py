@@ -69,8 +69,14 @@ class NodeProcess:
         except subprocess.TimeoutExpired:
             return None
 
+    def __enter__(self) -> NodeProcess:
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        self.stop()
+
     def stop(self, timeout: float = 10.0) -> int:
-        """SIGINT, then SIGKILL after ``timeout``; returns the exit code."""
+        """SIGINT, then SIGKILL after ``timeout``; returns the exit code (idempotent)."""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
             try:

@@ -75,20 +75,19 @@ def test_masks_for_every_frame_with_input_stamps(tmp_path):
 
 def test_bad_input_is_logged_and_survived(tmp_path):
     env = loopback_dds_env()
-    rec = NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(tmp_path / "o.mcap"),
-                                                       "/cam_1/foreground"], env, tmp_path)
-    node = NodeProcess.module("fg", "hmocap_ros.nodes.foreground_segmentation",
-                              ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=5",
-                               "-p", "min_blob_area:=4", "-p", "relearn_after_size_errors:=0"], env, tmp_path)
-    assert node.wait_for_output("segmenting", 30), node.output()
-    assert rec.wait_for_output("receiving /cam_1/foreground from", 30), rec.output()
-    pub = NodeProcess("pub", [sys.executable, "-c", BAD_INPUT_PUBLISHER], env, tmp_path)
-    assert pub.wait_for_output("sent", 60), pub.output()
-    pub.stop()
-    assert node.proc.poll() is None, node.output()       # still running
-    log = node.output()
-    node.stop()
-    rec.stop()
+    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(tmp_path / "o.mcap"), "--progress", "0.1",
+                                                      "/cam_1/foreground"], env, tmp_path) as rec, \
+         NodeProcess.module("fg", "hmocap_ros.nodes.foreground_segmentation",
+                            ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=5", "-p", "min_blob_area:=4",
+                             "-p", "relearn_after_size_errors:=0"], env, tmp_path) as node:
+        assert node.wait_for_output("segmenting", 60), node.output()
+        assert rec.wait_for_output("receiving /cam_1/foreground from", 60), rec.output()
+        with NodeProcess("pub", [sys.executable, "-c", BAD_INPUT_PUBLISHER], env, tmp_path) as pub:
+            assert pub.wait_for_output("sent", 60), pub.output()
+        # 12 valid frames -> 12 masks (5 empty while learning); the 7 bad ones are refused.
+        assert rec.wait_for_output("written: 12 messages", 30), rec.output()
+        assert node.proc.poll() is None, node.output()       # still running
+        log = node.output()
     assert "16UC1" in log, log   # (the short-data error follows within the 5 s log throttle)
     assert "learnt at 32x24" in log, log
     with BagReader(tmp_path / "o.mcap") as reader:

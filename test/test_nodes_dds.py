@@ -80,15 +80,15 @@ def test_recorder_loses_nothing_on_stop(tmp_path, stop_signal):
 
     env = loopback_dds_env()
     out = tmp_path / "rec.mcap"
-    rec = NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(out), "/test_joints"], env, tmp_path)
-    assert rec.wait_for_output("recording to", 30), rec.output()
     n = 300
-    pub = NodeProcess(f"pub", [sys.executable, "-c", PUBLISHER, str(n)], env, tmp_path)
-    assert pub.wait_for_output("published", 60), pub.output()
-    rec.proc.send_signal(getattr(signal, stop_signal))
-    assert rec.wait(20) == 0, rec.output()
-    pub.stop()
-    assert f"closed {out}" in rec.output()
+    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(out), "/test_joints"], env,
+                            tmp_path) as rec:
+        assert rec.wait_for_output("recording to", 30), rec.output()
+        with NodeProcess("pub", [sys.executable, "-c", PUBLISHER, str(n)], env, tmp_path) as pub:
+            assert pub.wait_for_output("published", 60), pub.output()
+            rec.proc.send_signal(getattr(signal, stop_signal))
+            assert rec.wait(20) == 0, rec.output()
+        assert f"closed {out}" in rec.output()
     with BagReader(out) as reader:
         msgs = [m.msg for m in reader.messages(["/test_joints"])]
     assert len(msgs) == n
@@ -109,16 +109,15 @@ def test_replay_rate_and_latched_topic(tmp_path):
             bag.write("/joints", msg, 100_000_000 * i)
     env = loopback_dds_env()
     out = tmp_path / "out.mcap"
-    rec = NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(out), "/joints", "/latched_text"],
-                             env, tmp_path)
-    assert rec.wait_for_output("recording to", 30)
-    t0 = time.monotonic()
-    play = NodeProcess.module("play", "hmocap_ros.cli",
-                              ["replay", str(src), "--rate", "2", "--wait-subscribers", "1", "--linger", "1.5"],
-                              env, tmp_path)
-    assert play.wait(60) == 0, play.output()
-    elapsed = time.monotonic() - t0
-    rec.stop()
+    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(out), "/joints", "/latched_text"],
+                            env, tmp_path) as rec:
+        assert rec.wait_for_output("recording to", 30)
+        t0 = time.monotonic()
+        with NodeProcess.module("play", "hmocap_ros.cli",
+                                ["replay", str(src), "--rate", "2", "--wait-subscribers", "1", "--linger", "1.5"],
+                                env, tmp_path) as play:
+            assert play.wait(60) == 0, play.output()
+        elapsed = time.monotonic() - t0
     with BagReader(out) as reader:
         topics = reader.topics()
         joints = [m.msg.position[0] for m in reader.messages(["/joints"])]
@@ -129,19 +128,37 @@ def test_replay_rate_and_latched_topic(tmp_path):
     assert 0.9 < elapsed < 30
 
 
-@pytest.mark.parametrize("argv", [
-    ["hmocap", "--help"], ["hmocap", "record", "--help"], ["hmocap", "replay", "--help"],
-    ["hmocap", "demo", "--help"], ["hmocap", "info", "--help"], ["camera_rig_publisher", "--help"],
-])
-def test_console_scripts_answer_help(argv):
+def _console_scripts() -> list[str]:
+    import re
+
+    setup_py = (Path(__file__).resolve().parents[1] / "setup.py").read_text()
+    return re.findall(r'^\s*"(\w+) = hmocap_ros[\w.]*:main",', setup_py, re.M)
+
+
+@pytest.mark.parametrize("script", _console_scripts())
+def test_console_scripts_answer_help(script):
     import subprocess
 
-    exe = Path(sys.executable).parent / argv[0]
+    exe = Path(sys.executable).parent / script
     if not exe.exists():
         pytest.skip(f"{exe} not installed (run make setup)")
-    res = subprocess.run([str(exe), *argv[1:]], capture_output=True, text=True, timeout=60)
+    res = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
     assert "usage" in res.stdout.lower()
+
+
+def test_every_hmocap_subcommand_answers_help(capsys):
+    from hmocap_ros.cli import COMMAND_GROUPS, main
+
+    commands = [["record"], ["replay"], ["demo"], ["info"], ["bench"]]
+    for group, (_, _, kinds) in COMMAND_GROUPS.items():
+        commands += [[group]] + [[group, kind] for kind in kinds]
+    assert {"sim", "eval", "train"} <= {c[0] for c in commands}
+    for argv in commands:
+        with pytest.raises(SystemExit) as exit_info:
+            main([*argv, "--help"])
+        assert exit_info.value.code == 0, argv
+        assert f"usage: hmocap {' '.join(argv)}" in capsys.readouterr().out, argv
 
 
 def test_demo_bag_is_shipped():
