@@ -265,6 +265,20 @@ def test_same_seed_same_bytes_and_other_options(tmp_path):
     # Distractors only add things: the subject and its ground truth keep their seed.
     d, _, _, _, skel_d = run("d", 11, distractors=True, **base)
     assert len(d) == len(a) and skel_d == skel_a
+    # So do lighting changes (their own random stream).
+    e, _, _, _, skel_e = run("e", 11, lighting_changes=True, **base)
+    assert len(e) == len(a) and skel_e == skel_a
+
+
+def test_lighting_events_dim_the_lamp_and_come_back():
+    t = np.arange(150) / 25.0
+    lamp, exposure, window = mocap_dataset._lighting_events(np.random.default_rng(3), t, 1.0, 6.0)
+    assert lamp[0] == 1.0 and lamp[-1] == 1.0 and 0.25 <= lamp.min() <= 0.35
+    dim = np.flatnonzero(lamp < 0.5)
+    assert 1.0 + 0.2 * 5 <= t[dim[0]] <= 1.0 + 0.31 * 5 and t[dim[-1]] <= 1.0 + 0.71 * 5
+    # the auto-exposure answers late and only in part
+    assert exposure[dim[0]] < exposure[dim[-1]] < 1.3 and exposure.min() == pytest.approx(1.0)
+    assert 0.6 < window.min() < 0.7 and window[0] > 0.99
 
 
 def test_make_rig_options():

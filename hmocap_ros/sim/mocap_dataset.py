@@ -33,7 +33,10 @@ inside every camera's image and away from the furniture; a motion that travels f
 the cameras' common view (a run) is placed to stay in view as long as it can, with a warning.
 ``--distractors`` adds a door that opens and closes, a ball rolling across the floor and a
 second person at the side of the room, which all cause foreground that is not the subject (and
-may occlude it: the silhouettes stay exact).
+may occlude it: the silhouettes stay exact). ``--lighting-changes`` adds sudden lighting
+events during the motion (on top of the small drifts of daylight and exposure every recording
+has): the ceiling lamp dims to about a third and comes back, the cameras' auto-exposure follows
+with a lag, and a cloud darkens the window light for a second.
 
 The rendered mesh is the finer ``hands`` body (12,000 triangles, relaxed fingers, hair volume)
 posed with the same parameters as the tracking body, so joints coincide exactly and the
@@ -81,6 +84,7 @@ class MocapSimConfig:
     background_seconds: float = 1.0
     seed: int = 0
     distractors: bool = False
+    lighting_changes: bool = False
     shadows: bool = True
     noise: bool = True
     supersample: int = 0
@@ -183,6 +187,34 @@ def _smooth_noise(rng, t: np.ndarray, amplitude: float, periods=(3.0, 9.0)) -> n
         period = rng.uniform(*periods)
         out += math.sqrt(2.0 / 3.0) * np.sin(2 * math.pi * t / period + rng.uniform(0, 2 * math.pi))
     return amplitude * out / 1.5
+
+
+def _lighting_events(rng, t: np.ndarray, t_motion: float, t_end: float):
+    """Lamp gain, exposure factor and window factor per frame for ``--lighting-changes``.
+
+    The lamp dims to ~30 % over 0.1 s at 20-30 % of the motion and comes back at 60-70 %; the
+    auto-exposure follows the lamp with a 0.4 s lag and compensates part of it; a cloud takes
+    ~35 % of the window light for about a second around the middle of the motion.
+    """
+    dur = max(t_end - t_motion, 1e-6)
+    t_off = t_motion + rng.uniform(0.2, 0.3) * dur
+    t_on = t_motion + rng.uniform(0.6, 0.7) * dur
+    low = rng.uniform(0.25, 0.35)
+    ramp = 0.1
+    down = np.clip((t - t_off) / ramp, 0.0, 1.0)
+    up = np.clip((t - t_on) / ramp, 0.0, 1.0)
+    lamp = 1.0 - (1.0 - low) * (down - up)
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.04
+    alpha = 1.0 - math.exp(-dt / 0.4)
+    seen = np.empty_like(lamp)
+    acc = 1.0
+    for i, g in enumerate(lamp):  # first-order lag of the auto-exposure
+        acc += alpha * (g - acc)
+        seen[i] = acc
+    exposure = 1.0 + 0.3 * (1.0 - seen)
+    t_cloud = t_motion + rng.uniform(0.4, 0.55) * dur
+    window = 1.0 - 0.35 * np.exp(-0.5 * ((t - t_cloud) / 0.35) ** 2)
+    return lamp, exposure, window
 
 
 def _full_parameters(track_params, tracking, full) -> np.ndarray:
@@ -465,7 +497,7 @@ def generate(config: MocapSimConfig) -> SimResult:
 
     # Independent random streams, so that e.g. --distractors does not change the subject.
     streams = np.random.SeedSequence(int(config.seed)).spawn(8)
-    rng_room, rng_shape, rng_look, rng_place, rng_dist, rng_light, rng_cam, _ = (
+    rng_room, rng_shape, rng_look, rng_place, rng_dist, rng_light, rng_cam, rng_events = (
         np.random.default_rng(s) for s in streams)
 
     if config.rig is not None:
@@ -514,6 +546,11 @@ def generate(config: MocapSimConfig) -> SimResult:
                              tracks, BALL_RADIUS)
     window_gain = 1.0 + _smooth_noise(rng_light, t, 0.12)
     exposure = 1.0 + _smooth_noise(rng_light, t, 0.03, periods=(5.0, 12.0))
+    lamp_gain = np.ones(n_frames)
+    if config.lighting_changes:
+        lamp_gain, exposure_step, window_step = _lighting_events(rng_events, t, t_motion, t_end)
+        exposure = exposure * exposure_step
+        window_gain = window_gain * window_step
     camera_gains = ((1.0 + 0.04 * rng_cam.standard_normal((len(rig), 1)))
                     * (1.0 + 0.025 * rng_cam.standard_normal((len(rig), 3))))
 
@@ -562,7 +599,8 @@ def generate(config: MocapSimConfig) -> SimResult:
             if second is not None:
                 verts.append(posed(second, j, "d") if present else None)
             state = FrameState(people=tuple(verts), door_angle=float(door[i]), ball=balls[i],
-                               window_gain=float(window_gain[i]), exposure=float(exposure[i]))
+                               window_gain=float(window_gain[i]), exposure=float(exposure[i]),
+                               lamp_gain=float(lamp_gain[i]))
             rngs = [np.random.default_rng(np.random.SeedSequence(int(config.seed),
                                                                  spawn_key=(1, i, k)))
                     for k in range(len(rig))]
@@ -602,7 +640,8 @@ def generate(config: MocapSimConfig) -> SimResult:
                               row_labels=[f"{(i - n_bg) / fps:.2f} s" for i, _ in sheet_rows],
                               title=(f"{bvh.name} from {config.start:g} s, seed {config.seed}, "
                                      f"{len(rig)} cameras {width}x{height}"
-                                     + (", distractors" if config.distractors else "")))
+                                     + (", distractors" if config.distractors else "")
+                                     + (", lighting changes" if config.lighting_changes else "")))
     else:
         sheet = np.zeros((8, 8, 3), np.uint8)
     save_png(sheet_path, sheet)
@@ -644,6 +683,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="seed of subject shape, look, room, placement and noise (default 0)")
     parser.add_argument("--distractors", action="store_true",
                         help="add a door that opens, a rolling ball and a second person")
+    parser.add_argument("--lighting-changes", action="store_true",
+                        help="the lamp dims and comes back, auto-exposure follows, a cloud passes")
     parser.add_argument("--no-shadow", dest="shadows", action="store_false",
                         help="no shadow map (faster; the lamp lights everything)")
     parser.add_argument("--no-noise", dest="noise", action="store_false",
@@ -666,7 +707,8 @@ def main_from_args(ns: argparse.Namespace) -> int:
     config = MocapSimConfig(
         out=ns.out, bvh=ns.bvh, cameras=ns.cameras, width=ns.width, height=ns.height, fps=ns.fps,
         start=ns.start, seconds=ns.seconds, background_seconds=ns.background_seconds,
-        seed=ns.seed, distractors=ns.distractors, shadows=ns.shadows, noise=ns.noise,
+        seed=ns.seed, distractors=ns.distractors, lighting_changes=ns.lighting_changes,
+        shadows=ns.shadows, noise=ns.noise,
         supersample=ns.supersample, rig=ns.rig, contact_frames=ns.contact_frames,
         force=ns.force, progress=not ns.quiet)
     try:
