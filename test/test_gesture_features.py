@@ -3,6 +3,7 @@ on hand-made depth maps whose feature values are known."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -30,7 +31,9 @@ def reference_test(img, x, y, u, v, params: FeatureParams) -> float:
     def probe(o):
         px = math.floor(x + o[0] / d + 0.5)
         py = math.floor(y + o[1] / d + 0.5)
-        if not (0 <= px < img.shape[1] and 0 <= py < img.shape[0]):
+        if params.outside == "border":  # the nearest pixel of the image
+            z = float(img[min(max(py, 0), img.shape[0] - 1), min(max(px, 0), img.shape[1] - 1)])
+        elif not (0 <= px < img.shape[1] and 0 <= py < img.shape[0]):
             z = params.background_depth_m
         else:
             z = float(img[py, px])
@@ -108,10 +111,28 @@ def test_invalid_pixels_and_the_outside_read_as_far_background():
     tests = np.array([[30.0, 0.0, 0.0, 0.0],     # lands on an invalid pixel (column 25 + 15)
                       [200.0, 0.0, 0.0, 0.0],    # lands outside the image
                       [0.0, 0.0, 0.0, 0.0]], np.float32)
-    plain = evaluate_tests_at_pixels(img, [25], [10], tests, PLAIN)[0]
+    far = dataclasses.replace(PLAIN, outside="background")
+    plain = evaluate_tests_at_pixels(img, [25], [10], tests, far)[0]
     np.testing.assert_allclose(plain, [8.0, 8.0, 0.0])  # 10 m background - 2 m
-    clipped = evaluate_tests_at_pixels(img, [25], [10], tests, CLIPPED)[0]
+    clipped = evaluate_tests_at_pixels(img, [25], [10], tests, dataclasses.replace(CLIPPED, outside="background"))[0]
     np.testing.assert_allclose(clipped, [0.3, 0.3, 0.0], atol=1e-6)  # "far": d + kappa
+
+
+def test_outside_the_image_reads_the_nearest_border_pixel():
+    """outside = 'border' (the default): the scene goes on beyond the frame, so a person cut by the
+    image edge does not look like a small object in front of far background."""
+    img = np.full((20, 40), 3.0, np.float32)
+    img[:, 34:] = 2.0  # a body at 2 m entering from the right edge; reference pixel (36, 10)
+    img[:, 38:] = 2.1  # the edge column differs, to tell it from the reference pixel
+    img[0, 36] = 2.05  # the top edge above the reference pixel
+    tests = np.array([[200.0, 0.0, 0.0, 0.0],     # beyond the right edge: column 39
+                      [0.0, -200.0, 0.0, 0.0],    # beyond the top edge: row 0
+                      [-40.0, 0.0, 200.0, 200.0]],  # on the wall vs beyond the bottom-right corner
+                     np.float32)
+    plain = evaluate_tests_at_pixels(img, [36], [10], tests, PLAIN)[0]
+    np.testing.assert_allclose(plain, [0.1, 0.05, 3.0 - 2.1], atol=1e-6)
+    clipped = evaluate_tests_at_pixels(img, [36], [10], tests, CLIPPED)[0]
+    np.testing.assert_allclose(clipped, [0.1, 0.05, 2.3 - 2.1], atol=1e-6)
 
 
 def render_square(depth: float, f: float = 200.0, shape=(120, 160)) -> np.ndarray:
@@ -141,7 +162,9 @@ def test_depth_normalised_offsets_see_the_same_object_at_twice_the_distance(para
     assert not np.allclose(f_near, f_far_unscaled)
 
 
-@pytest.mark.parametrize("params", [PLAIN, CLIPPED], ids=["plain", "clipped"])
+@pytest.mark.parametrize("params", [PLAIN, CLIPPED, dataclasses.replace(PLAIN, outside="background"),
+                                    dataclasses.replace(CLIPPED, outside="background")],
+                         ids=["plain", "clipped", "plain-far-outside", "clipped-far-outside"])
 def test_kernel_matches_the_written_out_equation(params):
     rng = np.random.default_rng(3)
     frames = rng.uniform(0.8, 4.0, (3, 30, 50)).astype(np.float32)

@@ -29,6 +29,7 @@ import dataclasses
 import json
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,18 +38,15 @@ import numpy as np
 from hmocap_ros.gestures.detection import GestureDetector
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
 from hmocap_ros.gestures.params import DetectorParams
-from hmocap_ros.gestures.trees import Forest, Tree
+from hmocap_ros.gestures.trees import Forest
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
 from hmocap_ros.io.conversions import image_to_numpy
 
 __all__ = ["DEFAULT_MODEL", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE", "average_precision",
-           "detector_params_for_focal", "evaluate_gestures", "forest_for_focal", "read_gesture_bag",
-           "read_gesture_bags", "add_arguments", "main_from_args"]
+           "evaluate_gestures", "read_gesture_bag", "read_gesture_bags", "add_arguments", "main_from_args"]
 
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
-#: Focal length (px) the pixel*metre defaults of ``hmocap_ros.gestures.params`` are tuned for.
-REFERENCE_FOCAL_PX = 525.0
 REFERENCE_WIDTH = 640
 #: Localization tolerance of thesis sec. 3.2.6, in pixels of a 640x480 image.
 TOLERANCE_PX_640 = 10.0
@@ -98,90 +96,81 @@ def _class_names(names_by_id: dict) -> tuple:
                                                     else f"gesture_{c}") for c in range(1, n + 1))
 
 
-def read_gesture_bag(path) -> GestureBag:
+def read_gesture_bag(path, frame_fn: Callable[[np.ndarray], np.ndarray] | None = None) -> GestureBag:
     """Depth frames, camera focal length and gesture ground truth of one bag (``hmocap sim gestures``
-    layout), matched by ``header.stamp``."""
-    path = Path(path)
+    layout), matched by ``header.stamp``; see :func:`read_gesture_bags` for ``frame_fn``."""
+    return read_gesture_bags([path], frame_fn)
+
+
+def _depth_count(path: Path) -> int:
+    with BagReader(path) as reader:
+        info = reader.topics().get(topics.DEPTH_IMAGE)
+        return info.count if info is not None else 0
+
+
+def read_gesture_bags(paths, frame_fn: Callable[[np.ndarray], np.ndarray] | None = None) -> GestureBag:
+    """Several bags of one camera (same size and focal length) concatenated in the given order.
+
+    The frames go into one array allocated once (from the bags' message counts): a training set
+    of thousands of 640x480 frames is held once, never copied. ``frame_fn``, when given, maps
+    each raw image as it is read (e.g. to float32 metres for training, so the raw stack is
+    never held at all); ``depth`` then holds its results.
+    """
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise GestureBagError("no bag given")
     wanted = [topics.DEPTH_IMAGE, topics.DEPTH_INFO, topics.GT_GESTURES]
-    depth, stamps, labels, visible, names, focal = [], [], [], [], {}, None
+    depth = None
+    n = 0
+    stamps, labels, visible, names, focal, sources = [], [], [], {}, None, []
+    first_path = None
     try:
-        with BagReader(path) as reader:
-            for stamp, msgs in reader.frame_sets(wanted):
-                info = msgs[topics.DEPTH_INFO]
-                fx = float(info.k[0])
-                if fx <= 0:
-                    raise GestureBagError(f"{path}: camera_info has no focal length (K[0] = {fx})")
-                if focal is None:
-                    focal = fx
-                elif abs(fx - focal) > 1e-6 * focal:
-                    raise GestureBagError(f"{path}: focal length changes within the bag")
-                img = image_to_numpy(msgs[topics.DEPTH_IMAGE])
-                if depth and img.shape != depth[0].shape:
-                    raise GestureBagError(f"{path}: image size changes within the bag")
-                gestures = list(msgs[topics.GT_GESTURES].gestures)
-                depth.append(img)
-                stamps.append(stamp)
-                if gestures:
-                    g = gestures[0]
-                    names[int(g.class_id)] = str(g.name)
-                    labels.append((int(g.class_id), float(g.u), float(g.v)))
-                    visible.append(bool(g.position_valid))
-                else:
-                    labels.append(None)
-                    visible.append(True)
+        capacity = sum(_depth_count(p) for p in paths)
+        for path in paths:
+            sources.append(str(path))
+            n_bag = 0
+            with BagReader(path) as reader:
+                for stamp, msgs in reader.frame_sets(wanted):
+                    fx = float(msgs[topics.DEPTH_INFO].k[0])
+                    if fx <= 0:
+                        raise GestureBagError(f"{path}: camera_info has no focal length (K[0] = {fx})")
+                    if focal is None:
+                        focal, first_path = fx, path
+                    elif abs(fx - focal) > 1e-6 * focal:
+                        raise GestureBagError(f"{path}: focal length {fx:g} differs from {focal:g} "
+                                              f"({first_path})")
+                    img = image_to_numpy(msgs[topics.DEPTH_IMAGE])
+                    if frame_fn is not None:
+                        img = frame_fn(img)
+                    if depth is None:
+                        depth = np.empty((capacity,) + img.shape, img.dtype)
+                    elif img.shape != depth.shape[1:]:
+                        raise GestureBagError(f"{path}: image size {img.shape[::-1]} differs from "
+                                              f"{depth.shape[:0:-1]} ({first_path})")
+                    if n == depth.shape[0]:  # more frame sets than depth messages cannot happen
+                        raise GestureBagError(f"{path}: more frames than depth images")
+                    depth[n] = img
+                    n += 1
+                    n_bag += 1
+                    stamps.append(stamp)
+                    gestures = list(msgs[topics.GT_GESTURES].gestures)
+                    if gestures:
+                        g = gestures[0]
+                        names[int(g.class_id)] = str(g.name)
+                        labels.append((int(g.class_id), float(g.u), float(g.v)))
+                        visible.append(bool(g.position_valid))
+                    else:
+                        labels.append(None)
+                        visible.append(True)
+            if n_bag == 0:
+                raise GestureBagError(f"{path}: no frame with depth image, camera_info and gesture ground truth")
     except BagReadError as err:
         raise GestureBagError(str(err)) from err
     except FileNotFoundError as err:
-        raise GestureBagError(f"{path}: no such bag") from err
-    if not depth:
-        raise GestureBagError(f"{path}: no frame with depth image, camera_info and gesture ground truth")
-    return GestureBag(np.stack(depth), np.asarray(stamps, np.int64), labels, np.asarray(visible, bool),
-                      float(focal), _class_names(names), [str(path)])
-
-
-def read_gesture_bags(paths) -> GestureBag:
-    """Several bags of one camera (same size and focal length) concatenated in the given order."""
-    bags = [read_gesture_bag(p) for p in paths]
-    first = bags[0]
-    for b in bags[1:]:
-        if b.depth.shape[1:] != first.depth.shape[1:] or abs(b.focal_px - first.focal_px) > 1e-6 * first.focal_px:
-            raise GestureBagError(f"{b.sources[0]}: {b.width}x{b.height} fx {b.focal_px} differs from "
-                                  f"{first.sources[0]}: {first.width}x{first.height} fx {first.focal_px}")
-    names = dict(enumerate(first.class_names))
-    for b in bags[1:]:
-        for c, n in enumerate(b.class_names):
-            names.setdefault(c, n)
-    return GestureBag(np.concatenate([b.depth for b in bags]), np.concatenate([b.stamps_ns for b in bags]),
-                      sum((b.labels for b in bags), []), np.concatenate([b.visible for b in bags]),
-                      first.focal_px, tuple(names[c] for c in sorted(names)), sum((b.sources for b in bags), []))
-
-
-def forest_for_focal(forest: Forest, focal_px: float) -> tuple[Forest, float]:
-    """``forest`` with its test offsets rescaled from its training focal length to ``focal_px``
-    (offsets are pixel*metres: they scale with f); returns (forest, factor). A forest without a
-    recorded focal length is used as is."""
-    trained = forest.meta.get("training", {}).get("focal_px")
-    if not trained:
-        return forest, 1.0
-    s = float(focal_px) / float(trained)
-    if abs(s - 1.0) < 1e-6:
-        return forest, 1.0
-    trees = [Tree((t.feature * np.float32(s)).astype(np.float32), t.threshold, t.left, t.right, t.counts, t.depth)
-             for t in forest.trees]
-    features = dataclasses.replace(forest.features,
-                                   patch_half_size_px_m=forest.features.patch_half_size_px_m * s)
-    return Forest(trees, forest.class_names, features, forest.kind, forest.meta), s
-
-
-def detector_params_for_focal(focal_px: float, **overrides) -> DetectorParams:
-    """The node's detector defaults with pixel sizes scaled from f = 525 px to ``focal_px``."""
-    s = float(focal_px) / REFERENCE_FOCAL_PX
-    d = DetectorParams()
-    base = dict(stride=max(1, round(d.stride * s)), parzen_sigma_px=d.parzen_sigma_px * s,
-                volume_radius_px_m=d.volume_radius_px_m * s,
-                suppression_radius_px_m=d.suppression_radius_px_m * s)
-    base.update(overrides)
-    return DetectorParams(**base)
+        raise GestureBagError(f"{err.filename}: no such bag") from err
+    # A prefix of a C-contiguous array is C-contiguous: no copy.
+    return GestureBag(depth[:n], np.asarray(stamps, np.int64), labels, np.asarray(visible, bool),
+                      float(focal), _class_names(names), sources)
 
 
 def average_precision(scores, correct, n_positives: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
@@ -202,10 +191,9 @@ def average_precision(scores, correct, n_positives: int) -> tuple[float, np.ndar
 
 def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams | None = None) -> dict:
     """Run the detector over ``data`` in order and score it (module docstring); a JSON-able dict."""
-    forest, offset_scale = forest_for_focal(forest, data.focal_px)
     if params is None:
-        params = detector_params_for_focal(data.focal_px, min_score=SWEEP_MIN_SCORE, min_volume=0.0)
-    detector = GestureDetector(forest, params)
+        params = DetectorParams(min_score=SWEEP_MIN_SCORE, min_volume=0.0)
+    detector = GestureDetector(forest, params, focal_px=data.focal_px)
     tolerance = TOLERANCE_PX_640 * data.width / REFERENCE_WIDTH
     n_gestures = forest.n_classes - 1
     scores = [[] for _ in range(n_gestures)]
@@ -243,15 +231,15 @@ def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams |
         "scored_frames": int(data.visible.sum()),
         "image_size": [data.width, data.height],
         "focal_px": data.focal_px,
-        "model_focal_px": forest.meta.get("training", {}).get("focal_px"),
-        "offset_scale": offset_scale,
+        "model_focal_px": forest.training_focal_px,
+        "offset_scale": detector.offset_scale,
         "criterion": f"correct class and location within {tolerance:g} px "
                      f"(10 px at 640x480, scaled by width {data.width}/640)",
         "tolerance_px": tolerance,
         "per_class": per_class,
         "mean_ap": float(np.mean(aps)) if aps else 0.0,
         "fps": n / seconds if seconds > 0 else 0.0,
-        "detector_params": dataclasses.asdict(params),
+        "detector_params": dataclasses.asdict(detector.active_params),
     }
 
 

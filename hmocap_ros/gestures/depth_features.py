@@ -82,21 +82,24 @@ def probe_index(coord, ofs, inv_d, size):
 
 
 @nb.njit(inline="always")
-def probe(img, x, y, ox, oy, inv_d, background):
-    """Depth at ``(x, y) + (ox, oy) / d``, rounded; ``background`` outside the image."""
+def probe(img, x, y, ox, oy, inv_d, background, border):
+    """Depth at ``(x, y) + (ox, oy) / d``, rounded; outside the image the nearest border pixel
+    (``border``) or ``background``."""
     h, w = img.shape
     px = probe_index(x, ox, inv_d, w)
     py = probe_index(y, oy, inv_d, h)
+    if border:
+        return img[min(max(py, 0), h - 1), min(max(px, 0), w - 1)]
     if px < 0 or py < 0 or px >= w or py >= h:
         return background
     return img[py, px]
 
 
 @nb.njit(inline="always")
-def test_value(img, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, background):
+def test_value(img, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, background, border):
     """Eq. 3.3 (``clipped`` false) or eq. 3.6 at reference pixel ``(x, y)`` of depth ``d``."""
-    a = probe(img, x, y, ux, uy, inv_d, background)
-    b = probe(img, x, y, vx, vy, inv_d, background)
+    a = probe(img, x, y, ux, uy, inv_d, background, border)
+    b = probe(img, x, y, vx, vy, inv_d, background, border)
     if clipped:
         lo = d - kappa
         hi = d + kappa
@@ -106,7 +109,7 @@ def test_value(img, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, background):
 
 
 @nb.njit(cache=True, nogil=True)
-def _evaluate_tests(frames, s_frame, s_x, s_y, offsets, clipped, kappa, background, out):
+def _evaluate_tests(frames, s_frame, s_x, s_y, offsets, clipped, kappa, background, border, out):
     for i in range(s_frame.shape[0]):
         img = frames[s_frame[i]]
         x = np.float64(s_x[i])
@@ -116,7 +119,7 @@ def _evaluate_tests(frames, s_frame, s_x, s_y, offsets, clipped, kappa, backgrou
         for t in range(offsets.shape[0]):
             out[i, t] = test_value(img, x, y, d, inv_d, offsets[t, 0], offsets[t, 1],
                                    offsets[t, 2], offsets[t, 3], clipped, np.float32(kappa),
-                                   np.float32(background))
+                                   np.float32(background), border)
 
 
 def evaluate_tests(frames: np.ndarray, s_frame, s_x, s_y, offsets: np.ndarray,
@@ -136,7 +139,7 @@ def evaluate_tests(frames: np.ndarray, s_frame, s_x, s_y, offsets: np.ndarray,
     offsets = np.ascontiguousarray(offsets, dtype=np.float32).reshape(-1, 4)
     out = np.empty((s_frame.shape[0], offsets.shape[0]), np.float32)
     _evaluate_tests(frames, s_frame, s_x, s_y, offsets, params.clipped, params.kappa_m,
-                    params.background_depth_m, out)
+                    params.background_depth_m, params.border, out)
     return out
 
 

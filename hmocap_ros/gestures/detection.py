@@ -39,7 +39,7 @@ from hmocap_ros.gestures.depth_features import depth_to_metres
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.gestures.trees import FlatForest, Forest
 
-__all__ = ["Detection", "GestureDetector", "forest_grid_proba", "forest_grid_votes", "pad_background"]
+__all__ = ["Detection", "GestureDetector", "forest_grid_proba", "forest_grid_votes", "pad_for_forest"]
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,8 @@ _BATCH = 8
 
 @nb.njit(inline="always")
 def _probe_padded(img, x, y, ox, oy, inv_d):
-    """``probe`` on an image with a 1-pixel background border: the clamp to the border replaces
-    the bounds test (same rounding as ``probe_index``)."""
+    """``probe`` on an image with a 1-pixel frame (:func:`pad_for_forest`): the clamp to the frame
+    replaces the bounds test (same rounding as ``probe_index``)."""
     px = int(min(max(x + ox * inv_d + 0.5, -1.0), img.shape[1] - 1.5) + 1.0)
     py = int(min(max(y + oy * inv_d + 0.5, -1.0), img.shape[0] - 1.5) + 1.0)
     return img[py, px]
@@ -73,7 +73,7 @@ def _probe_padded(img, x, y, ox, oy, inv_d):
 @nb.njit(cache=True, nogil=True)
 def _grid_votes(padded, stride, offset, nodes, links, proba, roots, max_depth, clipped, kappa, background,
                 early_exit, class_map, grid_depth, proba_out):
-    """Forest votes on the stride grid of ``padded`` (the metres image with a background border).
+    """Forest votes on the stride grid of ``padded`` (the metres image with a 1-pixel frame).
 
     Trees outer, pixels inner (one tree's records stay in cache while the grid walks it),
     ``_BATCH`` pixels interleaved. With ``early_exit``, from the middle tree on, a pixel whose
@@ -175,21 +175,27 @@ def grid_shape(height: int, width: int, stride: int) -> tuple[int, int, int]:
     return (height - offset + stride - 1) // stride, (width - offset + stride - 1) // stride, offset
 
 
-def pad_background(depth_m: np.ndarray, background: float, out: np.ndarray | None = None) -> np.ndarray:
-    """``depth_m`` with a 1-pixel border of ``background`` (what :func:`forest_grid_votes` takes)."""
+def pad_for_forest(depth_m: np.ndarray, flat: FlatForest, out: np.ndarray | None = None) -> np.ndarray:
+    """``depth_m`` (a ``depth_to_metres`` image) with the 1-pixel frame that
+    :func:`forest_grid_votes` takes: what the forest's tests read outside the image
+    (``FeatureParams.outside``): a copy of the image's edge pixels, or the background depth."""
+    background, border = flat.background, flat.border
     h, w = depth_m.shape
     if out is None or out.shape != (h + 2, w + 2):
         out = np.empty((h + 2, w + 2), np.float32)
-    out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = np.float32(background)
     out[1:-1, 1:-1] = depth_m
+    if border:
+        out[0, 1:-1], out[-1, 1:-1] = depth_m[0], depth_m[-1]
+        out[:, 0], out[:, -1] = out[:, 1], out[:, -2]
+    else:
+        out[0, :] = out[-1, :] = out[:, 0] = out[:, -1] = np.float32(background)
     return out
 
 
 def forest_grid_votes(flat: FlatForest, padded: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel forest votes (sec. 3.2.4) on the stride grid of a metres image.
 
-    ``padded``: a ``depth_to_metres`` image with a 1-pixel border of background
-    (:func:`pad_background`). Returns ``class_map`` (gh, gw) int8: -1 invalid depth,
+    ``padded``: a ``depth_to_metres`` image with the 1-pixel frame of :func:`pad_for_forest`. Returns ``class_map`` (gh, gw) int8: -1 invalid depth,
     0 background, ``c`` a vote for class ``c``; and ``grid_depth`` (gh, gw) float32.
     """
     padded = np.ascontiguousarray(padded, dtype=np.float32)
@@ -274,10 +280,20 @@ class GestureDetector:
     ``params``) and returns the detections of that frame; between calls it keeps the
     temporally smoothed densities (eq. 3.4). ``density`` (gh, gw, C-1) is that state and
     :meth:`probability_image` the full-resolution debug map.
+
+    Camera: the forest's tests are pixel*metre offsets for the focal length it was trained at,
+    and the pixel sizes of ``params`` are for ``params.reference_focal_px``; both are rescaled
+    to the camera's focal length ``focal_px`` (:meth:`set_focal`, e.g. from CameraInfo). While
+    it is unknown (None) the camera is taken to be the training camera at this image width
+    (focal scaled by width / training width). ``active_params`` are the scaled parameters in use.
     """
 
-    def __init__(self, forest: Forest, params: DetectorParams | None = None):
+    def __init__(self, forest: Forest, params: DetectorParams | None = None, focal_px: float | None = None):
         self.params = params if params is not None else DetectorParams()
+        self.focal_px = None if focal_px is None else float(focal_px)
+        self.active_params = self.params
+        self.offset_scale = 1.0
+        self._configured: tuple | None = None
         self.set_forest(forest)
 
     def set_forest(self, forest: Forest) -> None:
@@ -289,9 +305,36 @@ class GestureDetector:
             raise ValueError("at most 127 classes (the vote map is int8)")
         same = hasattr(self, "forest") and self.forest.class_names == forest.class_names
         self.forest = forest
-        self._flat = forest.flat()
+        self._configured = None
         if not same:
             self.reset()
+
+    def set_focal(self, focal_px: float | None) -> None:
+        """The camera's focal length in pixels (fx of its CameraInfo), None = unknown."""
+        if focal_px is not None and not (np.isfinite(focal_px) and focal_px > 0):
+            raise ValueError(f"focal length must be a positive number, got {focal_px}")
+        self.focal_px = None if focal_px is None else float(focal_px)
+
+    def camera_focal(self, width: int) -> float | None:
+        """The focal length used for an image ``width`` pixels wide (see the class docstring)."""
+        if self.focal_px is not None:
+            return self.focal_px
+        trained, trained_width = self.forest.training_focal_px, self.forest.training_width
+        if trained and trained_width:
+            return trained * width / trained_width
+        return trained
+
+    def _configure(self, width: int) -> None:
+        focal = self.camera_focal(width)
+        key = (focal, id(self.forest))
+        if self._configured == key:
+            return
+        scaled, self.offset_scale = self.forest.for_focal(focal) if focal is not None else (self.forest, 1.0)
+        self.active_params = self.params.for_focal(focal)
+        self._flat = scaled.flat()
+        if self._configured is not None and self._configured[0] != focal:
+            self.reset()  # another camera: the old densities mean nothing here
+        self._configured = key
 
     def reset(self) -> None:
         """Forget the temporal state (eq. 3.4 restarts from zero)."""
@@ -304,21 +347,22 @@ class GestureDetector:
 
     @property
     def grid_offset(self) -> int:
-        return self.params.stride // 2
+        return self.active_params.stride // 2
 
     def update(self, depth: np.ndarray, stamp_ns: int) -> list[Detection]:
         """Detections in one depth frame (raw units, see ``DetectorParams``), best score first."""
-        p = self.params
         stamp_ns = int(stamp_ns)
         background = self.forest.features.background_depth_m
-        depth_m = depth_to_metres(depth, p.depth_format, background)
+        depth_m = depth_to_metres(depth, self.params.depth_format, background)
+        self._configure(depth_m.shape[1])
+        p = self.active_params
         if (self._shape != depth_m.shape or self._last_stamp is None or stamp_ns < self._last_stamp
                 or stamp_ns - self._last_stamp > p.max_gap_s * 1e9):
             self.density = None
         self._shape = depth_m.shape
         self._last_stamp = stamp_ns
 
-        self._padded = pad_background(depth_m, background, self._padded)
+        self._padded = pad_for_forest(depth_m, self._flat, self._padded)
         self.class_map, self.grid_depth = forest_grid_votes(self._flat, self._padded, p.stride)
         n_gestures = self.forest.n_classes - 1
         votes = (self.class_map[:, :, None] == np.arange(1, n_gestures + 1, dtype=np.int8)).astype(np.float32)
@@ -335,7 +379,7 @@ class GestureDetector:
         return suppress_other_classes(detections, p.suppression_radius_px_m)
 
     def _localize(self, class_id: int, stamp_ns: int) -> Detection | None:
-        p = self.params
+        p = self.active_params
         dens = self.density[:, :, class_id - 1]
         flat_max = int(np.argmax(dens))
         gy, gx = divmod(flat_max, dens.shape[1])
@@ -376,7 +420,7 @@ class GestureDetector:
         if self.density is None or self._shape is None:
             return np.zeros(self._shape or (1, 1), np.float32)
         dens = self.density.max(axis=2) if class_id is None else self.density[:, :, class_id - 1]
-        s, h, w = self.params.stride, *self._shape
+        s, h, w = self.active_params.stride, *self._shape
         big = cv2.resize(dens, (dens.shape[1] * s, dens.shape[0] * s), interpolation=cv2.INTER_LINEAR)
         out = np.zeros((h, w), np.float32)
         out[: min(h, big.shape[0]), : min(w, big.shape[1])] = big[:h, :w]

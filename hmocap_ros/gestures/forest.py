@@ -41,7 +41,7 @@ from hmocap_ros.gestures.patches import SampleSet, collect_samples
 from hmocap_ros.gestures.trees import Forest, Tree, apply_tree
 
 __all__ = ["TreeReport", "balanced_error", "frames_to_metres", "grow_tree", "information_gain",
-           "train_forest", "train_forest_on_samples"]
+           "train_forest", "train_forest_on_frames", "train_forest_on_samples"]
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ def _uniform(state):
 
 
 @nb.njit(inline="always")
-def _node_test(frames, f, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, background):
+def _node_test(frames, f, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, background, border):
     """``test_value`` on frame ``f`` of the stack (3-D indexing, no per-call view)."""
     h = frames.shape[1]
     w = frames.shape[2]
@@ -89,8 +89,12 @@ def _node_test(frames, f, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, backgr
     ay = probe_index(y, uy, inv_d, h)
     bx = probe_index(x, vx, inv_d, w)
     by = probe_index(y, vy, inv_d, h)
-    a = frames[f, ay, ax] if (ax >= 0 and ay >= 0 and ax < w and ay < h) else background
-    b = frames[f, by, bx] if (bx >= 0 and by >= 0 and bx < w and by < h) else background
+    if border:
+        a = frames[f, min(max(ay, 0), h - 1), min(max(ax, 0), w - 1)]
+        b = frames[f, min(max(by, 0), h - 1), min(max(bx, 0), w - 1)]
+    else:
+        a = frames[f, ay, ax] if (ax >= 0 and ay >= 0 and ax < w and ay < h) else background
+        b = frames[f, by, bx] if (bx >= 0 and by >= 0 and bx < w and by < h) else background
     if clipped:
         a = max(min(a, d + kappa), d - kappa)
         b = max(min(b, d + kappa), d - kappa)
@@ -99,7 +103,7 @@ def _node_test(frames, f, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, backgr
 
 @nb.njit(cache=True, nogil=True)
 def _best_splits(frames, s_frame, s_x, s_y, s_label, live, node_start, node_count, node_seed,
-                 n_classes, n_tests, n_thresholds, half_size, clipped, kappa, background, min_leaf,
+                 n_classes, n_tests, n_thresholds, half_size, clipped, kappa, background, border, min_leaf,
                  xlogx, out_feature, out_threshold, out_gain, go_left):
     """Best of ``n_tests x n_thresholds`` random tests for each node of a level (eq. 3.2).
 
@@ -153,7 +157,8 @@ def _best_splits(frames, s_frame, s_x, s_y, s_label, live, node_start, node_coun
         for j in range(n):
             for t in range(n_tests):
                 vals[t, j] = _node_test(frames, fr[j], fx[j], fy[j], dd[j], inv_d[j], tests[t, 0],
-                                        tests[t, 1], tests[t, 2], tests[t, 3], clipped, kappa, background)
+                                        tests[t, 1], tests[t, 2], tests[t, 3], clipped, kappa, background,
+                                        border)
         best_gain = -1.0
         best_test = 0
         best_thr = np.float32(0.0)
@@ -290,7 +295,7 @@ def grow_tree(samples: SampleSet, bag: np.ndarray, params: ForestParams, feature
         _best_splits(frames, s_frame, s_x, s_y, s_label, live, node_start, node_count,
                      seeds, n_classes, params.n_tests, params.n_thresholds,
                      float(features.patch_half_size_px_m), features.clipped, float(features.kappa_m),
-                     float(features.background_depth_m), params.min_samples_leaf, xlogx,
+                     float(features.background_depth_m), features.border, params.min_samples_leaf, xlogx,
                      out_feature, out_threshold, out_gain, go_left)
         split = out_gain > params.min_gain
         if not np.any(split):
@@ -465,13 +470,24 @@ def train_forest(depth_frames, labels, params: TrainParams, rng: np.random.Gener
     """
     if len(depth_frames) == 0:
         raise ValueError("no depth frames")
-    frames = frames_to_metres(depth_frames, params)
+    return train_forest_on_frames(frames_to_metres(depth_frames, params), labels, params, rng, class_names,
+                                  progress)
+
+
+def train_forest_on_frames(frames_m: np.ndarray, labels, params: TrainParams, rng: np.random.Generator,
+                           class_names: Sequence[str] | None = None,
+                           progress: Callable[[TreeReport], None] | bool | None = None) -> Forest:
+    """:func:`train_forest` on frames already in metres (F, H, W) float32, as made by
+    :func:`~hmocap_ros.gestures.depth_features.depth_to_metres` with ``params.depth`` and
+    ``params.features.background_depth_m`` (used as is, not copied: big training sets)."""
+    if len(frames_m) == 0:
+        raise ValueError("no depth frames")
     n_classes = len(class_names) if class_names is not None else None
-    samples = collect_samples(frames, labels, params.patches, params.features, rng, n_classes)
+    samples = collect_samples(frames_m, labels, params.patches, params.features, rng, n_classes)
     forest = train_forest_on_samples(samples, params.forest, params.features, rng, class_names, progress)
     forest.meta["training"].update({
-        "n_frames": int(frames.shape[0]),
-        "image_size": [int(frames.shape[2]), int(frames.shape[1])],
+        "n_frames": int(frames_m.shape[0]),
+        "image_size": [int(frames_m.shape[2]), int(frames_m.shape[1])],
         "depth_format": asdict(params.depth),
         "patch_params": asdict(params.patches),
     })

@@ -21,10 +21,11 @@ A forest file is a NumPy ``.npz`` archive (``np.savez_compressed``; read with
 =====================  =================  ==========================================================
 
 Header keys: ``format`` = ``"hmocap-forest"``, ``version`` (integer; this module reads
-version 1 and refuses newer ones), ``kind`` (``"offline"`` or ``"online"``), ``class_names``
+versions 1 and 2 and refuses newer ones; version 2 added ``features.outside``, version 1
+files read as ``outside = "background"``), ``kind`` (``"offline"`` or ``"online"``), ``class_names``
 (class 0 is background), ``depth_unit`` = ``"m"`` (tests and thresholds are in metres,
 whatever the camera's raw unit), ``features`` (``FeatureParams``: ``feature_type``
-``"clipped"``/``"plain"``, ``kappa_m``, ``patch_half_size_px_m``, ``background_depth_m``,
+``"clipped"``/``"plain"``, ``kappa_m``, ``patch_half_size_px_m``, ``background_depth_m``, ``outside``,
 plus ``offset_unit`` = ``"pixel*metre"``), ``n_trees``, ``n_nodes``, ``n_pending_tests`` (K),
 ``created_utc`` and ``meta`` (free JSON: training parameters, data, timings).
 
@@ -53,7 +54,7 @@ from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "ForestFileError", "load_forest", "read_header", "save_forest"]
 
 FORMAT_NAME = "hmocap-forest"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 # name -> (dtype, trailing shape with C = classes, K = pending tests); leading dim is N or P.
 _NODE_ARRAYS = {
@@ -211,6 +212,8 @@ def load_forest(path) -> Forest:
             raise ForestFileError(f"{path}: unsupported offset unit {header['features']['offset_unit']!r}")
         if header.get("depth_unit", "m") != "m":
             raise ForestFileError(f"{path}: unsupported depth unit {header['depth_unit']!r}")
+        if header["version"] < 2:  # version 1 probed "far background" outside the image
+            feat.setdefault("outside", "background")
         features = FeatureParams(**feat)
         n_trees, n_nodes, k = int(header["n_trees"]), int(header["n_nodes"]), int(header["n_pending_tests"])
         meta = header.get("meta", {})

@@ -14,11 +14,15 @@ scale with depth are in pixel*metres ("pixels at 1 m": at depth d they span valu
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 FEATURE_TYPES = ("clipped", "plain")
+OUTSIDE_MODES = ("border", "background")
+#: Focal length (px) of the camera the pixel sizes of the defaults are given for: a 640x480
+#: Kinect-like depth camera (sec. 3.2.6 uses 85x85 px patches and a 10 px criterion at 640x480).
+REFERENCE_FOCAL_PX = 525.0
 
 
 def _param(default, description: str):
@@ -76,19 +80,28 @@ class FeatureParams:
         85.0, "Half side of the square of test offsets u, v in pixel*metres: at reference depth d "
               "the probes lie within +-value/d pixels (85 = the thesis' 85x85 px patch at 2 m).")
     background_depth_m: float = _param(
-        10.0, "Depth read by a probe that falls on an invalid pixel or outside the image: "
-              "far background (with clipping it reads d(x) + kappa like any far clutter).")
+        10.0, "Depth read by a probe that falls on an invalid pixel (or outside the image, with "
+              "outside = 'background'): far background (with clipping it reads d(x) + kappa like "
+              "any far clutter).")
+    outside: str = _param(
+        "border", "What a probe outside the image reads: 'border' = the nearest image pixel (the "
+                  "scene goes on beyond the frame), 'background' = background_depth_m.")
 
     def __post_init__(self):
         _check([(self.feature_type in FEATURE_TYPES, f"feature_type must be one of {FEATURE_TYPES}"),
                 (self.kappa_m > 0.0, "kappa_m must be > 0"),
                 (self.patch_half_size_px_m > 0.0, "patch_half_size_px_m must be > 0"),
-                (self.background_depth_m > 0.0, "background_depth_m must be > 0")],
+                (self.background_depth_m > 0.0, "background_depth_m must be > 0"),
+                (self.outside in OUTSIDE_MODES, f"outside must be one of {OUTSIDE_MODES}")],
                "FeatureParams")
 
     @property
     def clipped(self) -> bool:
         return self.feature_type == "clipped"
+
+    @property
+    def border(self) -> bool:
+        return self.outside == "border"
 
 
 @dataclass(frozen=True)
@@ -109,12 +122,20 @@ class PatchParams:
     negative_exclusion_scale: float = _param(
         1.0, "Negatives of gesture frames are drawn outside the box scaled by this factor "
              "(1 = just outside the box, as in the thesis).")
+    n_negative_near: int = _param(
+        0, "Extra negatives per gesture frame drawn outside the (scaled) box but inside the "
+           "square of half side near_half_size_px_m / d around the annotated point: the rest of "
+           "the hand, the arm, the face, which a detector sees next to the gesture.")
+    near_half_size_px_m: float = _param(
+        85.0, "Half side of the near-negative square in pixel*metres (85 = the test patch).")
 
     def __post_init__(self):
         _check([(self.n_positive >= 1 and self.n_negative >= 0, "need n_positive >= 1, n_negative >= 0"),
                 (self.box_half_size_px_m > 0.0, "box_half_size_px_m must be > 0"),
                 (self.positive_depth_tolerance_m >= 0.0, "positive_depth_tolerance_m must be >= 0"),
-                (self.negative_exclusion_scale >= 1.0, "negative_exclusion_scale must be >= 1")],
+                (self.negative_exclusion_scale >= 1.0, "negative_exclusion_scale must be >= 1"),
+                (self.n_negative_near >= 0, "n_negative_near must be >= 0"),
+                (self.near_half_size_px_m > 0.0, "near_half_size_px_m must be > 0")],
                "PatchParams")
 
 
@@ -196,6 +217,11 @@ class DetectorParams:
     max_gap_s: float = _param(
         1.0, "The smoothing state restarts when consecutive stamps are further apart than this, "
              "or go back in time (a replayed bag looping), or the image size changes.")
+    reference_focal_px: float = _param(
+        REFERENCE_FOCAL_PX, "Focal length (px) the pixel sizes above (stride, parzen_sigma_px, "
+                            "volume_radius_px_m, suppression_radius_px_m) are given for; they are "
+                            "scaled by the camera's fx / this (525 = a 640x480 Kinect-like camera). "
+                            "0 uses them as given.")
 
     def __post_init__(self):
         _check([(self.depth_unit_m >= 0.0, "depth_unit_m must be >= 0"),
@@ -206,10 +232,23 @@ class DetectorParams:
                 (self.volume_radius_px_m > 0.0, "volume_radius_px_m must be > 0"),
                 (self.min_score >= 0.0 and self.min_volume >= 0.0, "thresholds must be >= 0"),
                 (self.suppression_radius_px_m >= 0.0, "suppression_radius_px_m must be >= 0"),
-                (self.max_gap_s > 0.0, "max_gap_s must be > 0")],
+                (self.max_gap_s > 0.0, "max_gap_s must be > 0"),
+                (self.reference_focal_px >= 0.0, "reference_focal_px must be >= 0")],
                "DetectorParams")
 
     @property
     def depth_format(self) -> DepthFormat:
         return DepthFormat(unit_m=self.depth_unit_m, invalid_value=self.invalid_value,
                            min_depth_m=self.min_depth_m, max_depth_m=self.max_depth_m)
+
+    def for_focal(self, focal_px: float | None) -> "DetectorParams":
+        """These parameters with the pixel sizes scaled from ``reference_focal_px`` to a camera of
+        focal length ``focal_px`` (the stride rounded, at least 1); unchanged for ``None`` or
+        ``reference_focal_px = 0``."""
+        if focal_px is None or self.reference_focal_px <= 0:
+            return self
+        s = float(focal_px) / self.reference_focal_px
+        return replace(self, stride=int(min(64, max(1, round(self.stride * s)))),
+                       parzen_sigma_px=self.parzen_sigma_px * s,
+                       volume_radius_px_m=self.volume_radius_px_m * s,
+                       suppression_radius_px_m=self.suppression_radius_px_m * s, reference_focal_px=0.0)

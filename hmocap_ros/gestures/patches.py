@@ -117,6 +117,10 @@ def collect_samples(frames_m: np.ndarray, labels, params: PatchParams, features:
         ex = half * params.negative_exclusion_scale
         outside = valid & ~((np.abs(xs - u) <= ex) & (np.abs(ys - v) <= ex))
         parts.append((f, _choose(rng, np.flatnonzero(outside), params.n_negative), 0))
+        if params.n_negative_near:
+            near = params.near_half_size_px_m / d0
+            around = outside & (np.abs(xs - u) <= near) & (np.abs(ys - v) <= near)
+            parts.append((f, _choose(rng, np.flatnonzero(around), params.n_negative_near), 0))
     if parts:
         frame = np.concatenate([np.full(p[1].size, p[0], np.int32) for p in parts])
         flat = np.concatenate([p[1] for p in parts]).astype(np.int64)

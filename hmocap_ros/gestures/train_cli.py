@@ -19,12 +19,32 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.eval.gesture_eval import REFERENCE_FOCAL_PX, GestureBagError, read_gesture_bags
-from hmocap_ros.gestures.forest import train_forest
+from hmocap_ros.eval.gesture_eval import GestureBag, GestureBagError, read_gesture_bags
+from hmocap_ros.gestures.depth_features import depth_to_metres
+from hmocap_ros.gestures.forest import train_forest_on_frames
 from hmocap_ros.gestures.forest_file import save_forest
-from hmocap_ros.gestures.params import FeatureParams, ForestParams, PatchParams, TrainParams
+from hmocap_ros.gestures.params import REFERENCE_FOCAL_PX, FeatureParams, ForestParams, PatchParams, TrainParams
 
-__all__ = ["REFERENCE_FOCAL_PX", "add_arguments", "main_from_args", "train_params_for_focal"]
+__all__ = ["REFERENCE_FOCAL_PX", "add_arguments", "main_from_args", "read_training_bags", "train_params_for_focal"]
+
+
+def read_training_bags(paths, params: TrainParams | None = None) -> tuple[GestureBag, int]:
+    """The trainable frames of annotated bags as float32 metres (``params.depth``, invalid =
+    ``params.features.background_depth_m``): background frames and gesture frames whose
+    reference point is visible, in bag order. Each frame is converted as it is read and the
+    others are dropped in place, so memory holds one float32 copy of the frames. Returns the
+    frames and the number of frames left out."""
+    params = params if params is not None else TrainParams()
+    fmt, background = params.depth, params.features.background_depth_m
+    data = read_gesture_bags(paths, frame_fn=lambda raw: depth_to_metres(raw, fmt, background))
+    keep = np.flatnonzero(data.trainable)
+    frames = data.depth
+    for j, i in enumerate(keep):  # per frame, not per pixel: compaction without a second stack
+        if i != j:
+            frames[j] = frames[i]
+    return GestureBag(frames[:keep.size], data.stamps_ns[keep], [data.labels[i] for i in keep],
+                      data.visible[keep], data.focal_px, data.class_names, data.sources), len(data.labels) - keep.size
+
 
 def train_params_for_focal(focal_px: float, *, n_trees: int = 15, max_depth: int = 20,
                            kappa_m: float | None = 0.15, boosted: bool = True,
@@ -72,22 +92,20 @@ def main_from_args(ns) -> int:
         print(f"error: {out} exists (use --force to overwrite)", file=sys.stderr)
         return 2
     try:
-        data = read_gesture_bags(ns.bags)
+        data, n_hidden = read_training_bags(ns.bags)
         params = train_params_for_focal(data.focal_px, n_trees=ns.trees, max_depth=ns.depth, kappa_m=ns.kappa,
                                         boosted=not ns.no_boost, samples_per_class=ns.samples_per_class)
     except (GestureBagError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    keep = data.trainable
-    labels = [data.labels[i] for i in np.flatnonzero(keep)]
-    n_pos = sum(lab is not None for lab in labels)
-    print(f"{len(labels)} frames {data.width}x{data.height}, fx {data.focal_px:.1f} px "
+    n_pos = sum(lab is not None for lab in data.labels)
+    print(f"{len(data.labels)} frames {data.width}x{data.height}, fx {data.focal_px:.1f} px "
           f"(pixel sizes x{data.focal_px / REFERENCE_FOCAL_PX:.3f}); {n_pos} with a gesture, "
-          f"{int((~keep).sum())} with a hidden reference point left out")
+          f"{n_hidden} with a hidden reference point left out")
     rng = np.random.default_rng(ns.seed)
     try:
-        forest = train_forest(data.depth[keep], labels, params, rng, class_names=data.class_names,
-                              progress=not ns.quiet)
+        forest = train_forest_on_frames(data.depth, data.labels, params, rng, class_names=data.class_names,
+                                        progress=not ns.quiet)
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -25,7 +25,7 @@ unsplit leaves also carry their candidate tests and the per-test left/right stat
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numba as nb
 import numpy as np
@@ -160,6 +160,7 @@ class FlatForest:
     clipped: bool
     kappa: float
     background: float
+    border: bool
 
     @property
     def links(self) -> np.ndarray:
@@ -199,6 +200,36 @@ class Forest:
     def n_nodes(self) -> int:
         return sum(t.n_nodes for t in self.trees)
 
+    @property
+    def training_focal_px(self) -> float | None:
+        """Focal length (px) of the camera the forest was trained on (``meta["training"]``), or None."""
+        value = self.meta.get("training", {}).get("focal_px")
+        return float(value) if value else None
+
+    @property
+    def training_width(self) -> int | None:
+        """Image width of the training frames, or None when not recorded."""
+        size = self.meta.get("training", {}).get("image_size")
+        return int(size[0]) if size else None
+
+    def for_focal(self, focal_px: float) -> tuple["Forest", float]:
+        """This forest for a camera of focal length ``focal_px``: the test offsets (pixel*metres,
+        eq. 3.3/3.6, proportional to f) scaled by ``focal_px / training_focal_px``; returns
+        (forest, factor), ``self`` and 1 when the focal lengths match or none was recorded."""
+        trained = self.training_focal_px
+        if not trained:
+            return self, 1.0
+        s = float(focal_px) / trained
+        if abs(s - 1.0) < 1e-6:
+            return self, 1.0
+        trees = [Tree((t.feature * np.float32(s)).astype(np.float32), t.threshold, t.left, t.right, t.counts,
+                      t.depth) for t in self.trees]
+        features = replace(self.features, patch_half_size_px_m=self.features.patch_half_size_px_m * s)
+        meta = dict(self.meta)
+        meta["training"] = dict(meta.get("training", {}), focal_px=float(focal_px))
+        meta["rescaled_from_focal_px"] = trained
+        return Forest(trees, self.class_names, features, self.kind, meta), s
+
     def flat(self) -> FlatForest:
         """Pack the trees for the kernels (call again after the trees change)."""
         if not self.trees:
@@ -221,6 +252,7 @@ class Forest:
             clipped=self.features.clipped,
             kappa=float(self.features.kappa_m),
             background=float(self.features.background_depth_m),
+            border=self.features.border,
         )
 
     def predict_proba(self, frames: np.ndarray, s_frame, s_x, s_y) -> np.ndarray:
@@ -229,7 +261,7 @@ class Forest:
         frames, s_frame, s_x, s_y = _sample_arrays(frames, s_frame, s_x, s_y)
         out = np.zeros((s_frame.shape[0], flat.n_classes), np.float32)
         _forest_proba(frames, s_frame, s_x, s_y, flat.nodes, flat.links, flat.proba, flat.roots,
-                      flat.clipped, flat.kappa, flat.background, out)
+                      flat.clipped, flat.kappa, flat.background, flat.border, out)
         return out
 
 
@@ -242,38 +274,39 @@ def _sample_arrays(frames, s_frame, s_x, s_y):
 
 
 @nb.njit(inline="always")
-def descend(img, x, y, d, inv_d, node, feature, threshold, left, right, clipped, kappa, background):
+def descend(img, x, y, d, inv_d, node, feature, threshold, left, right, clipped, kappa, background, border):
     """Leaf reached from ``node`` by the pixel ``(x, y)`` of depth ``d``."""
     while left[node] >= 0:
         f = test_value(img, x, y, d, inv_d, feature[node, 0], feature[node, 1], feature[node, 2],
-                       feature[node, 3], clipped, kappa, background)
+                       feature[node, 3], clipped, kappa, background, border)
         node = left[node] if f < threshold[node] else right[node]
     return node
 
 
 @nb.njit(cache=True, nogil=True)
-def _tree_leaves(frames, s_frame, s_x, s_y, feature, threshold, left, right, clipped, kappa, background, out):
+def _tree_leaves(frames, s_frame, s_x, s_y, feature, threshold, left, right, clipped, kappa, background, border,
+                 out):
     kappa = np.float32(kappa)
     background = np.float32(background)
     for i in range(s_frame.shape[0]):
         img = frames[s_frame[i]]
         d = img[s_y[i], s_x[i]]
         out[i] = descend(img, np.float64(s_x[i]), np.float64(s_y[i]), d, 1.0 / np.float64(d), 0,
-                         feature, threshold, left, right, clipped, kappa, background)
+                         feature, threshold, left, right, clipped, kappa, background, border)
 
 
 @nb.njit(inline="always")
-def descend_packed(img, x, y, d, inv_d, node, nodes, links, clipped, kappa, background):
+def descend_packed(img, x, y, d, inv_d, node, nodes, links, clipped, kappa, background, border):
     """:func:`descend` on a :class:`FlatForest`'s packed records."""
     while links[node, 5] >= 0:
         f = test_value(img, x, y, d, inv_d, nodes[node, 0], nodes[node, 1], nodes[node, 2],
-                       nodes[node, 3], clipped, kappa, background)
+                       nodes[node, 3], clipped, kappa, background, border)
         node = links[node, 5 + np.int32(f >= nodes[node, 4])]  # a load, not a branch
     return node
 
 
 @nb.njit(cache=True, nogil=True)
-def _forest_proba(frames, s_frame, s_x, s_y, nodes, links, proba, roots, clipped, kappa, background, out):
+def _forest_proba(frames, s_frame, s_x, s_y, nodes, links, proba, roots, clipped, kappa, background, border, out):
     kappa = np.float32(kappa)
     background = np.float32(background)
     n_classes = proba.shape[1]
@@ -284,7 +317,8 @@ def _forest_proba(frames, s_frame, s_x, s_y, nodes, links, proba, roots, clipped
         y = np.float64(s_y[i])
         inv_d = 1.0 / np.float64(d)
         for t in range(roots.shape[0]):
-            leaf = descend_packed(img, x, y, d, inv_d, roots[t], nodes, links, clipped, kappa, background)
+            leaf = descend_packed(img, x, y, d, inv_d, roots[t], nodes, links, clipped, kappa, background,
+                                  border)
             for c in range(n_classes):
                 out[i, c] += proba[leaf, c]
         for c in range(n_classes):
@@ -298,5 +332,5 @@ def apply_tree(tree: Tree, features: FeatureParams, frames: np.ndarray, s_frame,
     _tree_leaves(frames, s_frame, s_x, s_y, np.ascontiguousarray(tree.feature, np.float32),
                  np.ascontiguousarray(tree.threshold, np.float32), np.ascontiguousarray(tree.left, np.int32),
                  np.ascontiguousarray(tree.right, np.int32), features.clipped, features.kappa_m,
-                 features.background_depth_m, out)
+                 features.background_depth_m, features.border, out)
     return out
