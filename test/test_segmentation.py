@@ -146,8 +146,28 @@ def test_global_illumination_change_is_not_foreground(rng, room, gain):
         assert model.gain == pytest.approx(gain, abs=0.02)
 
 
+@pytest.mark.parametrize("highlight, window_is_foreground", [(1.0, True), (1.15, False)])
+def test_unevenly_changing_light_is_a_highlight_not_foreground(rng, room, highlight, window_is_foreground):
+    # The lamp dims the room by 12 % but the window, lit by daylight, keeps its brightness: against
+    # the global gain the window is 1.14 times brighter, along its own colour (a highlight).
+    h, w = room.shape[:2]
+    model = learned_model(rng, room, ForegroundParams(learn_frames=15, highlight_max_brightness=highlight))
+    window = np.zeros((h, w), bool)
+    window[20:80, 30:110] = True
+    scene = room * 0.88
+    scene[window] = room[window]
+    truth = disc_mask(h, w, (220, 150), 30)
+    for i in range(3):
+        mask = model.apply(camera_frame(with_blob(scene, truth), rng), (20 + i) * FRAME_NS)
+    assert model.gain == pytest.approx(0.88, abs=0.02)
+    assert (np.count_nonzero(mask[window]) / np.count_nonzero(window) > 0.9) == window_is_foreground
+    assert mask_scores(mask, truth).recall > 0.98  # the red disc is no highlight of the background
+
+
 def test_brightening_floods_the_mask_without_compensation(rng, room):
-    model = learned_model(rng, room, ForegroundParams(learn_frames=15, illumination_compensation=False))
+    # (highlights off: a uniform 15 % brightening is also within the highlight range)
+    model = learned_model(rng, room, ForegroundParams(learn_frames=15, illumination_compensation=False,
+                                                      highlight_max_brightness=1.0))
     mask = model.apply(camera_frame(room * 1.15, rng), 20 * FRAME_NS)
     assert np.count_nonzero(mask) / mask.size > 0.5
     assert model.gain == 1.0

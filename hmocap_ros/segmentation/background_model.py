@@ -13,10 +13,16 @@ variance ``s2_p`` over the three colour channels (any channel order), learned fr
     (3) cd_p = || I_p - a_p mu_p ||                            chromaticity distortion
     (4) shadow iff  tau_low <= a_p / g < tau_high  and
                     cd_p^2 <= (tau_c a_p |mu_p|)^2 + k_c^2 (2/3) sum_c s2_pc
-    (5) foreground = not background and not shadow
+        highlight iff  tau_high <= a_p / g <= tau_hl  and the same chromaticity test
+    (5) foreground = not background and not shadow and not highlight
 
 (4) is Horprasert's test with the chromaticity distortion measured as an angle (scale-free, so
-the same threshold fits bright and dark surfaces) plus a sensor-noise allowance.
+the same threshold fits bright and dark surfaces) plus a sensor-noise allowance; like
+Horprasert's "highlighted background", a pixel a little brighter than the gain-scaled
+background along its colour is background too: light sources do not all change together (the
+lamp dims, the daylight through a window does not), so one global gain leaves surfaces lit by
+the other source brighter or darker than predicted. ``shadow_mask`` marks shadows and
+highlights.
 
 Illumination change: ``g`` is the median of ``a_p`` over a sparse grid of pixels that were
 background in the previous frame (all grid pixels when too few were), so a sudden global
@@ -108,9 +114,10 @@ def estimate_gain(frame, mean, prev_raw, prev_shadow, step, buf):
 
 @nb.njit(cache=True, nogil=True, fastmath=True)
 def classify_and_update(frame, mean, var, fg_count, prev_mask, gain, k2, min_var, max_var,
-                        shadow, tau_low, tau_high, chroma_tan2, chroma_noise2,
+                        shadow, tau_low, tau_high, tau_highlight, chroma_tan2, chroma_noise2,
                         rate, absorb_frames, absorb_rate, raw_out, shadow_out):
-    """One fused pass: eqs. (1)-(5) per pixel into ``raw_out``/``shadow_out`` (0/255), then the
+    """One fused pass: eqs. (1)-(5) per pixel into ``raw_out``/``shadow_out`` (0/255; shadow or
+    highlight), then the
     update (6) and the absorption of persistent changes, in place on ``mean``/``var``/``fg_count``.
 
     ``prev_mask`` (cleaned mask of the previous frame, 0/255) blocks the update inside the
@@ -142,7 +149,7 @@ def classify_and_update(frame, mean, var, fg_count, prev_mask, gain, k2, min_var
                 if mm >= _MIN_MEAN_NORM2:
                     a = (i0 * m0 + i1 * m1 + i2 * m2) / mm
                     ratio = a * inv_g
-                    if ratio >= tau_low and ratio < tau_high:
+                    if ratio >= tau_low and (ratio < tau_high or ratio <= tau_highlight):
                         p0 = i0 - a * m0
                         p1 = i1 - a * m1
                         p2 = i2 - a * m2
@@ -285,7 +292,7 @@ class BackgroundModel:
             frame, self.mean, self.variance, self._fg_count, self._mask, np.float32(self.gain),
             self._k2, self._min_var, self._max_var, p.shadow_suppression,
             np.float32(p.shadow_min_brightness), np.float32(p.shadow_max_brightness),
-            np.float32(p.shadow_max_chroma ** 2), np.float32(p.shadow_chroma_sigma ** 2),
+            np.float32(p.highlight_max_brightness), np.float32(p.shadow_max_chroma ** 2), np.float32(p.shadow_chroma_sigma ** 2),
             np.float32(p.learning_rate), p.absorb_frames, np.float32(p.absorb_rate),
             self.raw_mask, self.shadow_mask)
         self._mask = clean_mask(self.raw_mask, self._opening, self._closing, p.min_blob_area, p.max_hole_area)

@@ -49,9 +49,15 @@ class ForegroundParams:
              "that can still be a shadow; darker pixels are foreground.")
     shadow_max_brightness: float = _param(
         1.0, "tau_high: shadows are strictly darker than this ratio of the background brightness.")
+    highlight_max_brightness: float = _param(
+        1.15, "Highest brightness ratio (pixel / gain-scaled background) at which a pixel of the "
+             "background's chromaticity is still background: a surface lit by another source than "
+             "the one that set the global gain (daylight through a window while a lamp dims); 1 "
+             "or less disables it.")
     shadow_max_chroma: float = _param(
-        0.07, "Largest chromaticity distortion of a shadow: colour distance perpendicular to the "
-             "background colour, divided by the shadow's brightness (tan of the colour angle).")
+        0.03, "Largest chromaticity distortion of a shadow or highlight: colour distance "
+             "perpendicular to the background colour, divided by the pixel's brightness (tan of "
+             "the colour angle).")
     shadow_chroma_sigma: float = _param(
         2.0, "Extra tolerance of the chromaticity test for sensor noise, in standard deviations "
              "(matters for dark pixels, whose colour angle is noisy).")
