@@ -183,6 +183,7 @@ class EstimationParams:
     limb_maxfev: int = 120
     scale_limits: tuple = (0.8, 1.2)
     shape_limits: tuple = (0.7, 1.4)
+    proposal_fraction: float = 0.0
 
 
 @dataclass(eq=False)
@@ -219,7 +220,8 @@ LIMB_GRID = {
 
 def _best_on_grid(fitness: SilhouetteFitness, obs: Observation, params: np.ndarray,
                   idx: list, shape: BodyShape, rng: np.random.Generator | None = None,
-                  keep: int = 8, rounds: tuple = (15.0, 8.0, 4.0), samples: int = 24) -> np.ndarray:
+                  keep: int = 8, rounds: tuple = (15.0, 8.0, 4.0), samples: int = 24,
+                  extra: np.ndarray | None = None) -> np.ndarray:
     """Multi-start for one limb: the best of :data:`LIMB_GRID` after a local search.
 
     All grid points (and the current values) are weighed in one batch (eq. 2.8, the rest of
@@ -227,7 +229,8 @@ def _best_on_grid(fitness: SilhouetteFitness, obs: Observation, params: np.ndarr
     per round (std in degrees per round), keeping their best; the winner is returned. The
     local search matters: on a coarse grid an arm hidden inside the torso silhouette costs
     less than a visible arm a few tens of degrees off, and only the refined candidates show
-    which basin holds the true pose.
+    which basin holds the true pose. ``extra``: more candidate parameter vectors (K, D) to
+    weigh with the grid (the limb proposals of :mod:`.limb_proposals`).
     """
     skel = fitness.model.skeleton
     rng = rng if rng is not None else np.random.default_rng(0)
@@ -239,6 +242,8 @@ def _best_on_grid(fitness: SilhouetteFitness, obs: Observation, params: np.ndarr
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(idx))
     cand = np.tile(params, (len(grid) + 1, 1))
     cand[1:, idx] = grid
+    if extra is not None and len(extra):
+        cand = np.concatenate([cand, np.asarray(extra, dtype=np.float64)])
     clip_body_pose(skel, cand)
     costs = fitness.costs(cand, obs, shape)
     order = np.argsort(costs)[:keep]
@@ -259,12 +264,16 @@ def powell_fit(fitness: SilhouetteFitness, obs: Observation, params0: np.ndarray
                scale0: float, base_shape: BodyShape | None = None, *,
                fit_scale: bool = True, maxfev: int = 400, limb_maxfev: int = 120,
                scale_limits: tuple = (0.8, 1.2),
-               limb_grid: bool = True) -> tuple[np.ndarray, float, float]:
+               limb_grid: bool = True, proposer=None,
+               rng: np.random.Generator | None = None) -> tuple[np.ndarray, float, float]:
     """Powell refinement of (global scale,) root, then each limb (sec. 2.3.3 "To initialize").
 
     Each limb's Powell step starts from the best point of a coarse grid over its DoFs
     (``limb_grid``; one vectorised batch): silhouettes leave an arm's twist and elbow flexion
     multimodal, and a single start from the rest pose often ends in the wrong mode.
+    ``proposer`` (a :class:`~.limb_proposals.LimbProposer`) adds its silhouette-driven
+    candidates of each limb to the grid: a grid at 40 degree steps misses an arm held
+    straight out, which the proposals find.
     Returns ``(params (D,), global scale, eq. 2.8 cost)``. ``base_shape`` is the shape whose
     global scale is refined (neutral by default).
     """
@@ -296,10 +305,21 @@ def powell_fit(fitness: SilhouetteFitness, obs: Observation, params0: np.ndarray
     z = np.append(res.x, 0.0) if not fit_scale else res.x
     params[root] = params0[root] + z[:6] * unit
     scale = float(np.clip(scale0 * (1.0 + 0.1 * z[6]), lo_s, hi_s)) if fit_scale else scale0
+    rng = rng if rng is not None else np.random.default_rng(0)
     for names in LIMB_STEPS:
         idx = [skel.dof_index(n) for n in names]
+        extra = None
+        limb = f"{names[0][:2]}{'arm' if 'shoulder' in names[0] else 'leg'}"
+        if proposer is not None and limb in proposer.limbs:
+            rest = fitness.rest(shaped(scale))
+            support, residual = proposer.evidence(obs, params, rest, fitness.faces)
+            values, _ = proposer.candidates(limb, params, rest, obs, support, residual, rng,
+                                            cost_fn=lambda x, rest=rest: fitness.costs(x, obs, rest))
+            extra = np.repeat(params[None], len(values), axis=0)
+            extra[:, proposer.dofs(limb)] = values
         if limb_grid:
-            params[idx] = _best_on_grid(fitness, obs, params, idx, shaped(scale))
+            params[idx] = _best_on_grid(fitness, obs, params, idx, shaped(scale), rng,
+                                        extra=extra)
         start = params[idx].copy()
 
         def f_limb(z: np.ndarray, idx=idx, start=start) -> float:
@@ -323,8 +343,9 @@ class AnthropometryEstimator:
 
     def __init__(self, fitness: SilhouetteFitness, params: EstimationParams,
                  rng: np.random.Generator, room: tuple | None = None,
-                 fixed_shape: BodyShape | None = None):
+                 fixed_shape: BodyShape | None = None, proposer=None):
         self.fitness = fitness
+        self.proposer = proposer
         self.model = fitness.model
         self.skel = self.model.skeleton
         self.params = params
@@ -478,14 +499,16 @@ class AnthropometryEstimator:
             scale0 = float(self.fixed_shape.global_scale)
             pelvis_y = float(self.fitness.rest(self.fixed_shape).joints[0][1])
         if headings is None:
-            headings = (hull.heading, hull.heading + np.pi)
+            starts = self.search_headings(obs, hull, pelvis_y, scale0)
+        else:
+            starts = [(h, initial_pose(self.model, hull, h, pelvis_y)) for h in headings]
         self.hypotheses = []
-        for h in headings:
-            pose0 = initial_pose(self.model, hull, h, pelvis_y)
+        for h, pose0 in starts:
             params, scale, _ = powell_fit(
                 self.fitness, obs, pose0, scale0, self.fixed_shape,
                 fit_scale=self.fixed_shape is None and p.powell_scale, maxfev=p.powell_maxfev,
-                limb_maxfev=p.limb_maxfev, scale_limits=p.scale_limits)
+                limb_maxfev=p.limb_maxfev, scale_limits=p.scale_limits,
+                proposer=self.proposer, rng=self.rng)
             shape_state = self.base_shape_state.copy()
             if self.fixed_shape is None:
                 shape_state[SHAPE_KEYS.index("global")] = scale
@@ -497,6 +520,50 @@ class AnthropometryEstimator:
             self.hypotheses.append(Hypothesis(heading=float(h), particles=parts, estimate=x0))
         self.frames_done = 0
 
+    def search_headings(self, obs: Observation, hull: Hull, pelvis_y: float, scale0: float,
+                        n_headings: int = 16, keep: int = 2,
+                        min_separation: float = np.deg2rad(60.0)) -> list:
+        """The ``keep`` most likely ``(heading, pose (D,))`` of a person standing in the hull.
+
+        Without a limb proposer: the hull's two headings (its chest axis normals). With one:
+        ``n_headings`` headings around the circle, plus the hull's pair, each posed at the
+        hull centroid with every limb set to the best of its silhouette-driven candidates
+        (one batch of weightings per limb, eq. 2.8); the cheapest headings at least
+        ``min_separation`` apart are kept. The chest-axis guess alone fails when the arms are
+        held out at chest height, and is ambiguous front/back anyway.
+        """
+        if self.proposer is None:
+            return [(h, initial_pose(self.model, hull, h, pelvis_y))
+                    for h in (hull.heading, hull.heading + np.pi)]
+        shape = (self.fixed_shape if self.fixed_shape is not None
+                 else BodyShape(np.ones(len(ENTITY_NAMES)), np.ones(len(ENTITY_NAMES)), scale0))
+        rest = self.fitness.rest(shape)
+        cands = np.concatenate([hull.heading + np.array([0.0, np.pi]),
+                                hull.heading + np.pi / n_headings
+                                + np.arange(n_headings) * 2 * np.pi / n_headings])
+        costs, poses = [], []
+        for h in cands:
+            pose = initial_pose(self.model, hull, h, pelvis_y)
+            for limb in self.proposer.limbs:
+                support, residual = self.proposer.evidence(obs, pose, rest, self.fitness.faces)
+                values, c = self.proposer.candidates(
+                    limb, pose, rest, obs, support, residual, self.rng,
+                    cost_fn=lambda x, rest=rest: self.fitness.costs(x, obs, rest))
+                c0 = float(self.fitness.costs(pose[None], obs, rest)[0])
+                if len(values) and c[0] < c0:
+                    pose = pose.copy()
+                    pose[self.proposer.dofs(limb)] = values[0]
+            costs.append(float(self.fitness.costs(pose[None], obs, shape)[0]))
+            poses.append(pose)
+        chosen: list = []
+        for i in np.argsort(costs):
+            d = np.abs((cands[i] - np.array([h for h, _ in chosen]) + np.pi) % (2 * np.pi) - np.pi)
+            if not chosen or d.min() >= min_separation:
+                chosen.append((float(cands[i]), poses[i]))
+            if len(chosen) == keep:
+                break
+        return chosen
+
     @property
     def done(self) -> bool:
         return self.frames_done >= max(self.params.frames, 1)
@@ -506,6 +573,15 @@ class AnthropometryEstimator:
         lpf = self._filters[min(self.frames_done, len(self._filters) - 1)]
         diags = []
         for hyp in self.hypotheses:
+            if self.proposer is not None and self.params.proposal_fraction > 0.0:
+                shape = (self.fixed_shape if self.fixed_shape is not None
+                         else shape_from_state(hyp.estimate[self.n_pose:]))
+                pose = hyp.particles[:, :self.n_pose]
+                rest = self.fitness.rest(shape)
+                self.proposer.apply(pose, hyp.estimate[:self.n_pose], rest, obs,
+                                    self.fitness.faces, self.params.proposal_fraction, self.rng,
+                                    cost_fn=lambda x, rest=rest: self.fitness.costs(x, obs, rest))
+                hyp.particles[:, :self.n_pose] = pose
             res = lpf_run(hyp.particles, lpf, self._weight_fn(obs), self.rng)
             hyp.particles = res.particles
             hyp.estimate = res.estimate

@@ -43,6 +43,7 @@ from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator,
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
 from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
+from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths, layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d,
                                                    reach_box)
@@ -107,6 +108,10 @@ class TrackerParams:
                                             "displacement added to the particles before "
                                             "filtering (0: zero-velocity Gaussian as in the "
                                             "thesis).")
+    proposal_fraction: float = _param(0.0, "Fraction of the particles that, per limb and "
+                                           "frame, take their limb DoFs from silhouette-driven "
+                                           "proposals (limb_proposals); 0: Gaussian only.")
+    proposal_limbs: str = _param("arms", "Limbs that get proposals: 'arms', 'legs' or 'all'.")
     estimator: str = _param("mean", "Pose estimate: 'mean' (weighted mean of the final layer) "
                                     "or 'max' (its best particle).")
     min_views: int = _param(2, "Views with enough foreground needed to start (and to carve "
@@ -150,6 +155,9 @@ class TrackerParams:
             (0.0 <= self.velocity_gain <= 1.0 and 0.0 <= self.root_velocity_gain <= 1.0,
              "velocity gains must lie in [0, 1]"),
             (self.estimator in ("mean", "max"), "estimator must be 'mean' or 'max'"),
+            (0.0 <= self.proposal_fraction <= 1.0, "proposal_fraction must lie in [0, 1]"),
+            (self.proposal_limbs in ("arms", "legs", "all"),
+             "proposal_limbs must be 'arms', 'legs' or 'all'"),
             (self.min_views >= 1, "min_views must be >= 1"),
             (0.0 < self.rejection_tau <= 1.0, "rejection_tau must lie in (0, 1]"),
             (self.shape_frames >= 1 and self.shape_particles >= 2, "shape_frames >= 1, "
@@ -228,6 +236,10 @@ class BodyTracker:
         self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
                                 for blocks, boxed in zip(self.schedule.layer_blocks,
                                                          self.schedule.boxed)]
+        limbs = {"arms": ("l_arm", "r_arm"), "legs": ("l_leg", "r_leg"),
+                 "all": ("l_arm", "r_arm", "l_leg", "r_leg")}[p.proposal_limbs]
+        self.proposer = LimbProposer(model, limbs)
+        self.start_proposer = LimbProposer(model, ("l_arm", "r_arm", "l_leg", "r_leg"))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -323,6 +335,11 @@ class BodyTracker:
         t0 = time.perf_counter()
         try:
             self._predict()
+            if self.params.proposal_fraction > 0.0 and self.estimate is not None:
+                rest = self.fitness.rest(self.shape)
+                self.proposer.apply(self.particles, self.estimate, rest, obs, self.fitness.faces,
+                                    self.params.proposal_fraction, self.rng,
+                                    cost_fn=lambda x: self.fitness.costs(x, obs, rest))
             res = lpf_run(self.particles, self.schedule.filter, self.weight_fn(obs, self.shape),
                           self.rng)
         except ValueError as err:
@@ -372,9 +389,11 @@ class BodyTracker:
             n_particles=p.shape_particles,
             frames=p.shape_frames if (p.estimate_shape and self.shape is None) else 1,
             estimate_shape=p.estimate_shape, rejection_tau=p.rejection_tau,
-            rejection_trials=p.rejection_trials, survival_rate=p.survival_rate)
+            rejection_trials=p.rejection_trials, survival_rate=p.survival_rate,
+            proposal_fraction=p.proposal_fraction)
         self._estimator = AnthropometryEstimator(self.shape_fitness, est_params, self.rng,
-                                                 room=self.room, fixed_shape=self.shape)
+                                                 room=self.room, fixed_shape=self.shape,
+                                                 proposer=self.start_proposer if p.proposal_fraction > 0 else None)
         self._estimator.start(shape_obs, hull)
         best = min(self._estimator.hypotheses,
                    key=lambda h: float(self.shape_fitness.costs(
