@@ -2,8 +2,9 @@
 
 Usage: PYTHONPATH=. .venv/bin/python benchmarks/bench_render.py [--save DIR]
 
-Uses the 2,400-triangle reference body (shared/data/body_model_reference.npz, or --mesh) seen
-by four cameras in the upper corners of a 6 x 5 x 2.6 m room, like the smart-room rig.
+Uses the package's 2,400-triangle tracking body (``load_body_model("tracking")``, rest pose; or
+any mesh with ``--mesh FILE.npz``) seen by four cameras in the upper corners of a 6 x 5 x 2.6 m
+room, like the smart-room rig.
 Figures are wall-clock medians after a warm-up (numba compiled and cached first).
 """
 
@@ -23,7 +24,7 @@ from hmocap_ros.render import (DirectionalLight, Lighting, Material, PointLight,
                                render_silhouettes, shade, vertex_normals, xor_counts)
 from hmocap_ros.render.sensor import add_sensor_noise, downsample
 
-DEFAULT_MESH = "/work/shared/data/body_model_reference.npz"
+DEFAULT_MESH = "tracking"
 ROOM = (6.0, 2.6, 5.0)  # x, y (height), z in metres; floor on y = 0, corner at the origin
 
 
@@ -41,8 +42,16 @@ def rig(width: int, height: int, n_views: int = 4):
 
 
 def load_body(path: str):
-    """Any .npz with ``vertices (V, 3)`` (metres, +Y up, feet on y = 0) and ``faces (F, 3)``;
-    ``joint_names`` and ``weights`` (skinning) only colour the clothes."""
+    """``tracking`` (the shipped tracking body) or any .npz with ``vertices (V, 3)`` (metres,
+    +Y up, feet on y = 0) and ``faces (F, 3)``; ``joint_names`` and ``weights`` (skinning) only
+    colour the clothes."""
+    if path == "tracking":
+        from hmocap_ros.body import load_body_model
+
+        model = load_body_model("tracking")
+        d = {"vertices": np.asarray(model.vertices, np.float64), "faces": np.asarray(model.faces),
+             "weights": np.asarray(model.weights), "joint_names": np.asarray(model.joint_names)}
+        return d["vertices"], d["faces"].astype(np.int32), d
     if not os.path.exists(path):
         raise SystemExit(f"body mesh {path} not found: pass --mesh FILE.npz")
     d = dict(np.load(path))

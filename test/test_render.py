@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import cv2
 import numba
 import numpy as np
@@ -18,35 +16,14 @@ from hmocap_ros.render.depth import projector_shadow
 from hmocap_ros.render.reference import coverage_pairs, silhouette_reference, zbuffer_reference
 from hmocap_ros.render.sensor import add_sensor_noise, random_illumination
 
-BODY = Path("/work/shared/data/body_model_reference.npz")
-
-
-def _icosphere_like(n_lat=12, n_lon=24, radius=0.4, centre=(0.0, 1.0, 0.0)):
-    """A closed, outward-oriented UV sphere: stands in for the body when the asset is absent."""
-    lat = np.linspace(0, np.pi, n_lat + 1)[1:-1]
-    lon = np.linspace(0, 2 * np.pi, n_lon, endpoint=False)
-    ring = np.stack([np.sin(lat)[:, None] * np.cos(lon), np.cos(lat)[:, None] * np.ones_like(lon),
-                     np.sin(lat)[:, None] * np.sin(lon)], -1).reshape(-1, 3)
-    v = np.concatenate([[[0, 1, 0]], ring, [[0, -1, 0]]]) * radius + centre
-    faces = []
-    top, bottom = 0, len(v) - 1
-    idx = lambda i, j: 1 + i * n_lon + (j % n_lon)  # noqa: E731
-    for j in range(n_lon):
-        faces.append((top, idx(0, j + 1), idx(0, j)))
-        faces.append((bottom, idx(n_lat - 2, j), idx(n_lat - 2, j + 1)))
-    for i in range(n_lat - 2):
-        for j in range(n_lon):
-            a, b, c, d = idx(i, j), idx(i, j + 1), idx(i + 1, j), idx(i + 1, j + 1)
-            faces += [(a, b, d), (a, d, c)]
-    return v.astype(np.float64), np.array(faces, dtype=np.int32)
-
 
 @pytest.fixture(scope="module")
 def body():
-    if BODY.exists():
-        d = np.load(BODY)
-        return d["vertices"].astype(np.float64), d["faces"].astype(np.int32)
-    return _icosphere_like()
+    # The shipped 2,400-triangle tracking body (in the repository, so CI renders the same mesh).
+    from hmocap_ros.body import load_body_model
+
+    model = load_body_model("tracking")
+    return np.asarray(model.vertices, np.float64), np.asarray(model.faces, np.int32)
 
 
 def _cameras(width, height, n=4, dist=True):
