@@ -1,4 +1,4 @@
-"""foreground_segmentation over DDS: masks for every frame with the input stamps, and bad input survived."""
+"""foreground_segmentation over DDS: masks for every frame with the input stamps; bad input survived; relearn service."""
 
 import sys
 
@@ -73,6 +73,19 @@ def test_masks_for_every_frame_with_input_stamps(tmp_path):
     assert float(np.mean(scores.f1)) > 0.75, scores.f1
 
 
+RELEARN_CLIENT = r"""
+import rclpy
+from std_srvs.srv import Trigger
+rclpy.init()
+node = rclpy.create_node("relearn_client")
+client = node.create_client(Trigger, "/foreground_segmentation/relearn")
+assert client.wait_for_service(timeout_sec=30), "no relearn service"
+future = client.call_async(Trigger.Request())
+rclpy.spin_until_future_complete(node, future, timeout_sec=30)
+print("answer:", future.result().success, future.result().message, flush=True)
+"""
+
+
 def test_bad_input_is_logged_and_survived(tmp_path):
     env = loopback_dds_env()
     with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(tmp_path / "o.mcap"), "--progress", "0.1",
@@ -87,6 +100,9 @@ def test_bad_input_is_logged_and_survived(tmp_path):
         # 12 valid frames -> 12 masks (5 empty while learning); the 7 bad ones are refused.
         assert rec.wait_for_output("written: 12 messages", 30), rec.output()
         assert node.proc.poll() is None, node.output()       # still running
+        with NodeProcess("relearn", [sys.executable, "-c", RELEARN_CLIENT], env, tmp_path) as client:
+            assert client.wait(60) == 0, client.output()
+        assert "answer: True relearning the background of 1 cameras" in client.output()
         log = node.output()
     assert "16UC1" in log, log   # (the short-data error follows within the 5 s log throttle)
     assert "learnt at 32x24" in log, log
