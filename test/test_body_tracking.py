@@ -247,7 +247,9 @@ def test_anthropometry_estimation_reduces_entity_size_error(model, rig):
     err_est = np.abs(entity_sizes(model, est.shape()) - true).mean()
     err_neutral = np.abs(entity_sizes(model, None) - true).mean()
     assert err_est < 0.75 * err_neutral
-    assert est.shape().global_scale == pytest.approx(1.05, abs=0.03)
+    # global scale and entity factors trade off (a longer leg or a bigger body); the stature
+    # they give together is what the silhouettes fix
+    assert est.shape().height(model) == pytest.approx(shape.height(model), abs=0.03)
 
 
 # ----------------------------------------------------------------------------- schedules
@@ -316,7 +318,8 @@ def test_tracker_follows_a_short_sequence(model, rig):
         assert res.has_pose and res.joints.shape == (19, 3)
         errors.append(1000 * np.linalg.norm(res.joints - joints[f], axis=1).mean())
         assert res.timings["evaluations"] > 0 and res.timings["total"] > 0
-    assert states[0] == "initialising" and states[-1] == "tracking"
+    # with the shape known, the start-up (hull, Powell, one layered run) takes one frame
+    assert states[0] in ("initialising", "tracking") and states[-1] == "tracking"
     assert np.mean(errors) < 60.0, errors
     assert len(res.layers) == tracker.schedule.n_weightings
     assert all(1.0 <= e <= 120 for e in res.ess)

@@ -205,7 +205,7 @@ class SilhouetteFitness:
         else:
             w = self.working[0]
             stack = np.zeros((0, w.height, w.width), dtype=np.uint8)
-        counts = stack.reshape(len(small), -1).sum(axis=1).astype(np.int64)
+        counts = stack.sum(axis=(1, 2), dtype=np.int64)
         return Observation(masks=stack, views=views, dropped=tuple(dropped), K=self._K[views],
                            R=self._R[views], t=self._t[views], D=self._D[views], counts=counts,
                            stamp_ns=int(stamp_ns))
@@ -242,11 +242,13 @@ class SilhouetteFitness:
 
     # ------------------------------------------------------------------ costs
 
-    def view_xor(self, uv: np.ndarray, obs: Observation,
-                 boxes: np.ndarray | None = None) -> np.ndarray:
-        """XOR pixel counts (N, M) of projected particles, inside ``boxes`` (M, 4) if given."""
+    def view_xor(self, uv: np.ndarray, obs: Observation, boxes: np.ndarray | None = None,
+                 faces: np.ndarray | None = None) -> np.ndarray:
+        """XOR pixel counts (N, M) of projected particles, inside ``boxes`` (M, 4) if given,
+        rendering ``faces`` (a subset of the mesh's triangles; default all)."""
         t0 = time.perf_counter()
-        out = xor_counts(uv, self.faces, obs.masks, boxes, front_only=self.front_only)
+        out = xor_counts(uv, self.faces if faces is None else faces, obs.masks, boxes,
+                         front_only=self.front_only)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += uv.shape[0]
         return out
@@ -261,11 +263,13 @@ class SilhouetteFitness:
         return np.maximum(w * h, float(self.min_count))
 
     def costs_from_uv(self, uv: np.ndarray, obs: Observation,
-                      boxes: np.ndarray | None = None) -> np.ndarray:
-        """Eq. 2.8 (``boxes`` None) or eq. 2.15 cost (N,) of projected particles."""
+                      boxes: np.ndarray | None = None,
+                      faces: np.ndarray | None = None) -> np.ndarray:
+        """Eq. 2.8 (``boxes`` None) or eq. 2.15 cost (N,) of projected particles; ``faces``
+        renders only part of the body (the parts a hierarchical layer has filtered)."""
         if obs.n_views == 0:
             return np.zeros(uv.shape[0])
-        xor = self.view_xor(uv, obs, boxes)
+        xor = self.view_xor(uv, obs, boxes, faces)
         return (xor / self.normalisers(obs, boxes)).sum(axis=1)
 
     def costs(self, params: np.ndarray, obs: Observation,

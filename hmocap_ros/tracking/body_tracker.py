@@ -44,7 +44,9 @@ from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
 from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
 from hmocap_ros.tracking.limb_proposals import LimbProposer
-from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths, layer_boxes,
+from hmocap_ros.tracking.body_layers import BODY_BLOCKS
+from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths, faces_of_blocks,
+                                                   layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d,
                                                    reach_box)
 from hmocap_ros.tracking.visual_hull import room_bounds, visual_hull
@@ -112,6 +114,10 @@ class TrackerParams:
                                            "frame, take their limb DoFs from silhouette-driven "
                                            "proposals (limb_proposals); 0: Gaussian only.")
     proposal_limbs: str = _param("arms", "Limbs that get proposals: 'arms', 'legs' or 'all'.")
+    render_filtered_parts: bool = _param(False, "Hierarchical methods: each layer renders only "
+                                              "the body parts filtered so far (sec. 2.4); "
+                                              "False renders the whole body at its predicted "
+                                              "pose.")
     estimator: str = _param("mean", "Pose estimate: 'mean' (weighted mean of the final layer) "
                                     "or 'max' (its best particle).")
     min_views: int = _param(2, "Views with enough foreground needed to start (and to carve "
@@ -236,6 +242,13 @@ class BodyTracker:
         self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
                                 for blocks, boxed in zip(self.schedule.layer_blocks,
                                                          self.schedule.boxed)]
+        # per weighting: the triangles it renders (None: the whole mesh)
+        self._layer_faces = [None] * len(self.schedule.layer_blocks)
+        if p.render_filtered_parts and p.method != "apf":
+            for l, blocks in enumerate(self.schedule.layer_blocks):
+                if blocks and l < len(self.schedule.layer_blocks) - 1:
+                    upto = BODY_BLOCKS[:BODY_BLOCKS.index(blocks[0]) + 1]
+                    self._layer_faces[l] = faces_of_blocks(model, upto)
         limbs = {"arms": ("l_arm", "r_arm"), "legs": ("l_leg", "r_leg"),
                  "all": ("l_arm", "r_arm", "l_leg", "r_leg")}[p.proposal_limbs]
         self.proposer = LimbProposer(model, limbs)
@@ -282,7 +295,7 @@ class BodyTracker:
                     lo, hi = part_boxes_3d(verts, self._layer_vertices[layer], p.box_spread,
                                            p.box_margin)
                 boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
-            return self.fitness.costs_from_uv(uv, obs, boxes)
+            return self.fitness.costs_from_uv(uv, obs, boxes, self._layer_faces[layer])
 
         return weight
 
@@ -294,7 +307,7 @@ class BodyTracker:
         self.fitness.times.reset()
         if self.shape_fitness is not self.fitness:
             self.shape_fitness.times.reset()
-        timings = {"observe": 0.0, "hull": 0.0, "init": 0.0, "filter": 0.0}
+        timings = {"observe": 0.0, "hull": 0.0, "init": 0.0, "filter": 0.0, "proposals": 0.0}
         masks = list(masks) if masks is not None else [None] * len(self.cameras)
         if len(masks) != len(self.cameras):
             log.error("expected %d masks, got %d: frame skipped", len(self.cameras), len(masks))
@@ -336,10 +349,12 @@ class BodyTracker:
         try:
             self._predict()
             if self.params.proposal_fraction > 0.0 and self.estimate is not None:
+                t1 = time.perf_counter()
                 rest = self.fitness.rest(self.shape)
                 self.proposer.apply(self.particles, self.estimate, rest, obs, self.fitness.faces,
                                     self.params.proposal_fraction, self.rng,
                                     cost_fn=lambda x: self.fitness.costs(x, obs, rest))
+                timings["proposals"] = time.perf_counter() - t1
             res = lpf_run(self.particles, self.schedule.filter, self.weight_fn(obs, self.shape),
                           self.rng)
         except ValueError as err:

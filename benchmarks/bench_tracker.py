@@ -1,0 +1,97 @@
+#!/usr/bin/env python3
+"""Body tracker speed at the thesis' budget: seconds per frame and weight evaluations per second.
+
+The scene: the shipped CMU clip 13_26 retargeted onto the tracking body, exact silhouettes
+rendered at 640x480 in the 4 cameras of ``config/rig_example.yaml`` (no segmentation: this
+measures the tracker). The tracker is started on the first frame (the start-up is not timed),
+then every method runs ``--frames`` frames of tracking at its default budget (about 3,500
+weight evaluations per frame: HPF 7 layers x 500 particles as in the thesis' comparison,
+HPF+APO 8 x 438, APF 14 x 250), with 1 and 2 numba threads. Printed per method: seconds per
+frame (median), evaluations per second, and where the time goes (skinning = eq. 2.11/2.12,
+projection, XOR = eq. 2.8/2.15, proposals, the rest = resampling, kernels, boxes).
+
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from hmocap_ros.body import load_body_model, local_rotations_to_pose
+from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.render import project_batch, render_silhouettes
+from hmocap_ros.rig import load_rig
+from hmocap_ros.sim.retarget import load_motion, place_in_room
+from hmocap_ros.tracking.body_layers import METHODS
+from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def scene(model, rig, n_frames: int, start: int = 250):
+    shape = BodyShape.neutral()
+    motion = load_motion(ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh", model.joints_rest,
+                         model.parents, model.joint_names, model.end_sites_rest,
+                         model.end_site_parents, model.end_site_names, fps=25)
+    motion = place_in_room(motion, (0.2, -0.1), 0.6)
+    sl = slice(start, start + n_frames)
+    params = local_rotations_to_pose(model.skeleton, motion.local_rotations[sl],
+                                     motion.root_translation[sl])
+    verts, _ = model.pose(params, shape)
+    K = np.stack([c.K for c in rig])
+    R = np.stack([c.R for c in rig])
+    t = np.stack([c.t for c in rig])
+    D = np.stack([np.pad(np.ravel(c.D), (0, 8))[:8] for c in rig])
+    uv, _ = project_batch(verts, K, R, t, D)
+    masks = render_silhouettes(uv, model.faces, rig[0].height, rig[0].width) * np.uint8(255)
+    return shape, masks
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--threads", type=int, nargs="*", default=[1, 2])
+    ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
+    ap.add_argument("--working-scale", type=float, default=0.25)
+    args = ap.parse_args()
+    model = load_body_model("tracking")
+    rig = load_rig(ROOT / "config" / "rig_example.yaml")
+    shape, masks = scene(model, rig, args.frames + 1)
+    print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
+          f"{platform.machine()}, cpus {numba.config.NUMBA_NUM_THREADS}")
+    print(f"4 views {rig[0].width}x{rig[0].height}, working scale {args.working_scale} "
+          f"({int(rig[0].width * args.working_scale)}x{int(rig[0].height * args.working_scale)}), "
+          f"mesh {model.n_vertices} vertices / {len(model.faces)} triangles, {args.frames} frames")
+    for threads in args.threads:
+        numba.set_num_threads(threads)
+        for method in args.methods:
+            tracker = BodyTracker(model, rig, TrackerParams(method=method,
+                                                            working_scale=args.working_scale),
+                                  np.random.default_rng(0), shape=shape)
+            tracker.update(list(masks[0]), 0)  # start-up (hull, Powell): not timed
+            tracker.update(list(masks[1 % len(masks)]), 1)  # warm-up (numba caches)
+            totals, stages = [], {}
+            for f in range(1, args.frames + 1):
+                t0 = time.perf_counter()
+                res = tracker.update(list(masks[f]), f)
+                totals.append(time.perf_counter() - t0)
+                for k, v in res.timings.items():
+                    stages[k] = stages.get(k, 0.0) + v
+            spf = float(np.median(totals))
+            n = args.frames
+            evals = stages["evaluations"] / n
+            known = ("skinning", "projection", "xor", "proposals")
+            rest = stages["total"] / n - sum(stages.get(k, 0.0) / n for k in known)
+            print(f"threads={threads} {method:8s} {spf:6.3f} s/frame  {evals:6.0f} evaluations/frame  "
+                  f"{evals / spf:8.0f} evaluations/s  | " + "  ".join(
+                      f"{k} {stages.get(k, 0.0) / n:.3f}" for k in known) + f"  other {rest:.3f}",
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()
