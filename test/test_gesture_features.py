@@ -196,7 +196,8 @@ def test_patch_collection_boxes_and_negative_frames():
     gesture = wall.copy()
     gesture[20:41, 30:51] = 2.0  # a 21 x 21 px "hand" at 2 m around (40, 30)
     frames = np.stack([gesture, wall])
-    params = PatchParams(n_positive=30, n_negative=50, box_half_size_px_m=12.0, positive_depth_tolerance_m=0.1)
+    params = PatchParams(n_positive=30, n_negative=50, n_negative_near=0, box_half_size_px_m=12.0,
+                         positive_depth_tolerance_m=0.1)
     s = collect_samples(frames, [(1, 40, 30), None], params, FeatureParams(), np.random.default_rng(0),
                         n_classes=3)
     assert s.n_classes == 3
@@ -216,3 +217,17 @@ def test_patch_collection_boxes_and_negative_frames():
     s = collect_samples(frames[:1], [(1, 30, 30)], params, FeatureParams(), np.random.default_rng(0))
     assert np.all(frames[0, s.y[s.label == 1], s.x[s.label == 1]] == 2.0)
     assert 0 < (s.label == 1).sum() <= 30
+
+    # Near negatives: outside the box, inside the near square (30 px*m = 15 px at 2 m), nothing in
+    # negative frames; the same uint16 millimetre frames give the same samples.
+    near = dataclasses.replace(params, n_negative=0, n_negative_near=40, near_half_size_px_m=30.0)
+    s = collect_samples(frames, [(1, 40, 30), None], near, FeatureParams(), np.random.default_rng(0))
+    np.testing.assert_array_equal(s.class_counts(), [40, 30])
+    neg = s.label == 0
+    assert np.all(s.frame[neg] == 0)
+    assert np.all((np.abs(s.x[neg] - 40) > half) | (np.abs(s.y[neg] - 30) > half))
+    assert np.all((np.abs(s.x[neg] - 40) <= 15) & (np.abs(s.y[neg] - 30) <= 15))
+    mm = np.rint(frames * 1000).astype(np.uint16)
+    s_mm = collect_samples(mm, [(1, 40, 30), None], near, FeatureParams(), np.random.default_rng(0))
+    for name in ("frame", "x", "y", "label"):
+        np.testing.assert_array_equal(getattr(s_mm, name), getattr(s, name))

@@ -3,6 +3,8 @@ tree-by-tree learning with out-of-bag misclassified samples (sec. 3.2.3), determ
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from hmocap_ros.gestures import (
     train_forest_on_samples,
 )
 from hmocap_ros.gestures.forest import balanced_error, frames_to_metres, information_gain
+from hmocap_ros.gestures.patches import mine_hard_negatives
 from hmocap_ros.gestures.synthetic import TOY_CLASSES, toy_forest, toy_sequence, toy_train_params
 from hmocap_ros.gestures.trees import apply_tree
 
@@ -109,14 +112,44 @@ def test_bagged_training_carries_nothing_and_progress_is_reported():
     rng = np.random.default_rng(4)
     frames, labels = toy_sequence(rng, 30, SHAPE)
     params = toy_train_params(SHAPE, n_trees=3, max_depth=8, samples_per_class=500)
-    params = type(params)(params.depth, params.features, params.patches,
-                          ForestParams(n_trees=3, max_depth=8, samples_per_class=500, boosted=False))
+    params = dataclasses.replace(params, forest=ForestParams(n_trees=3, max_depth=8, samples_per_class=500,
+                                                             boosted=False, mining_rounds=0))
     reports = []
     forest = train_forest(frames, labels, params, rng, class_names=TOY_CLASSES, progress=reports.append)
     assert [r.index for r in reports] == [0, 1, 2]
     assert all(r.n_carried == 0 and r.bag_size == 1500 for r in reports)
     assert forest.meta["training"]["method"] == "bagged"
     assert forest.meta["training"]["n_frames"] == 30
+
+
+def test_hard_negative_mining_adds_the_forests_false_positives_and_retrains():
+    rng = np.random.default_rng(6)
+    frames, labels = toy_sequence(rng, 40, SHAPE)
+    params = toy_train_params(SHAPE, n_trees=3, max_depth=6, samples_per_class=300, mining_rounds=1)
+    reports = []
+    forest = train_forest(frames, labels, params, rng, class_names=TOY_CLASSES, progress=reports.append)
+    assert [r.index for r in reports] == [0, 1, 2, 0, 1, 2]  # two forests: before and after mining
+    rounds = forest.meta["training"]["rounds"]
+    assert len(rounds) == 2 and rounds[1]["mined_negatives"] > 0
+    mined = rounds[1]["mined_negatives"]
+    assert rounds[1]["n_samples"] == rounds[0]["n_samples"] + mined
+    assert rounds[1]["class_counts"][0] == rounds[0]["class_counts"][0] + mined  # all background
+    assert rounds[1]["class_counts"][1:] == rounds[0]["class_counts"][1:]
+
+    # The mined pixels are where a forest votes for a gesture away from the annotated one.
+    shallow = train_forest(frames, labels, dataclasses.replace(params, forest=dataclasses.replace(
+        params.forest, mining_rounds=0)), np.random.default_rng(0), class_names=TOY_CLASSES)
+    metres = frames_to_metres(frames, params)
+    negatives = mine_hard_negatives(shallow, metres, labels, params.patches, np.random.default_rng(0), 50, 4)
+    assert len(negatives) > 0 and np.all(negatives.label == 0)
+    assert np.bincount(negatives.frame, minlength=len(frames)).max() <= 50
+    proba = shallow.predict_proba(metres, negatives.frame, negatives.x, negatives.y)
+    assert np.all(proba[:, 1:].max(1) > proba[:, 0])  # each one votes for a gesture
+    lab = np.array([(0, -1, -1) if lab is None else lab for lab in labels])[negatives.frame]
+    d = metres[negatives.frame, lab[:, 2].clip(0), lab[:, 1].clip(0)]
+    away = 2.0 * params.patches.box_half_size_px_m / d
+    far = (np.abs(negatives.x - lab[:, 1]) > away) | (np.abs(negatives.y - lab[:, 2]) > away)
+    assert np.all(far | (lab[:, 0] == 0))
 
 
 def test_training_repeats_bit_for_bit_with_the_seed():

@@ -12,7 +12,11 @@ read the same, so the forest cannot learn the clutter behind the gestures of its
 
 Depth convention (all kernels): images are float32 metres as made by :func:`depth_to_metres`,
 in which every invalid pixel (no depth, NaN, out of the sensor range) holds the constant
-``background_depth_m`` (default 10 m, beyond any valid depth). A probe that falls on such a
+``background_depth_m`` (default 10 m, beyond any valid depth). Training frame stacks may
+instead be compact uint16 millimetres with 0 = invalid (:func:`depth_to_millimetres`, half the
+memory of metres for the thousands of 640x480 frames of a training set): the kernels read a
+pixel through :func:`pixel_metres`, which gives the very float32 that :func:`depth_to_metres`
+gives for that millimetre value, so training and detection see the same numbers. A probe that falls on such a
 pixel or outside the image reads that constant: "far background", which with clipping is
 ``d + kappa`` like any real clutter. Reference pixels are the valid ones (``d < background``).
 Probe coordinates are rounded to the nearest pixel.
@@ -23,10 +27,16 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 from hmocap_ros.gestures.params import DepthFormat, FeatureParams
 
-__all__ = ["depth_to_metres", "evaluate_tests", "evaluate_tests_at_pixels", "random_offsets", "valid_mask"]
+__all__ = ["depth_to_metres", "depth_to_millimetres", "evaluate_tests", "evaluate_tests_at_pixels", "pixel_metres",
+           "random_offsets", "stack_metres", "valid_mask"]
+
+#: Metres per unit of a compact (uint16 millimetre) training frame, as a float32.
+MM = np.float32(0.001)
 
 
 def depth_to_metres(depth: np.ndarray, fmt: DepthFormat, background_depth_m: float) -> np.ndarray:
@@ -51,6 +61,54 @@ def depth_to_metres(depth: np.ndarray, fmt: DepthFormat, background_depth_m: flo
         out |= bad
     metres[out] = np.float32(background_depth_m)
     return metres
+
+
+def depth_to_millimetres(depth: np.ndarray, fmt: DepthFormat, background_depth_m: float) -> np.ndarray:
+    """Raw depth image -> compact uint16 millimetres, 0 = invalid (as :func:`depth_to_metres`).
+
+    Depths are rounded to the millimetre (exact for 16UC1 millimetre images); a sensor range
+    beyond 65.535 m is refused."""
+    if fmt.max_depth_m > 65.535:
+        raise ValueError("uint16 millimetres cannot hold depths beyond 65.535 m")
+    metres = depth_to_metres(depth, fmt, background_depth_m)
+    mm = np.rint(metres * np.float32(1000.0))
+    mm[metres >= np.float32(background_depth_m)] = 0
+    return mm.astype(np.uint16)
+
+
+def stack_metres(frame: np.ndarray, background_depth_m: float) -> np.ndarray:
+    """One frame of a training stack (float32 metres or uint16 mm) as float32 metres."""
+    if frame.dtype == np.uint16:
+        out = frame.astype(np.float32) * MM
+        out[frame == 0] = np.float32(background_depth_m)
+        return out
+    return frame
+
+
+def check_stack(frames: np.ndarray) -> np.ndarray:
+    """A frame stack the kernels take: C-contiguous (F, H, W) float32 metres or uint16 mm."""
+    frames = np.asarray(frames)
+    if frames.ndim == 2:
+        frames = frames[None]
+    if frames.dtype != np.uint16:
+        frames = frames.astype(np.float32, copy=False)
+    return np.ascontiguousarray(frames)
+
+
+def pixel_metres(v, background):
+    """A pixel of a frame stack in metres (float32 metres as they are; uint16 mm converted)."""
+    return v
+
+
+@overload(pixel_metres)
+def _pixel_metres(v, background):
+    if isinstance(v, types.Integer):
+        def impl(v, background):
+            return background if v == 0 else np.float32(v) * np.float32(0.001)
+    else:
+        def impl(v, background):
+            return v
+    return impl
 
 
 def valid_mask(depth_m: np.ndarray, background_depth_m: float) -> np.ndarray:
@@ -89,10 +147,10 @@ def probe(img, x, y, ox, oy, inv_d, background, border):
     px = probe_index(x, ox, inv_d, w)
     py = probe_index(y, oy, inv_d, h)
     if border:
-        return img[min(max(py, 0), h - 1), min(max(px, 0), w - 1)]
+        return pixel_metres(img[min(max(py, 0), h - 1), min(max(px, 0), w - 1)], background)
     if px < 0 or py < 0 or px >= w or py >= h:
         return background
-    return img[py, px]
+    return pixel_metres(img[py, px], background)
 
 
 @nb.njit(inline="always")
@@ -114,7 +172,7 @@ def _evaluate_tests(frames, s_frame, s_x, s_y, offsets, clipped, kappa, backgrou
         img = frames[s_frame[i]]
         x = np.float64(s_x[i])
         y = np.float64(s_y[i])
-        d = img[s_y[i], s_x[i]]
+        d = pixel_metres(img[s_y[i], s_x[i]], np.float32(background))
         inv_d = 1.0 / np.float64(d)
         for t in range(offsets.shape[0]):
             out[i, t] = test_value(img, x, y, d, inv_d, offsets[t, 0], offsets[t, 1],
@@ -126,13 +184,11 @@ def evaluate_tests(frames: np.ndarray, s_frame, s_x, s_y, offsets: np.ndarray,
                    params: FeatureParams) -> np.ndarray:
     """Feature matrix (S, T) float32: ``T`` tests at ``S`` sample pixels of a frame stack.
 
-    ``frames`` (F, H, W) float32 metres (:func:`depth_to_metres`); sample ``i`` is pixel
-    ``(s_x[i], s_y[i])`` (column, row) of frame ``s_frame[i]`` and must be valid;
-    ``offsets`` (T, 4) pixel*metres.
+    ``frames`` (F, H, W) float32 metres (:func:`depth_to_metres`) or uint16 mm
+    (:func:`depth_to_millimetres`); sample ``i`` is pixel ``(s_x[i], s_y[i])`` (column, row) of
+    frame ``s_frame[i]`` and must be valid; ``offsets`` (T, 4) pixel*metres.
     """
-    frames = np.ascontiguousarray(frames, dtype=np.float32)
-    if frames.ndim == 2:
-        frames = frames[None]
+    frames = check_stack(frames)
     s_frame = np.ascontiguousarray(s_frame, dtype=np.int32)
     s_x = np.ascontiguousarray(s_x, dtype=np.int32)
     s_y = np.ascontiguousarray(s_y, dtype=np.int32)

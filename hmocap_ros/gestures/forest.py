@@ -24,6 +24,14 @@ each class, with replacement). Each trained tree classifies its out-of-bag sampl
 gets wrong (at most ``max_boost_fraction`` of a bag, chosen at random, not balanced: mostly
 false positives) go into the next tree's bag, which is completed per class with replacement
 from the full set until each class has ``samples_per_class``.
+
+Hard negative mining (:func:`train_forest_on_frames`, ``mining_rounds``): the thesis draws the
+negatives uniformly outside the gesture's box (sec. 3.2.3, "Patch collection"), so the pixels a
+detector actually gets wrong (other hands, near-miss poses, the frames between two gestures,
+clutter shaped like a hand) are rare in the pool and boosting can only carry what the pool
+holds. After a forest is trained, it votes on its own training frames like the detector
+(sec. 3.2.4); its false-positive pixels join the pool as background and the forest is trained
+again, as the online forests mine hard negatives by detection (sec. 3.3.2).
 """
 
 from __future__ import annotations
@@ -35,9 +43,9 @@ from dataclasses import asdict, dataclass
 import numba as nb
 import numpy as np
 
-from hmocap_ros.gestures.depth_features import depth_to_metres, probe_index
+from hmocap_ros.gestures.depth_features import depth_to_metres, pixel_metres, probe_index
 from hmocap_ros.gestures.params import FeatureParams, ForestParams, TrainParams
-from hmocap_ros.gestures.patches import SampleSet, collect_samples
+from hmocap_ros.gestures.patches import SampleSet, collect_samples, mine_hard_negatives
 from hmocap_ros.gestures.trees import Forest, Tree, apply_tree
 
 __all__ = ["TreeReport", "balanced_error", "frames_to_metres", "grow_tree", "information_gain",
@@ -90,11 +98,13 @@ def _node_test(frames, f, x, y, d, inv_d, ux, uy, vx, vy, clipped, kappa, backgr
     bx = probe_index(x, vx, inv_d, w)
     by = probe_index(y, vy, inv_d, h)
     if border:
-        a = frames[f, min(max(ay, 0), h - 1), min(max(ax, 0), w - 1)]
-        b = frames[f, min(max(by, 0), h - 1), min(max(bx, 0), w - 1)]
+        a = pixel_metres(frames[f, min(max(ay, 0), h - 1), min(max(ax, 0), w - 1)], background)
+        b = pixel_metres(frames[f, min(max(by, 0), h - 1), min(max(bx, 0), w - 1)], background)
     else:
-        a = frames[f, ay, ax] if (ax >= 0 and ay >= 0 and ax < w and ay < h) else background
-        b = frames[f, by, bx] if (bx >= 0 and by >= 0 and bx < w and by < h) else background
+        a = pixel_metres(frames[f, ay, ax], background) if (ax >= 0 and ay >= 0 and ax < w and ay < h) \
+            else background
+        b = pixel_metres(frames[f, by, bx], background) if (bx >= 0 and by >= 0 and bx < w and by < h) \
+            else background
     if clipped:
         a = max(min(a, d + kappa), d - kappa)
         b = max(min(b, d + kappa), d - kappa)
@@ -141,7 +151,7 @@ def _best_splits(frames, s_frame, s_x, s_y, s_label, live, node_start, node_coun
             fr[j] = s_frame[i]
             fx[j] = s_x[i]
             fy[j] = s_y[i]
-            dd[j] = frames[s_frame[i], s_y[i], s_x[i]]
+            dd[j] = pixel_metres(frames[s_frame[i], s_y[i], s_x[i]], background)
             inv_d[j] = 1.0 / np.float64(dd[j])
         sum_parent = 0.0
         for c in range(n_classes):
@@ -259,8 +269,8 @@ def grow_tree(samples: SampleSet, bag: np.ndarray, params: ForestParams, feature
     s_label = np.ascontiguousarray(samples.label[bag], np.int32)
     n_classes = samples.n_classes
     frames = samples.frames
-    if frames.dtype != np.float32 or not frames.flags.c_contiguous:
-        raise ValueError("sample frames must be C-contiguous float32 metres")
+    if frames.dtype not in (np.float32, np.uint16) or not frames.flags.c_contiguous:
+        raise ValueError("sample frames must be C-contiguous float32 metres or uint16 millimetres")
     xlogx = _xlogx_table(bag.size)
     min_split = 2 * params.min_samples_leaf
 
@@ -360,12 +370,15 @@ def _balanced_bag(rng: np.random.Generator, by_class: list, per_class: np.ndarra
     return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
-def _tqdm_progress(n_trees: int):
+def _tqdm_progress(desc: str = "trees"):
     from tqdm import tqdm
 
-    bar = tqdm(total=n_trees, desc="trees", unit="tree")
+    bar = None
 
     def report(r: TreeReport) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = tqdm(total=r.n_trees, desc=desc, unit="tree")
         bar.set_postfix(nodes=r.n_nodes, depth=r.max_depth, oob=f"{r.forest_oob_error:.3f}")
         bar.update(1)
         if r.index + 1 == r.n_trees:
@@ -389,7 +402,7 @@ def train_forest_on_samples(samples: SampleSet, params: ForestParams, features: 
     if len(samples) == 0:
         raise ValueError("no training samples")
     if progress is True:
-        progress = _tqdm_progress(params.n_trees)
+        progress = _tqdm_progress()
     label = samples.label
     by_class = [np.flatnonzero(label == c) for c in range(n_classes)]
     present = np.array([p.size > 0 for p in by_class])
@@ -477,18 +490,45 @@ def train_forest(depth_frames, labels, params: TrainParams, rng: np.random.Gener
 def train_forest_on_frames(frames_m: np.ndarray, labels, params: TrainParams, rng: np.random.Generator,
                            class_names: Sequence[str] | None = None,
                            progress: Callable[[TreeReport], None] | bool | None = None) -> Forest:
-    """:func:`train_forest` on frames already in metres (F, H, W) float32, as made by
-    :func:`~hmocap_ros.gestures.depth_features.depth_to_metres` with ``params.depth`` and
-    ``params.features.background_depth_m`` (used as is, not copied: big training sets)."""
+    """:func:`train_forest` on converted frames (F, H, W): float32 metres as made by
+    :func:`~hmocap_ros.gestures.depth_features.depth_to_metres`, or compact uint16 millimetres
+    (:func:`~hmocap_ros.gestures.depth_features.depth_to_millimetres`), with ``params.depth``
+    and ``params.features.background_depth_m``; used as is, not copied (big training sets)."""
     if len(frames_m) == 0:
         raise ValueError("no depth frames")
     n_classes = len(class_names) if class_names is not None else None
+    fp = params.forest
     samples = collect_samples(frames_m, labels, params.patches, params.features, rng, n_classes)
-    forest = train_forest_on_samples(samples, params.forest, params.features, rng, class_names, progress)
-    forest.meta["training"].update({
+    forest = train_forest_on_samples(samples, fp, params.features, rng, class_names,
+                                     _round_progress(progress, 0, fp.mining_rounds))
+    rounds = [forest.meta["training"]]
+    for r in range(fp.mining_rounds):
+        t0 = time.perf_counter()
+        mined = mine_hard_negatives(forest, samples.frames, labels, params.patches, rng, fp.mining_per_frame,
+                                    fp.mining_stride, fp.mining_exclusion_scale)
+        mining_s = time.perf_counter() - t0
+        samples = samples.extended(mined)
+        forest = train_forest_on_samples(samples, fp, params.features, rng, forest.class_names,
+                                         _round_progress(progress, r + 1, fp.mining_rounds))
+        forest.meta["training"].update({"mined_negatives": len(mined), "mining_seconds": mining_s})
+        rounds.append(forest.meta["training"])
+    training = forest.meta["training"]
+    training.update({
         "n_frames": int(frames_m.shape[0]),
         "image_size": [int(frames_m.shape[2]), int(frames_m.shape[1])],
         "depth_format": asdict(params.depth),
         "patch_params": asdict(params.patches),
+        "feature_params": asdict(params.features),
+        "seconds_total": sum(r["seconds"] + r.get("mining_seconds", 0.0) for r in rounds),
+        "rounds": [{k: r[k] for k in ("n_samples", "class_counts", "seconds", "bag_samples_per_s")}
+                   | ({"mined_negatives": r["mined_negatives"]} if "mined_negatives" in r else {})
+                   for r in rounds],
     })
     return forest
+
+
+def _round_progress(progress, r: int, n_rounds: int):
+    """The per-tree progress of mining round ``r`` (a tqdm bar per round for ``progress=True``)."""
+    if progress is True:
+        return _tqdm_progress(f"trees (round {r}/{n_rounds})" if n_rounds else "trees")
+    return progress

@@ -111,7 +111,7 @@ class PatchParams:
     n_positive: int = _param(
         64, "N+: positive samples per gesture frame, drawn in the box around the annotated point.")
     n_negative: int = _param(
-        128, "N-: negative samples per frame: outside the box in gesture frames, anywhere in "
+        256, "N-: negative samples per frame: outside the box in gesture frames, anywhere in "
              "negative frames.")
     box_half_size_px_m: float = _param(
         20.0, "Half side of the positive box in pixel*metres, scaled by the annotated point's "
@@ -123,7 +123,7 @@ class PatchParams:
         1.0, "Negatives of gesture frames are drawn outside the box scaled by this factor "
              "(1 = just outside the box, as in the thesis).")
     n_negative_near: int = _param(
-        0, "Extra negatives per gesture frame drawn outside the (scaled) box but inside the "
+        256, "Extra negatives per gesture frame drawn outside the (scaled) box but inside the "
            "square of half side near_half_size_px_m / d around the annotated point: the rest of "
            "the hand, the arm, the face, which a detector sees next to the gesture.")
     near_half_size_px_m: float = _param(
@@ -160,6 +160,15 @@ class ForestParams:
     max_boost_fraction: float = _param(
         0.5, "Cap on the misclassified out-of-bag samples carried to the next tree, as a "
              "fraction of the balanced bag size.")
+    mining_rounds: int = _param(
+        1, "Rounds of hard negative mining: the trained forest votes on its training frames "
+           "like the detector; pixels voting for a gesture away from the annotated one join "
+           "the samples as background and the forest is trained again (0 = none).")
+    mining_per_frame: int = _param(256, "At most this many mined negatives per frame and round.")
+    mining_stride: int = _param(
+        4, "Grid step (pixels) of the mining votes, as the detector's stride.")
+    mining_exclusion_scale: float = _param(
+        2.0, "Votes within this many positive boxes of the annotated point are not mined.")
 
     def __post_init__(self):
         _check([(self.n_trees >= 1, "n_trees must be >= 1"),
@@ -168,7 +177,11 @@ class ForestParams:
                 (self.min_samples_leaf >= 1, "min_samples_leaf must be >= 1"),
                 (self.min_gain >= 0.0, "min_gain must be >= 0"),
                 (self.samples_per_class >= 1, "samples_per_class must be >= 1"),
-                (0.0 <= self.max_boost_fraction <= 10.0, "max_boost_fraction must be in [0, 10]")],
+                (0.0 <= self.max_boost_fraction <= 10.0, "max_boost_fraction must be in [0, 10]"),
+                (self.mining_rounds >= 0 and self.mining_per_frame >= 1, "need mining_rounds >= 0, "
+                                                                         "mining_per_frame >= 1"),
+                (1 <= self.mining_stride <= 64, "mining_stride must be in [1, 64]"),
+                (self.mining_exclusion_scale >= 1.0, "mining_exclusion_scale must be >= 1")],
                "ForestParams")
 
 
@@ -184,6 +197,16 @@ class TrainParams:
     def __post_init__(self):
         _check([(self.depth.max_depth_m < self.features.background_depth_m,
                  "depth.max_depth_m must be below features.background_depth_m")], "TrainParams")
+
+    def for_focal(self, focal_px: float) -> "TrainParams":
+        """These parameters with the pixel sizes (patch, boxes, mining stride), given for a camera
+        of focal length :data:`REFERENCE_FOCAL_PX`, scaled to a camera of ``focal_px``."""
+        s = float(focal_px) / REFERENCE_FOCAL_PX
+        f, p, t = self.features, self.patches, self.forest
+        return replace(self, features=replace(f, patch_half_size_px_m=f.patch_half_size_px_m * s),
+                       patches=replace(p, box_half_size_px_m=p.box_half_size_px_m * s,
+                                       near_half_size_px_m=p.near_half_size_px_m * s),
+                       forest=replace(t, mining_stride=int(min(64, max(1, round(t.mining_stride * s))))))
 
 
 @dataclass(frozen=True)

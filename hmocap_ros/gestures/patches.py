@@ -18,17 +18,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hmocap_ros.gestures.depth_features import check_stack, stack_metres
 from hmocap_ros.gestures.params import FeatureParams, PatchParams
+from hmocap_ros.gestures.trees import Forest
 
-__all__ = ["SampleSet", "collect_samples", "frame_labels"]
+__all__ = ["SampleSet", "collect_samples", "frame_labels", "mine_hard_negatives"]
 
 
 @dataclass(eq=False)
 class SampleSet:
     """Training samples: pixel ``(x[i], y[i])`` (column, row) of ``frames[frame[i]]`` with class ``label[i]``.
 
-    ``frames`` (F, H, W) float32 metres as made by ``depth_to_metres`` (shared, not copied, by
-    :meth:`subset`).
+    ``frames`` (F, H, W) float32 metres as made by ``depth_to_metres``, or uint16 millimetres
+    (``depth_to_millimetres``) (shared, not copied, by :meth:`subset`).
     """
 
     frames: np.ndarray
@@ -47,6 +49,14 @@ class SampleSet:
     def subset(self, index) -> "SampleSet":
         index = np.asarray(index)
         return SampleSet(self.frames, self.frame[index], self.x[index], self.y[index], self.label[index],
+                         self.n_classes)
+
+    def extended(self, other: "SampleSet") -> "SampleSet":
+        """These samples followed by ``other``'s (same frame stack)."""
+        if other.frames is not self.frames or other.n_classes != self.n_classes:
+            raise ValueError("can only extend with samples of the same frames and classes")
+        return SampleSet(self.frames, np.concatenate([self.frame, other.frame]), np.concatenate([self.x, other.x]),
+                         np.concatenate([self.y, other.y]), np.concatenate([self.label, other.label]),
                          self.n_classes)
 
 
@@ -80,13 +90,14 @@ def _choose(rng: np.random.Generator, flat_index: np.ndarray, n: int) -> np.ndar
 
 def collect_samples(frames_m: np.ndarray, labels, params: PatchParams, features: FeatureParams,
                     rng: np.random.Generator, n_classes: int | None = None) -> SampleSet:
-    """Samples of every frame of ``frames_m`` (F, H, W) float32 metres, labels ``(class, u, v)`` per frame.
+    """Samples of every frame of ``frames_m`` (F, H, W) float32 metres or uint16 millimetres
+    (``depth_features.depth_to_millimetres``), labels ``(class, u, v)`` per frame.
 
     A gesture frame whose annotated point lies outside the image or has no valid depth within
     3 px gives no samples at all (without the point's depth there is no box to sample around,
     nor to keep negatives out of).
     """
-    frames_m = np.ascontiguousarray(frames_m, dtype=np.float32)
+    frames_m = check_stack(frames_m)
     if frames_m.ndim != 3:
         raise ValueError("frames_m must be (F, H, W)")
     lab = frame_labels(labels, frames_m.shape[0])
@@ -97,7 +108,7 @@ def collect_samples(frames_m: np.ndarray, labels, params: PatchParams, features:
     bg = np.float32(features.background_depth_m)
     parts = []
     for f in range(frames_m.shape[0]):
-        depth = frames_m[f]
+        depth = stack_metres(frames_m[f], bg)
         valid = depth < bg
         cls, u, v = (int(a) for a in lab[f])
         if cls == 0:
@@ -128,3 +139,48 @@ def collect_samples(frames_m: np.ndarray, labels, params: PatchParams, features:
     else:
         frame, flat, label = np.zeros(0, np.int32), np.zeros(0, np.int64), np.zeros(0, np.int32)
     return SampleSet(frames_m, frame, (flat % w).astype(np.int32), (flat // w).astype(np.int32), label, n_classes)
+
+
+def mine_hard_negatives(forest: Forest, frames_m: np.ndarray, labels, params: PatchParams,
+                        rng: np.random.Generator, per_frame: int, stride: int,
+                        exclusion_scale: float = 2.0) -> SampleSet:
+    """Hard negatives of a trained forest on its own training frames (the on-the-fly hard
+    negative mining of thesis sec. 3.3.2, run offline over the whole training set).
+
+    The forest votes on every ``stride``-th pixel of each frame, exactly as the detector does
+    (:func:`~hmocap_ros.gestures.detection.forest_grid_votes`, sec. 3.2.4); a pixel that votes for
+    a gesture is a false positive unless it lies within ``exclusion_scale`` positive boxes of the
+    frame's annotated gesture (whose pixels are, or border on, positives). Up to ``per_frame``
+    of them per frame, drawn at random, become background samples. These are the shapes the
+    uniform negatives of patch collection rarely hit: other people's hands, near-miss poses,
+    the moments between gestures, clutter that looks like a hand.
+    """
+    from hmocap_ros.gestures.detection import forest_grid_votes, grid_shape, pad_for_forest
+
+    frames_m = check_stack(frames_m)
+    lab = frame_labels(labels, frames_m.shape[0])
+    flat = forest.flat()
+    h, w = frames_m.shape[1:]
+    _, _, offset = grid_shape(h, w, stride)
+    bg = np.float32(forest.features.background_depth_m)
+    padded = None
+    parts = []
+    for f in range(frames_m.shape[0]):
+        depth = stack_metres(frames_m[f], bg)
+        padded = pad_for_forest(depth, flat, padded)
+        class_map, _ = forest_grid_votes(flat, padded, stride)
+        gy, gx = np.nonzero(class_map > 0)
+        px, py = offset + gx * stride, offset + gy * stride
+        cls, u, v = (int(a) for a in lab[f])
+        if cls > 0 and px.size:
+            d0 = _annotated_depth(depth, depth < bg, u, v)
+            if d0 is None:
+                continue
+            ex = exclusion_scale * params.box_half_size_px_m / d0
+            keep = (np.abs(px - u) > ex) | (np.abs(py - v) > ex)
+            px, py = px[keep], py[keep]
+        parts.append((f, _choose(rng, py * w + px, per_frame)))
+    flat_index = np.concatenate([p[1] for p in parts]).astype(np.int64) if parts else np.zeros(0, np.int64)
+    frame = np.concatenate([np.full(p[1].size, p[0], np.int32) for p in parts]) if parts else np.zeros(0, np.int32)
+    return SampleSet(frames_m, frame, (flat_index % w).astype(np.int32), (flat_index // w).astype(np.int32),
+                     np.zeros(flat_index.size, np.int32), forest.n_classes)

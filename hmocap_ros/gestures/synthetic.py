@@ -139,13 +139,12 @@ def focal_scale(shape) -> float:
 
 
 def toy_train_params(shape=(240, 320), n_trees: int = 8, max_depth: int = 18,
-                     samples_per_class: int = 5000) -> TrainParams:
-    """Training defaults with the pixel*metre sizes scaled to the toy image size."""
-    s = focal_scale(shape)
-    return TrainParams(features=FeatureParams(patch_half_size_px_m=85.0 * s),
-                       patches=PatchParams(box_half_size_px_m=20.0 * s),
-                       forest=ForestParams(n_trees=n_trees, max_depth=max_depth,
-                                           samples_per_class=samples_per_class))
+                     samples_per_class: int = 5000, mining_rounds: int = 0) -> TrainParams:
+    """Training defaults with the pixel*metre sizes scaled to the toy image size (no hard
+    negative mining unless asked: the toy tests stay fast)."""
+    forest = ForestParams(n_trees=n_trees, max_depth=max_depth, samples_per_class=samples_per_class,
+                          mining_rounds=mining_rounds)
+    return TrainParams(forest=forest).for_focal(525.0 * focal_scale(shape))
 
 
 def toy_detector_params(shape=(240, 320), **overrides) -> DetectorParams:

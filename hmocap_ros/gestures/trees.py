@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 import numba as nb
 import numpy as np
 
-from hmocap_ros.gestures.depth_features import test_value
+from hmocap_ros.gestures.depth_features import check_stack, pixel_metres, test_value
 from hmocap_ros.gestures.params import FeatureParams
 
 __all__ = ["FlatForest", "Forest", "PendingTests", "Tree", "apply_tree"]
@@ -266,9 +266,7 @@ class Forest:
 
 
 def _sample_arrays(frames, s_frame, s_x, s_y):
-    frames = np.ascontiguousarray(frames, dtype=np.float32)
-    if frames.ndim == 2:
-        frames = frames[None]
+    frames = check_stack(frames)
     return (frames, np.ascontiguousarray(s_frame, np.int32), np.ascontiguousarray(s_x, np.int32),
             np.ascontiguousarray(s_y, np.int32))
 
@@ -290,7 +288,7 @@ def _tree_leaves(frames, s_frame, s_x, s_y, feature, threshold, left, right, cli
     background = np.float32(background)
     for i in range(s_frame.shape[0]):
         img = frames[s_frame[i]]
-        d = img[s_y[i], s_x[i]]
+        d = pixel_metres(img[s_y[i], s_x[i]], background)
         out[i] = descend(img, np.float64(s_x[i]), np.float64(s_y[i]), d, 1.0 / np.float64(d), 0,
                          feature, threshold, left, right, clipped, kappa, background, border)
 
@@ -312,7 +310,7 @@ def _forest_proba(frames, s_frame, s_x, s_y, nodes, links, proba, roots, clipped
     n_classes = proba.shape[1]
     for i in range(s_frame.shape[0]):
         img = frames[s_frame[i]]
-        d = img[s_y[i], s_x[i]]
+        d = pixel_metres(img[s_y[i], s_x[i]], background)
         x = np.float64(s_x[i])
         y = np.float64(s_y[i])
         inv_d = 1.0 / np.float64(d)
