@@ -37,6 +37,7 @@ from hmocap_ros.body.anthropometry import BodyShape, ShapedRest, apply_shape
 from hmocap_ros.body.kinematics import forward_kinematics, skin_vertices, skinning_matrices
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.render import project_batch, xor_counts
+from hmocap_ros.tracking.fused_xor import xor_counts_from_vertices
 
 __all__ = ["Observation", "SilhouetteFitness", "StageTimes", "downsample_mask", "posed_mesh",
            "serial_below"]
@@ -272,6 +273,22 @@ class SilhouetteFitness:
         xor = self.view_xor(uv, obs, boxes, faces)
         return (xor / self.normalisers(obs, boxes)).sum(axis=1)
 
+    def costs_from_verts(self, verts: np.ndarray, obs: Observation,
+                         boxes: np.ndarray | None = None,
+                         faces: np.ndarray | None = None) -> np.ndarray:
+        """Eq. 2.8 / 2.15 cost (N,) of posed meshes (N, V, 3): projection and scan-fill fused
+        (:func:`~.fused_xor.xor_counts_from_vertices`; the same counts as
+        :meth:`costs_from_uv` of :meth:`project`), timed as "xor"."""
+        if obs.n_views == 0:
+            return np.zeros(verts.shape[0])
+        t0 = time.perf_counter()
+        xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D,
+                                       self.faces if faces is None else faces, obs.masks, boxes,
+                                       front_only=self.front_only)
+        self.times.xor += time.perf_counter() - t0
+        self.times.evaluations += verts.shape[0]
+        return (xor / self.normalisers(obs, boxes)).sum(axis=1)
+
     def costs(self, params: np.ndarray, obs: Observation,
               shape: BodyShape | ShapedRest | None = None,
               boxes: np.ndarray | None = None) -> np.ndarray:
@@ -283,7 +300,7 @@ class SilhouetteFitness:
         n = np.atleast_2d(params).shape[0]
         with serial_below(n * max(obs.n_views, 1)):
             verts, _ = self.pose(params, shape)
-            return self.costs_from_uv(self.project(verts, obs), obs, boxes)
+            return self.costs_from_verts(verts, obs, boxes)
 
     def mean_view_cost(self, cost: float | np.ndarray, obs: Observation):
         """Eq. 2.8 cost divided by the number of views: comparable across dropped cameras."""

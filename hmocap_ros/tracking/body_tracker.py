@@ -283,7 +283,6 @@ class BodyTracker:
 
         def weight(particles: np.ndarray, layer: int) -> np.ndarray:
             verts, joints = self.fitness.pose(particles, rest)
-            uv = self.fitness.project(verts, obs)
             boxes = None
             if sched.boxed[layer]:
                 block = sched.layer_blocks[layer][0]
@@ -295,7 +294,7 @@ class BodyTracker:
                     lo, hi = part_boxes_3d(verts, self._layer_vertices[layer], p.box_spread,
                                            p.box_margin)
                 boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
-            return self.fitness.costs_from_uv(uv, obs, boxes, self._layer_faces[layer])
+            return self.fitness.costs_from_verts(verts, obs, boxes, self._layer_faces[layer])
 
         return weight
 

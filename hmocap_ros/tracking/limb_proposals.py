@@ -111,20 +111,22 @@ class LimbProposer:
     def evidence(self, obs, reference: np.ndarray, rest, faces: np.ndarray) -> tuple:
         """(supporting masks (M, h, w) bool, residual masks (M, h, w) bool) of one frame.
 
-        Supporting: the foreground dilated by ``tolerance_px``. Residual: foreground the
-        reference pose (D,) on the shaped ``rest`` does not cover.
+        Supporting: the foreground dilated by ``tolerance_px``. Residual: foreground farther
+        than ``tolerance_px`` from the silhouette of the reference pose (D,) on the shaped
+        ``rest`` (a one-pixel fringe is resampling, not a limb).
         """
         from hmocap_ros.tracking.body_fitness import posed_mesh
 
         tol = int(self.params.tolerance_px)
-        if tol > 0:
-            kernel = np.ones((2 * tol + 1, 2 * tol + 1), np.uint8)
-            support = np.stack([cv2.dilate(m, kernel) for m in obs.masks]) > 0
-        else:
-            support = obs.masks > 0
         verts, _ = posed_mesh(self.model, reference[None], rest)
         uv, _ = project_batch(verts, obs.K, obs.R, obs.t, obs.D)
         model_sil = render_silhouettes(uv[0], faces, obs.height, obs.width)
+        if tol > 0:
+            kernel = np.ones((2 * tol + 1, 2 * tol + 1), np.uint8)
+            support = np.stack([cv2.dilate(m, kernel) for m in obs.masks]) > 0
+            model_sil = np.stack([cv2.dilate(m, kernel) for m in model_sil])
+        else:
+            support = obs.masks > 0
         residual = (obs.masks > 0) & (model_sil == 0)
         return support, residual
 
