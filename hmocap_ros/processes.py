@@ -92,16 +92,15 @@ class NodeProcess:
 PERIODIC_TOPICS = ("/diagnostics", "/rosout", "/parameter_events")
 
 
-def _written(recorder: NodeProcess, topics: Sequence[str]) -> int:
-    """Messages recorded on ``topics`` so far, from the recorder's last ``--progress`` line."""
+def _written(recorder: NodeProcess) -> dict[str, int]:
+    """Messages recorded per topic so far, from the recorder's last ``--progress`` line."""
     lines = [ln for ln in recorder.output().splitlines() if ln.startswith("written: ")]
-    if not lines:
-        return 0
-    counts = {}
-    for item in lines[-1].split(": ", 2)[2].split(", "):
-        topic, _, n = item.rpartition(" ")
-        counts[topic] = int(n)
-    return sum(counts.get(t, 0) for t in topics)
+    counts: dict[str, int] = {}
+    if lines:
+        for item in lines[-1].split(": ", 2)[2].split(", "):
+            topic, _, n = item.rpartition(" ")
+            counts[topic] = int(n)
+    return counts
 
 
 def replay_through_nodes(
@@ -118,6 +117,7 @@ def replay_through_nodes(
     replay_timeout: float = 600.0,
     drain_timeout: float = 120.0,
     drain_topics: Sequence[str] | None = None,
+    expect: Mapping[str, int] | None = None,
 ) -> dict[str, NodeProcess]:
     """Replay ``bag`` into ``nodes`` (separate processes over DDS) while recording ``record_topics``.
 
@@ -127,9 +127,12 @@ def replay_through_nodes(
     sides of discovery: a best-effort link drops what comes before), and waits itself for a
     subscriber on each replayed topic (``--wait-subscribers 1``, plus its ``--settle``).
     After the replay ends, the nodes may still be working through a backlog (a slow or loaded
-    machine): they are stopped only once nothing new has been recorded on ``drain_topics``
-    (default: the recorded topics but :data:`PERIODIC_TOPICS`) for ``settle`` seconds (at most
-    ``drain_timeout`` s), then the recorder last, so it flushes everything.
+    machine, or one still compiling on its first frames): they are stopped only once every
+    topic of ``expect`` has at least that many messages recorded, and then nothing new has been
+    recorded on ``drain_topics`` (default: the recorded topics but :data:`PERIODIC_TOPICS`) for
+    ``settle`` seconds (all within ``drain_timeout`` s), then the recorder last, so it flushes
+    everything. Give ``expect`` whenever the number of outputs is known: a node slower than
+    ``settle`` to its first output is otherwise stopped before it answered.
     Returns the processes (stopped) so callers can read their logs.
     Raises RuntimeError, with the log of the process at fault, when something does not start.
     """
@@ -161,11 +164,18 @@ def replay_through_nodes(
             raise RuntimeError(f"the replay did not finish in {replay_timeout:.0f} s")
         if replay.proc.returncode != 0:
             raise RuntimeError(f"the replay failed:\n{replay.output()}")
-        last, quiet_since = _written(recorder, drain_topics), time.monotonic()
-        end = quiet_since + drain_timeout
+        end = time.monotonic() + drain_timeout
+        expect = dict(expect or {})
+        while time.monotonic() < end:
+            counts = _written(recorder)
+            if all(counts.get(t, 0) >= n for t, n in expect.items()):
+                break
+            time.sleep(0.1)
+        last = sum(_written(recorder).get(t, 0) for t in drain_topics)
+        quiet_since = time.monotonic()
         while time.monotonic() - quiet_since < settle and time.monotonic() < end:
             time.sleep(0.1)
-            count = _written(recorder, drain_topics)
+            count = sum(_written(recorder).get(t, 0) for t in drain_topics)
             if count != last:
                 last, quiet_since = count, time.monotonic()
     finally:

@@ -52,10 +52,13 @@ time.sleep(1.0)
 
 def test_masks_for_every_frame_with_input_stamps(tmp_path):
     out = tmp_path / "fg.mcap"
+    with BagReader(DEMO_BAG) as reader:
+        per_camera = {c: reader.topics()[f"/{c}/image_raw"].count for c in CAMERAS}
     procs = replay_through_nodes(DEMO_BAG, [NODE], [f"/{c}/foreground" for c in CAMERAS], out,
                                  loopback_dds_env(), tmp_path / "logs",
                                  replay_topics=[f"/{c}/image_raw" for c in CAMERAS],
-                                 replay_rate=0.5)  # 50 frames/s in all: a loaded 2-core machine keeps up
+                                 replay_rate=0.5,  # 50 frames/s in all: a loaded 2-core machine keeps up
+                                 expect={f"/{c}/foreground": n for c, n in per_camera.items()})
     log = procs["foreground_segmentation"].output()
     assert "Traceback" not in log, log
     with BagReader(DEMO_BAG) as reader:

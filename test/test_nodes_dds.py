@@ -48,10 +48,13 @@ def test_replay_node_record_pipeline(tmp_path):
     rig = load_rig(DEMO_RIG)
     images = [f"/{c}/image_raw" for c in rig.names]
     out = tmp_path / "out.mcap"
+    with BagReader(DEMO_BAG) as reader:
+        per_camera = {c: reader.topics()[f"/{c}/image_raw"].count for c in rig.names}
     node = ("camera_rig_publisher", "hmocap_ros.nodes.camera_rig_publisher",
             ["--ros-args", "-p", f"rig_file:={DEMO_RIG}"], "serving rig")
     replay_through_nodes(DEMO_BAG, [node], ["/camera_rig", *(f"/{c}/camera_info" for c in rig.names)], out,
-                         loopback_dds_env(), tmp_path / "logs", replay_topics=images, replay_rate=0.5)
+                         loopback_dds_env(), tmp_path / "logs", replay_topics=images, replay_rate=0.5,
+                         expect={f"/{c}/camera_info": n for c, n in per_camera.items()})
     with BagReader(DEMO_BAG) as reader:
         sent = {(m.topic.split("/")[1], stamp_to_ns(m.msg.header.stamp)) for m in reader.messages(images)}
     with BagReader(out) as reader:
