@@ -72,6 +72,7 @@ class BodyTrackerNode(Node):
         self.rig: Rig | None = None
         self.frame_id = "room"
         self.last_shape = None
+        self.last_state = "searching"
         self.frames = 0
         self.pub_joints = self.create_publisher(JointState, "joint_states", RESULT_QOS)
         self.pub_skeleton = self.create_publisher(Skeleton, "skeleton", RESULT_QOS)
@@ -149,9 +150,27 @@ class BodyTrackerNode(Node):
             return
         seconds = time.perf_counter() - t0
         self.frames += 1
+        if result.state != self.last_state:
+            self._log_transition(result, seconds)
+            self.last_state = result.state
         if result.has_pose:
             self._publish_pose(stamp_ns, result)
         self._publish_diagnostics(stamp_ns, result, seconds)
+
+    def _log_transition(self, result, seconds: float) -> None:
+        log = self.get_logger()
+        views = len(result.views)
+        if result.state == "initialising":
+            log.info(f"a person appeared ({views} views): estimating the body shape "
+                     f"({self.params.shape_frames} frames, start-up took {seconds:.1f} s)")
+        elif result.state == "tracking":
+            height = result.shape.height(self.model) if result.shape is not None else float("nan")
+            log.info(f"tracking ({self.params.method}); body height {height:.2f} m, "
+                     f"fit cost {result.fit_cost:.2f} per view")
+        elif result.state == "lost":
+            log.warning("the fit collapsed: restarting from the visual hull")
+        elif result.state == "searching":
+            log.info("no person in view")
 
     def _header(self, msg, stamp_ns: int):
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)

@@ -56,6 +56,7 @@ from hmocap_ros.body.anthropometry import (ENTITY_NAMES, BodyShape, entity_sizes
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import body_sigma0, clip_body_pose, root_room_limits
 from hmocap_ros.tracking.kernels import rejection_kernel
+from hmocap_ros.tracking.limb_proposals import LimbProposalParams
 from hmocap_ros.tracking.layered_filter import (Layer, LayeredFilter, beta_for_survival_rate,
                                                 lpf_run)
 from hmocap_ros.tracking.visual_hull import Hull
@@ -96,6 +97,10 @@ TABLE_2_2 = (
                                          "torso_depth:radial", "legs:radial"),
      ("spine_flex", "spine_bend", "spine_twist", "neck_flex", "neck_bend", "neck_twist"), 1.0),
 )
+
+#: Coarser limb proposals for the heading search (18 headings x 4 limbs at start-up).
+HEADING_SEARCH_SIZES = LimbProposalParams(n_swing=240, top_swings=6, n_distal=40, screen=16,
+                                          top_configs=4)
 
 ROOT_DOFS = ("root_tx", "root_ty", "root_tz", "root_yaw", "root_pitch", "root_roll")
 LIMB_STEPS = (
@@ -179,8 +184,8 @@ class EstimationParams:
     anneal_alpha: float = 0.5
     powell_scale: bool = False
     prior_on_proportions: bool = True
-    powell_maxfev: int = 400
-    limb_maxfev: int = 120
+    powell_maxfev: int = 200
+    limb_maxfev: int = 60
     scale_limits: tuple = (0.8, 1.2)
     shape_limits: tuple = (0.7, 1.4)
     proposal_fraction: float = 0.0
@@ -221,7 +226,7 @@ LIMB_GRID = {
 def _best_on_grid(fitness: SilhouetteFitness, obs: Observation, params: np.ndarray,
                   idx: list, shape: BodyShape, rng: np.random.Generator | None = None,
                   keep: int = 8, rounds: tuple = (15.0, 8.0, 4.0), samples: int = 24,
-                  extra: np.ndarray | None = None) -> np.ndarray:
+                  extra: np.ndarray | None = None, grid: bool = True) -> np.ndarray:
     """Multi-start for one limb: the best of :data:`LIMB_GRID` after a local search.
 
     All grid points (and the current values) are weighed in one batch (eq. 2.8, the rest of
@@ -230,7 +235,8 @@ def _best_on_grid(fitness: SilhouetteFitness, obs: Observation, params: np.ndarr
     local search matters: on a coarse grid an arm hidden inside the torso silhouette costs
     less than a visible arm a few tens of degrees off, and only the refined candidates show
     which basin holds the true pose. ``extra``: more candidate parameter vectors (K, D) to
-    weigh with the grid (the limb proposals of :mod:`.limb_proposals`).
+    weigh with the grid (the limb proposals of :mod:`.limb_proposals`); ``grid=False``
+    starts from them (and the current values) alone.
     """
     skel = fitness.model.skeleton
     rng = rng if rng is not None else np.random.default_rng(0)
@@ -239,9 +245,10 @@ def _best_on_grid(fitness: SilhouetteFitness, obs: Observation, params: np.ndarr
         name = skel.dof_names[i]
         name = name[2:] if name[:2] in ("l_", "r_") else name
         axes.append(np.deg2rad(LIMB_GRID[name]) if name in LIMB_GRID else np.array([params[i]]))
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(idx))
-    cand = np.tile(params, (len(grid) + 1, 1))
-    cand[1:, idx] = grid
+    points = (np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(idx)) if grid
+              else np.empty((0, len(idx))))
+    cand = np.tile(params, (len(points) + 1, 1))
+    cand[1:, idx] = points
     if extra is not None and len(extra):
         cand = np.concatenate([cand, np.asarray(extra, dtype=np.float64)])
     clip_body_pose(skel, cand)
@@ -317,9 +324,10 @@ def powell_fit(fitness: SilhouetteFitness, obs: Observation, params0: np.ndarray
                                             cost_fn=lambda x, rest=rest: fitness.costs(x, obs, rest))
             extra = np.repeat(params[None], len(values), axis=0)
             extra[:, proposer.dofs(limb)] = values
-        if limb_grid:
+        if limb_grid or extra is not None:
             params[idx] = _best_on_grid(fitness, obs, params, idx, shaped(scale), rng,
-                                        extra=extra)
+                                        extra=extra, grid=extra is None,
+                                        samples=24 if extra is None else 12)
         start = params[idx].copy()
 
         def f_limb(z: np.ndarray, idx=idx, start=start) -> float:
@@ -521,7 +529,7 @@ class AnthropometryEstimator:
         self.frames_done = 0
 
     def search_headings(self, obs: Observation, hull: Hull, pelvis_y: float, scale0: float,
-                        n_headings: int = 16, keep: int = 2,
+                        n_headings: int = 12, keep: int = 2,
                         min_separation: float = np.deg2rad(60.0)) -> list:
         """The ``keep`` most likely ``(heading, pose (D,))`` of a person standing in the hull.
 
@@ -548,7 +556,8 @@ class AnthropometryEstimator:
                 support, residual = self.proposer.evidence(obs, pose, rest, self.fitness.faces)
                 values, c = self.proposer.candidates(
                     limb, pose, rest, obs, support, residual, self.rng,
-                    cost_fn=lambda x, rest=rest: self.fitness.costs(x, obs, rest))
+                    cost_fn=lambda x, rest=rest: self.fitness.costs(x, obs, rest),
+                    sizes=HEADING_SEARCH_SIZES)
                 c0 = float(self.fitness.costs(pose[None], obs, rest)[0])
                 if len(values) and c[0] < c0:
                     pose = pose.copy()

@@ -37,6 +37,7 @@ from hmocap_ros.body.anthropometry import BodyShape, ShapedRest, apply_shape
 from hmocap_ros.body.kinematics import forward_kinematics, skin_vertices, skinning_matrices
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.render import project_batch, xor_counts
+from hmocap_ros.render.projection import distortion_valid_r2
 from hmocap_ros.tracking.fused_xor import xor_counts_from_vertices
 
 __all__ = ["Observation", "SilhouetteFitness", "StageTimes", "downsample_mask", "posed_mesh",
@@ -120,6 +121,7 @@ class Observation:
     views: (M,) rig indices of those views; dropped: rig indices of missing/invalid masks.
     K, R, t, D: stacked working-resolution cameras of the available views.
     counts: C(S_v), foreground pixels per view (int64, (M,)).
+    max_r2: per view, the squared normalised radius where the distortion stays monotonic.
     stamp_ns: the frame set's stamp.
     """
 
@@ -132,6 +134,7 @@ class Observation:
     D: np.ndarray
     counts: np.ndarray
     stamp_ns: int = 0
+    max_r2: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -175,6 +178,7 @@ class SilhouetteFitness:
         self._t = np.stack([c.t for c in self.working])
         self._D = np.stack([np.pad(np.asarray(c.D, np.float64).ravel(), (0, 8))[:8]
                             for c in self.working])
+        self._max_r2 = np.array([distortion_valid_r2(d) for d in self._D])
         self.faces = np.ascontiguousarray(self.model.faces, dtype=np.int32)
         self._rest_cache: tuple | None = None
 
@@ -209,7 +213,7 @@ class SilhouetteFitness:
         counts = stack.sum(axis=(1, 2), dtype=np.int64)
         return Observation(masks=stack, views=views, dropped=tuple(dropped), K=self._K[views],
                            R=self._R[views], t=self._t[views], D=self._D[views], counts=counts,
-                           stamp_ns=int(stamp_ns))
+                           stamp_ns=int(stamp_ns), max_r2=self._max_r2[views])
 
     # ------------------------------------------------------------------ posing
 
@@ -284,7 +288,7 @@ class SilhouetteFitness:
         t0 = time.perf_counter()
         xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D,
                                        self.faces if faces is None else faces, obs.masks, boxes,
-                                       front_only=self.front_only)
+                                       front_only=self.front_only, max_r2=obs.max_r2)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += verts.shape[0]
         return (xor / self.normalisers(obs, boxes)).sum(axis=1)

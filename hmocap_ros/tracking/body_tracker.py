@@ -110,7 +110,7 @@ class TrackerParams:
                                             "displacement added to the particles before "
                                             "filtering (0: zero-velocity Gaussian as in the "
                                             "thesis).")
-    proposal_fraction: float = _param(0.0, "Fraction of the particles that, per limb and "
+    proposal_fraction: float = _param(0.2, "Fraction of the particles that, per limb and "
                                            "frame, take their limb DoFs from silhouette-driven "
                                            "proposals (limb_proposals); 0: Gaussian only.")
     proposal_limbs: str = _param("arms", "Limbs that get proposals: 'arms', 'legs' or 'all'.")

@@ -20,46 +20,69 @@ from hmocap_ros.render.silhouette import _fill_silhouette, clip_boxes, observed_
 __all__ = ["xor_counts_from_vertices"]
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def _fused_kernel(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
-                  front_only, n_chunks, out):
+def _fused_body(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
+                front_only, n_chunks, out, c):
     n_poses = verts.shape[0]
     n_views = K.shape[0]
     n_vert = verts.shape[1]
     height = observed.shape[1]
     width = observed.shape[2]
     n = n_poses * n_views
+    buf = np.zeros((height, width), dtype=np.uint8)
+    uv = np.empty((n_vert, 2), dtype=np.float32)
+    z = np.empty(n_vert, dtype=np.float32)
+    for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+        b = i // n_views
+        m = i % n_views
+        _project_one(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
+        x0, y0, x1, y1 = _fill_silhouette(
+            buf, uv, faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3], front_only)
+        rendered = 0
+        both = 0
+        obs = observed[m]
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                v = buf[y, x]
+                rendered += v
+                both += v & obs[y, x]
+                buf[y, x] = 0
+        out[b, m] = observed_in_rect[m] + rendered - 2 * both
+
+
+_fused_chunk = nb.njit(cache=True, nogil=True)(_fused_body)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def _fused_parallel(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
+                    front_only, n_chunks, out):
     for c in nb.prange(n_chunks):
-        buf = np.zeros((height, width), dtype=np.uint8)
-        uv = np.empty((n_vert, 2), dtype=np.float32)
-        z = np.empty(n_vert, dtype=np.float32)
-        for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            b = i // n_views
-            m = i % n_views
-            _project_one(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
-            x0, y0, x1, y1 = _fill_silhouette(
-                buf, uv, faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3], front_only)
-            rendered = 0
-            both = 0
-            obs = observed[m]
-            for y in range(y0, y1):
-                for x in range(x0, x1):
-                    v = buf[y, x]
-                    rendered += v
-                    both += v & obs[y, x]
-                    buf[y, x] = 0
-            out[b, m] = observed_in_rect[m] + rendered - 2 * both
+        _fused_chunk(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
+                     front_only, n_chunks, out, c)
+
+
+@nb.njit(cache=True, nogil=True)
+def _fused_serial(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
+                  front_only, out):
+    _fused_chunk(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
+                 front_only, 1, out, 0)
+
+
+#: Below this many (pose, view) pairs the kernel runs on the calling thread: waking numba's
+#: workers costs milliseconds on a small, loaded machine (a Powell step weighs one pose).
+PARALLEL_MIN_ITEMS = 64
 
 
 def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
                              dist, faces: np.ndarray, observed: np.ndarray,
                              boxes: np.ndarray | None = None, *, front_only: bool = False,
-                             near: float = 1e-3) -> np.ndarray:
+                             near: float = 1e-3, max_r2: np.ndarray | None = None) -> np.ndarray:
     """XOR counts (B, M) of posed meshes ``verts (B, V, 3)`` against masks ``(M, H, W)``.
 
     Cameras: ``K, R (M, 3, 3)``, ``t (M, 3)``, ``dist (M, k)`` OpenCV coefficients or None, at
     the masks' resolution. ``faces``, ``boxes`` and ``front_only`` as in
-    :func:`hmocap_ros.render.xor_counts`. Parallel over poses x views.
+    :func:`hmocap_ros.render.xor_counts`. ``max_r2`` (M,): the cameras'
+    :func:`~hmocap_ros.render.projection.distortion_valid_r2`, if the caller keeps them.
+    Parallel over poses x views (serial below :data:`PARALLEL_MIN_ITEMS` pairs).
     """
     verts = np.asarray(verts)
     if verts.dtype not in (np.float32, np.float64):
@@ -81,7 +104,9 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
         d = np.zeros((n_views, 8))
     else:
         d = np.stack([_dist8(x) for x in np.asarray(dist, dtype=np.float64).reshape(n_views, -1)])
-    max_r2 = np.array([distortion_valid_r2(x) for x in d])
+    if max_r2 is None:
+        max_r2 = np.array([distortion_valid_r2(x) for x in d])
+    max_r2 = np.ascontiguousarray(max_r2, dtype=np.float64)
     obs01 = np.ascontiguousarray(observed != 0, dtype=np.uint8)
     _, height, width = obs01.shape
     rects = clip_boxes(boxes, n_views, height, width)
@@ -89,7 +114,11 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     out = np.empty((verts.shape[0], n_views), dtype=np.int64)
     if out.size == 0:
         return out
-    n_chunks = min(out.size, 4 * nb.get_num_threads())
-    _fused_kernel(verts, K, R, t, d, float(near), max_r2, faces, obs01, rects, counts,
-                  bool(front_only), n_chunks, out)
+    if out.size < PARALLEL_MIN_ITEMS or nb.get_num_threads() == 1:
+        _fused_serial(verts, K, R, t, d, float(near), max_r2, faces, obs01, rects, counts,
+                      bool(front_only), out)
+    else:
+        n_chunks = min(out.size, 4 * nb.get_num_threads())
+        _fused_parallel(verts, K, R, t, d, float(near), max_r2, faces, obs01, rects, counts,
+                        bool(front_only), n_chunks, out)
     return out

@@ -168,14 +168,16 @@ class LimbProposer:
     # ------------------------------------------------------------------ proposals
 
     def candidates(self, limb: str, reference: np.ndarray, rest, obs, support, residual,
-                   rng: np.random.Generator, cost_fn=None) -> tuple[np.ndarray, np.ndarray]:
+                   rng: np.random.Generator, cost_fn=None,
+                   sizes: LimbProposalParams | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The best configurations of one limb: (values (K, n_dofs), scores (K,)).
 
         Without ``cost_fn`` the ``top_configs`` best by point score (in [0, 1 + w]); with it
         (``cost_fn(params (K, D)) -> costs (K,)``), the ``top_configs`` of the ``screen`` best
-        by point score that cost least, and their costs.
+        by point score that cost least, and their costs. ``sizes`` overrides the proposer's
+        parameters for this call (a coarser search, say).
         """
-        p = self.params
+        p = sizes or self.params
         swing, other, prox, dist = self._spec[limb]
         lower, upper = np.asarray(self.skel.lower), np.asarray(self.skel.upper)
         # stage 1: swings of the proximal bone

@@ -28,11 +28,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from hmocap_ros.render import project_batch
+from functools import lru_cache
+
+from hmocap_ros.render.projection import _project_one, distortion_valid_r2
 
 __all__ = ["LAYER_ANCHORS", "LAYER_PARTS", "box_corners", "chain_lengths", "faces_of_blocks",
-           "layer_boxes",
-           "layer_vertex_indices", "part_boxes_3d", "reach_box"]
+           "layer_boxes", "layer_vertex_indices", "part_boxes_3d", "reach_box"]
 
 LAYER_PARTS = {
     "torso": ("pelvis", "spine", "chest", "neck", "head", "l_clavicle", "r_clavicle"),
@@ -120,6 +121,11 @@ def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.where(sel == 0, lo, hi)
 
 
+@lru_cache(maxsize=64)
+def _valid_r2(dist: tuple) -> float:
+    return distortion_valid_r2(np.array(dist))
+
+
 def layer_boxes(lo: np.ndarray, hi: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
                 D: np.ndarray, width: int, height: int, pad_px: float = 1.0) -> np.ndarray:
     """2D boxes (M, 4) ``[x0, y0, x1, y1)`` enclosing the projected 3D box in each view.
@@ -127,8 +133,15 @@ def layer_boxes(lo: np.ndarray, hi: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     A box whose corners cannot all be projected (a corner behind a camera) is the whole
     image, so the layer never loses that view's evidence by accident.
     """
-    uv, _ = project_batch(box_corners(lo, hi)[None], K, R, t, D)
-    uv = uv[0].astype(np.float64)  # (M, 8, 2)
+    corners = box_corners(lo, hi)
+    d8 = np.zeros((len(K), 8))
+    d8[:, :np.shape(D)[1]] = D
+    uv = np.empty((len(K), 8, 2), dtype=np.float32)
+    z = np.empty(8, dtype=np.float32)
+    for m in range(len(K)):  # 8 points: a serial call beats waking the thread pool
+        _project_one(corners, np.asarray(K[m], np.float64), np.asarray(R[m], np.float64),
+                     np.asarray(t[m], np.float64), d8[m], 1e-3, _valid_r2(tuple(d8[m])), uv[m], z)
+    uv = uv.astype(np.float64)  # (M, 8, 2)
     boxes = np.empty((uv.shape[0], 4))
     ok = np.isfinite(uv).all(axis=(1, 2))
     boxes[:, 0] = np.where(ok, np.nanmin(uv[..., 0], axis=1, initial=np.inf) - pad_px, 0)
