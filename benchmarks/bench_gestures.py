@@ -4,33 +4,42 @@ Targets: 15 trees of depth 20 trained on ~100k samples in a few minutes; detecti
 on 640x480 depth frames with such a forest. Run:
 ``python benchmarks/bench_gestures.py [--width 640 --height 480 --trees 15 --depth 20 --quick]``.
 
-Two forests of the same size are timed on the same toy depth scenes (``gestures.synthetic``:
-clutter, a person, palm / tee hand shapes, Kinect-like noise and holes):
+Three forests are timed:
 
-- ``trained``: boosted training (sec. 3.2.3) on the toy gestures. Its trees stop where the
-  classes are separated, and most background pixels are decided early: the realistic case.
+- ``shipped``: the default forest ``hmocap_ros/data/gesture_forest.npz`` (15 trees, depth <= 20,
+  trained on 640x480 simulated bags) on frames of a freshly simulated 640x480 bag
+  (``hmocap sim gestures``: a person gesturing in a furnished room, Kinect-like noise): the
+  case the node runs.
+- ``trained``: boosted training (sec. 3.2.3) on toy depth scenes (``gestures.synthetic``:
+  clutter, a person, palm / tee hand shapes, Kinect-like noise and holes), timed on toy scenes.
 - ``deep``: the same samples with random labels, so that every tree grows to the maximum depth
   with uncertain leaves (about 15k nodes per tree, mean path 18 at depth 20): the worst case for
   detection (no pixel is decided early) and for training.
 
-numba and OpenCV are limited to one thread. Detection is timed per frame over a stream
-(``GestureDetector.update``: depth conversion, forest votes, Parzen density, smoothing,
-localization), for several grid strides; median and best of the frames are printed.
+Training speed is the bag samples grown per second (tree growth, sec. 3.2.1, on the toy set;
+``--samples-per-class`` per class and tree, no mining). numba and OpenCV are limited to one
+thread. Detection is timed per frame over a stream (``GestureDetector.update``: depth
+conversion, forest votes, Parzen density, smoothing, localization) for several grid strides
+(stride 4 = the node's default at 640x480); median and best of the frames are printed.
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
+from pathlib import Path
 
 import cv2
 import numba
 import numpy as np
 
-from hmocap_ros.gestures import DetectorParams, ForestParams, GestureDetector, collect_samples
+from hmocap_ros.eval.gesture_eval import DEFAULT_MODEL, read_gesture_bag
+from hmocap_ros.gestures import DetectorParams, ForestParams, GestureDetector, collect_samples, load_forest
 from hmocap_ros.gestures.forest import frames_to_metres, train_forest_on_samples
 from hmocap_ros.gestures.params import FeatureParams, PatchParams, TrainParams
 from hmocap_ros.gestures.synthetic import TOY_CLASSES, focal_scale, toy_sequence
+from hmocap_ros.sim.gesture_dataset import generate
 
 
 def train(samples, params: TrainParams, rng, label: str):
@@ -46,10 +55,10 @@ def train(samples, params: TrainParams, rng, label: str):
     return forest
 
 
-def time_detection(forest, frames, stride: int, scale: float):
+def time_detection(forest, frames, stride: int, scale: float, focal_px: float | None = None):
     params = DetectorParams(stride=stride, parzen_sigma_px=6.0 * scale, volume_radius_px_m=20.0 * scale,
-                            suppression_radius_px_m=60.0 * scale)
-    det = GestureDetector(forest, params)
+                            suppression_radius_px_m=60.0 * scale, reference_focal_px=0.0)
+    det = GestureDetector(forest, params, focal_px=focal_px)
     det.update(frames[0], 0)  # compile / warm caches, not timed
     times = []
     for i, frame in enumerate(frames):
@@ -87,7 +96,8 @@ def main(argv=None) -> None:
     params = TrainParams(
         features=FeatureParams(patch_half_size_px_m=85.0 * scale),
         patches=PatchParams(n_positive=200, n_negative=300, box_half_size_px_m=20.0 * scale),
-        forest=ForestParams(n_trees=args.trees, max_depth=args.depth, samples_per_class=args.samples_per_class))
+        forest=ForestParams(n_trees=args.trees, max_depth=args.depth, samples_per_class=args.samples_per_class,
+                            mining_rounds=0))
     samples = collect_samples(frames_to_metres(frames, params), labels, params.patches, params.features, rng,
                               len(TOY_CLASSES))
     print(f"training: {len(samples)} samples from {args.train_frames} frames, "
@@ -98,9 +108,20 @@ def main(argv=None) -> None:
     deep = train(noise, params, rng, "deep")
 
     test_frames, _ = toy_sequence(np.random.default_rng(1), args.frames, shape)
+    shipped = load_forest(DEFAULT_MODEL)
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = Path(tmp) / "bench.mcap"
+        generate(bag, seed=77, subjects=1, subject_offset=7700, frames=args.frames, width=args.width,
+                 height=args.height, contact=False, progress=False)
+        sim = read_gesture_bag(bag)
+    print(f"shipped forest: {len(shipped.trees)} trees, {shipped.n_nodes} nodes, max depth "
+          f"{max(t.max_depth for t in shipped.trees)}, trained at fx {shipped.training_focal_px:g} px; "
+          f"simulated frames fx {sim.focal_px:g} px")
     print(f"detection, {args.frames} frames per run, ms per frame (median / best) and fps (median):")
     for stride in args.strides:
         row = []
+        med, best = time_detection(shipped, list(sim.depth), stride, scale, sim.focal_px)
+        row.append(f"shipped {med:6.1f} / {best:6.1f} ms {1e3 / med:6.1f} fps")
         for name, forest in (("trained", trained), ("deep", deep)):
             med, best = time_detection(forest, test_frames, stride, scale)
             row.append(f"{name} {med:6.1f} / {best:6.1f} ms {1e3 / med:6.1f} fps")

@@ -5,8 +5,9 @@ stands 1.0-1.5 m high at the room origin and looks roughly horizontally at the z
 the person stands, 1.5-3.5 m away.  A :class:`Layout` is one furnished room, drawn from a
 seeded generator:
 
-* walls (back wall 0.8-2.5 m behind the person, side walls, floor, ceiling), finely
-  tessellated because the rasteriser does not clip at the near plane;
+* walls (back wall 0.4-2.3 m behind the person, or 0.15-0.85 m for ``background="close"``,
+  side walls, floor, ceiling), finely tessellated because the rasteriser does not clip at the
+  near plane;
 * furniture made of boxes: tables, chairs, shelves with boards, cabinets, a sofa, floor
   lamps, plants, a TV stand, kept out of the person's zone and of the corridor between the
   camera and that zone (the gesture itself is never hidden by furniture);
@@ -224,17 +225,26 @@ def _in_view(x: float, z: float, radius: float, half_fov_tan: float = 0.55) -> b
     return z > 0.8 and abs(x) - radius < half_fov_tan * z
 
 
+#: Room kinds of :func:`make_layout`: the back wall 0.4-2.3 m behind the person ("room"), or
+#: close behind them, 0.15-0.85 m ("close": the background of a gesture lies within a few
+#: tens of centimetres, where depth clipping, eq. 3.6, matters most).
+BACKGROUNDS = ("room", "close")
+
+
 def make_layout(rng: np.random.Generator, layout_id: int = 0, width: int = 640, height: int = 480,
-                n_bystanders: int | None = None) -> Layout:
-    """A random furnished room with the camera at the origin (see the module docstring)."""
+                n_bystanders: int | None = None, background: str = "room") -> Layout:
+    """A random furnished room with the camera at the origin (see the module docstring);
+    ``background`` (:data:`BACKGROUNDS`) sets how far behind the person the back wall stands."""
+    if background not in BACKGROUNDS:
+        raise ValueError(f"background must be one of {BACKGROUNDS}, got {background!r}")
     u = rng.uniform
     cam_h = u(1.0, 1.5)
     zone_z = u(2.0, 3.0)
     zone_x = u(-0.4, 0.4)
-    zone = (zone_x, zone_z, 0.5)
+    zone = (zone_x, zone_z, 0.5 if background == "room" else 0.2)
     camera = depth_camera((u(-0.1, 0.1), cam_h, 0.0), (zone_x + u(-0.15, 0.15), u(1.1, 1.35), zone_z),
                           width, height)
-    back = zone_z + 0.5 + u(0.4, 1.8)
+    back = zone_z + zone[2] + (u(0.4, 1.8) if background == "room" else u(0.15, 0.45))
     left, right = u(1.3, 2.8), u(1.3, 2.8)
     ceiling = u(2.5, 3.0)
     parts = _walls(rng, back, left, right, ceiling)
@@ -268,9 +278,12 @@ def make_layout(rng: np.random.Generator, layout_id: int = 0, width: int = 640, 
     n_people = int(rng.choice([0, 1, 1, 2])) if n_bystanders is None else n_bystanders
     for _ in range(n_people):
         for _ in range(30):
-            x, z = u(-right + 0.4, left - 0.4), u(zone_z + 0.6, back - 0.3)
-            if rng.random() < 0.3:  # beside the person instead of behind
-                z = u(zone_z - 0.5, zone_z + 1.0)
+            if background == "close":  # no room behind the person: beside them, before the wall
+                x, z = u(-right + 0.4, left - 0.4), u(zone_z - 0.5, back - 0.3)
+            else:
+                x, z = u(-right + 0.4, left - 0.4), u(zone_z + 0.6, back - 0.3)
+                if rng.random() < 0.3:  # beside the person instead of behind
+                    z = u(zone_z - 0.5, zone_z + 1.0)
             blocked = not _in_view(x, z, 0.0) or _blocked(x, z, (0.3, 0.3), zone, (0.0, 0.0), 0.15)
             blocked |= any(np.hypot(x - ix, z - iz) < 0.9 for _, ix, iz, _ in items)
             blocked |= any(np.hypot(x - bx, z - bz) < 0.7 for bx, bz, _ in bystanders)

@@ -28,7 +28,8 @@ Sequence: the frames are split evenly between ``--subjects`` subjects with ident
 only, so sets generated with disjoint id ranges never share a person; use them for train
 and test).  Each subject performs takes in a random room (the room and the bystanders
 change every few takes and with the seed; bystanders get identities >= 10^6, never a
-subject's): a short transition from the previous pose (1-3 frames, background), then
+subject's; ``--background close`` puts the back wall 0.15-0.85 m behind the person):
+a short transition from the previous pose (1-3 frames, background), then
 ``--hold`` (default 5-10) frames holding a gesture with small motion, or as many frames of
 a negative kind.  Takes follow shuffled blocks of the six gestures plus three negatives, so classes
 are balanced and about half of the frames are background.  Same arguments, same bytes.
@@ -63,7 +64,7 @@ from hmocap_ros.io.bag_writer import BagWriter
 from hmocap_ros.io.conversions import dict_to_camera_info, numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
 from hmocap_ros.sim import gesture_set as gs
-from hmocap_ros.sim.depth_scene import Layout, make_layout, pixel_to_optical, render_depth
+from hmocap_ros.sim.depth_scene import BACKGROUNDS, Layout, make_layout, pixel_to_optical, render_depth
 
 START_NS = 1_700_000_000_000_000_000
 LABELS_FORMAT = "hmocap-gesture-labels/1"
@@ -346,7 +347,7 @@ class Summary:
 def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int = 200,
              width: int = 640, height: int = 480, subject_offset: int = 0, fps: float = 10.0,
              contact: bool = True, progress: bool = True, per_class: int = 4,
-             hold: tuple = HOLD_FRAMES) -> Summary:
+             hold: tuple = HOLD_FRAMES, background: str = "room") -> Summary:
     """Render and write the bag, its labels JSON and (optionally) its contact sheet."""
     if subjects < 1 or frames < 1 or width < 16 or height < 16 or fps <= 0:
         raise ValueError("subjects and frames must be >= 1, the image at least 16x16, fps > 0")
@@ -385,7 +386,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
                 if takes_here >= TAKES_PER_LAYOUT:
                     layout_id += 1
                     layout = make_layout(np.random.default_rng([seed, _STREAM_LAYOUT, layout_id]),
-                                         layout_id, width, height)
+                                         layout_id, width, height, background=background)
                     layout_rng = np.random.default_rng([seed, _STREAM_LAYOUT, layout_id, 1])
                     people = [Actor(gs.make_subject(model, int(layout_rng.integers(10**6, 10**9))))
                               for _ in layout.bystanders]
@@ -444,7 +445,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
     cam_info = {"frame_id": cam.frame_id, "width": width, "height": height,
                 "K": np.round(cam.K, 6).tolist(), "depth_unit": "mm", "invalid": 0}
     labels = {"format": LABELS_FORMAT, "bag": out.name, "seed": seed, "subject_offset": subject_offset,
-              "fps": fps, "classes": {str(i + 1): n for i, n in enumerate(gs.GESTURE_CLASSES)},
+              "fps": fps, "background": background, "classes": {str(i + 1): n for i, n in enumerate(gs.GESTURE_CLASSES)},
               "reference_points": gs.REFERENCE_POINTS, "camera": cam_info,
               "subjects": subjects_info, "layouts": layouts_info, "counts": per_cls, "frames": records}
     labels_path.write_text(json.dumps(labels, indent=1) + "\n")
@@ -467,6 +468,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=10.0, help="frame rate of the stamps (default 10)")
     parser.add_argument("--hold", type=int, nargs=2, default=list(HOLD_FRAMES), metavar=("MIN", "MAX"),
                         help=f"frames per take, drawn in [MIN, MAX] (default {HOLD_FRAMES[0]} {HOLD_FRAMES[1]})")
+    parser.add_argument("--background", choices=BACKGROUNDS, default="room",
+                        help="room: back wall 0.4-2.3 m behind the person (default); close: 0.15-0.85 m")
     parser.add_argument("--no-contact-sheet", action="store_true", help="do not write BAG.contact.png")
     parser.add_argument("--force", action="store_true", help="overwrite the bag and its side files")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -485,7 +488,8 @@ def main_from_args(ns) -> int:
     try:
         s = generate(out, seed=ns.seed, subjects=ns.subjects, frames=ns.frames, width=ns.width,
                      height=ns.height, subject_offset=ns.subject_offset, fps=ns.fps,
-                     contact=not ns.no_contact_sheet, progress=not ns.quiet, hold=tuple(ns.hold))
+                     contact=not ns.no_contact_sheet, progress=not ns.quiet, hold=tuple(ns.hold),
+                     background=ns.background)
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
