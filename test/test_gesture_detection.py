@@ -168,3 +168,33 @@ def test_detector_state_survives_a_forest_update():
     other.class_names = ("background", "other")
     det.set_forest(other)
     assert det.density is None
+
+
+def test_forest_and_pixel_sizes_follow_the_cameras_focal_length():
+    """A forest trained on 320x240 frames (f = 262.5 px) finds the gesture in a 640x480 frame of the
+    same camera model (f = 525 px): its offsets (pixel*metres, proportional to f) and the detector's
+    pixel sizes (given for 525 px) are rescaled, from camera_info's fx or, without it, from the
+    image width relative to the training frames."""
+    small = toy_forest(shape=SHAPE)
+    forest = Forest(small.trees, small.class_names, small.features, small.kind,
+                    {"training": dict(small.meta["training"], focal_px=262.5)})
+    for shape, focal in ((SHAPE, 262.5), ((480, 640), 525.0)):
+        scale = focal / 262.5
+        rng = np.random.default_rng(5)
+        uv = (int(150 * scale), int(110 * scale))
+        clean, _ = toy_frame(rng, shape, 1, uv=uv, depth_m=2.0, focal_px=focal, noise=False)
+        for camera_focal in (focal, None):
+            det = GestureDetector(forest, DetectorParams(), focal_px=camera_focal)
+            for k in range(3):
+                found = det.update(add_sensor_noise(rng, clean / 1000.0), k * FRAME_NS)
+            assert det.offset_scale == pytest.approx(scale)
+            assert det.active_params.stride == round(4 * focal / 525.0)
+            assert det.active_params.parzen_sigma_px == pytest.approx(6.0 * focal / 525.0)
+            assert found and found[0].class_id == 1, found
+            assert np.hypot(found[0].u - uv[0], found[0].v - uv[1]) <= 4.0 * scale
+    # Unknown training focal length (an old forest): the offsets are used as they are.
+    det = GestureDetector(small, DetectorParams(), focal_px=525.0)
+    det.update(np.full((48, 64), 2000, np.uint16), 0)
+    assert det.offset_scale == 1.0 and det.active_params.stride == 4
+    with pytest.raises(ValueError):
+        det.set_focal(-1.0)
