@@ -17,7 +17,8 @@ Publications (all with the stamp of the frame set):
   ``body_shape`` (hmocap_interfaces/BodyShape, latched): the estimated anthropometry.
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray): state, seconds per frame, ESS per layer,
   time per stage, views used and dropped.
-Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``seed``, ``body_id`` and every
+Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``, ``queue_depth``,
+``seed``, ``body_id`` and every
 field of :class:`~hmocap_ros.tracking.TrackerParams` (``body_tracker --help``).
 
 A dropped camera is tracked on the remaining views; a frame without a person publishes
@@ -41,7 +42,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from hmocap_ros.body.model import load_body_model
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.nodes.common import LATCHED_QOS, RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node
+from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, param, run_node,
+                                     sensor_qos)
 from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
 from hmocap_ros.stamp_sync import StampSynchronizer
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
@@ -56,6 +58,9 @@ class BodyTrackerNodeConfig:
     min_views_to_sync: int = param(2, "Frame sets with at least this many cameras are processed when a "
                                       "camera drops out (after max_wait_ms).")
     max_wait_ms: float = param(200.0, "How long (ms) a frame set waits for a missing camera.")
+    queue_depth: int = param(5, "Masks queued per camera while the tracker is busy (best effort: older "
+                                "ones are dropped, so a live tracker works on recent frames; raise it "
+                                "when replaying a bag slowly and every frame must be tracked).")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
     body_id: str = param("body_0", "Body id in the published messages (REP-155 style).")
 
@@ -104,12 +109,17 @@ class BodyTrackerNode(Node):
         self.rig = rig
         self.frame_id = rig.frame_id
         self.tracker = BodyTracker(self.model, rig, self.params, self.rng)
+        if first:
+            seconds = self.tracker.warm_up()
+            self.get_logger().info(f"kernels ready ({seconds:.1f} s)")
         self.sync = StampSynchronizer(
-            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6), queue_size=10, allow_partial=True,
+            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
+            queue_size=max(10, self.config.queue_depth), allow_partial=True,
             min_keys=min(self.config.min_views_to_sync, len(rig)), max_delay_ns=int(self.config.max_wait_ms * 1e6))
         if first:
             for name in rig.names:
-                self.create_subscription(Image, f"{name}/foreground", self._on_mask(name), SENSOR_QOS)
+                self.create_subscription(Image, f"{name}/foreground", self._on_mask(name),
+                                         sensor_qos(max(1, self.config.queue_depth)))
         self.get_logger().info(f"tracking with {len(rig)} cameras ({', '.join(rig.names)}), method "
                                f"{self.params.method}")
 

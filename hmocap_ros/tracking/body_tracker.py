@@ -273,6 +273,25 @@ class BodyTracker:
     def shape_known(self) -> bool:
         return self.shape is not None
 
+    def warm_up(self) -> float:
+        """Compile every numba kernel of the weighting (serial and parallel variants) on a
+        dummy frame; returns the seconds it took. A fresh install has no numba cache: without
+        this, the first frames with a person would stall for seconds while they compile."""
+        t0 = time.perf_counter()
+        w = self.fitness.working[0]
+        masks = [np.zeros((c.height, c.width), np.uint8) for c in self.fitness.working]
+        obs = self.fitness.observe(masks)
+        rest_params = self.model.rest_pose(None)[None]
+        for n in (1, 128):  # serial and parallel paths
+            params = np.repeat(rest_params, n, axis=0)
+            self.fitness.costs(params, obs)
+            verts, _ = self.fitness.pose(params)
+            self.fitness.costs_from_verts(verts, obs, np.array([[0, 0, w.width, w.height]] * obs.n_views))
+            self.fitness.costs_from_uv(self.fitness.project(verts, obs), obs)
+        self.proposer.evidence(obs, rest_params[0], self.fitness.rest(None), self.fitness.faces)
+        self.fitness.times.reset()
+        return time.perf_counter() - t0
+
     # ------------------------------------------------------------------ weighting
 
     def weight_fn(self, obs: Observation, shape: BodyShape):

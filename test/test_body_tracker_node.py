@@ -1,0 +1,134 @@
+"""body_tracker over DDS: the shipped bag through foreground_segmentation -> body_tracker gives
+joint states with the input stamps and a bounded 3D error; bad input is logged and survived.
+
+Small particle budgets keep this fast on a 2-core machine; the figures of the README come
+from ``tools/mocap_table.py`` and ``hmocap eval mocap``, not from here.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from hmocap_ros.demo import DEMO_BAG, DEMO_RIG
+from hmocap_ros.eval.metrics import match_joints
+from hmocap_ros.io.bag_reader import BagReader
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
+
+CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
+FAST = ["-p", "n_particles:=120", "-p", "n_layers:=0", "-p", "shape_particles:=60",
+        "-p", "shape_frames:=2", "-p", "working_scale:=1.0", "-p", "shape_working_scale:=1.0"]
+
+
+def _points(msg) -> np.ndarray:
+    return np.array([[p.x, p.y, p.z] for p in msg.positions])
+
+
+def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
+    out = tmp_path / "body.mcap"
+    nodes = [("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
+              ["--ros-args", "-p", f"cameras:=[{','.join(CAMERAS)}]", "-p", "learn_frames:=8",
+               "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
+             ("body_tracker", "hmocap_ros.nodes.body_tracker",
+              ["--ros-args", "-p", "method:=hpf-apo", "-p", "queue_depth:=100", *FAST],
+              "waiting for the rig")]
+    procs = replay_through_nodes(
+        DEMO_BAG, nodes, ["/joint_states", "/skeleton", "/body_shape", "/diagnostics"], out,
+        loopback_dds_env(), tmp_path / "logs",
+        replay_topics=["/camera_rig", *(f"/{c}/image_raw" for c in CAMERAS)], replay_rate=0.2,
+        expect={"/joint_states": 15}, settle=5.0)
+    log = procs["body_tracker"].output()
+    assert "Traceback" not in log, log
+    with BagReader(DEMO_BAG) as reader:
+        image_stamps = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/cam_1/image_raw"])}
+        truth = {stamp_to_ns(m.msg.header.stamp): m.msg
+                 for m in reader.messages(["/ground_truth/skeleton"])}
+    with BagReader(out) as reader:
+        joints = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/joint_states"])}
+        skeletons = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
+        shapes = list(reader.messages(["/body_shape"]))
+        diags = list(reader.messages(["/diagnostics"]))
+    assert set(joints) <= image_stamps and set(joints) == set(skeletons)
+    assert len(joints) >= len(truth) - 2, (len(joints), len(truth))  # a pose for (nearly) every frame
+    js = next(iter(joints.values()))
+    assert len(js.name) == 30 and len(js.position) == 30 and js.header.frame_id == "room"
+    errors = []
+    for stamp, sk in skeletons.items():
+        gt = truth[stamp]
+        i, j = match_joints(list(sk.joint_names), list(gt.joint_names))
+        errors.append(1000 * np.linalg.norm(_points(sk)[i] - _points(gt)[j], axis=1).mean())
+    assert np.mean(errors) < 150.0, errors  # a small budget at 160x120; the table has the real figures
+    assert shapes and shapes[-1].msg.height > 1.0
+    states = {kv.value for d in diags for s in d.msg.status for kv in s.values if kv.key == "state"}
+    assert {"searching", "tracking"} <= states
+
+
+BAD_INPUT = r"""
+import time, numpy as np, rclpy
+from rclpy.qos import QoSProfile, DurabilityPolicy
+from sensor_msgs.msg import Image
+from hmocap_interfaces.msg import CameraRig
+from hmocap_ros.io.conversions import numpy_to_image
+from hmocap_ros.io.msg_factory import RclpyFactory
+from hmocap_ros.rig import load_rig, rig_to_msg
+rclpy.init()
+node = rclpy.create_node("bad_masks")
+f = RclpyFactory()
+rig = load_rig(RIG)
+latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+rig_pub = node.create_publisher(CameraRig, "/camera_rig", latched)
+rig_pub.publish(rig_to_msg(rig, 1, f))
+pubs = {c.name: node.create_publisher(Image, f"/{c.name}/foreground", QoSProfile(depth=100)) for c in rig}
+end = time.monotonic() + 30
+while min(p.get_subscription_count() for p in pubs.values()) < 1 and time.monotonic() < end:
+    time.sleep(0.05)
+time.sleep(1.0)
+h, w = rig[0].height, rig[0].width
+stamp = 1_000_000_000
+def frame(make):
+    global stamp
+    for c in rig:
+        msg = make(c.name)
+        if msg is not None:
+            pubs[c.name].publish(msg)
+    stamp += 40_000_000
+    time.sleep(0.15)
+empty = lambda name: numpy_to_image(np.zeros((h, w), np.uint8), "mono8", stamp, name, f)
+for _ in range(2):
+    frame(empty)                                                       # nobody in the room
+frame(lambda name: numpy_to_image(np.zeros((h, w, 3), np.uint8), "rgb8", stamp, name, f))  # wrong encoding
+frame(lambda name: numpy_to_image(np.zeros((h // 2, w // 2), np.uint8), "mono8", stamp, name, f))  # wrong size
+frame(lambda name: None if name == "cam_2" else empty(name))           # a camera drops out
+for _ in range(2):
+    frame(empty)
+print("sent", flush=True)
+time.sleep(1.5)
+"""
+
+
+def test_bad_input_is_logged_and_survived(tmp_path):
+    env = loopback_dds_env()
+    script = BAD_INPUT.replace("RIG", repr(str(DEMO_RIG)))
+    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(tmp_path / "d.mcap"),
+                                                      "--progress", "0.1", "/diagnostics"],
+                           env, tmp_path) as rec, \
+         NodeProcess.module("tracker", "hmocap_ros.nodes.body_tracker",
+                            ["--ros-args", "-p", "max_wait_ms:=100.0", *FAST], env, tmp_path) as node:
+        assert node.wait_for_output("waiting for the rig", 60), node.output()
+        with NodeProcess("pub", [sys.executable, "-c", script], env, tmp_path) as pub:
+            assert pub.wait_for_output("sent", 60), pub.output()
+            assert pub.wait(30) == 0, pub.output()
+        assert rec.wait_for_output("written:", 30), rec.output() + node.output()
+        assert node.proc.poll() is None, node.output()  # still running
+        log = node.output()
+    assert "tracking with 4 cameras" in log, log
+    assert "must be mono8" in log, log                     # wrong encoding, logged
+    assert "the rig says" in log, log                      # wrong size, logged
+    assert "Traceback" not in log, log
+    with BagReader(tmp_path / "d.mcap") as reader:
+        diags = [m.msg for m in reader.messages()]
+    states = [kv.value for d in diags for s in d.status for kv in s.values if kv.key == "state"]
+    assert states and set(states) == {"searching"}, states  # no person: no pose, no crash
+    dropped = [kv.value for d in diags for s in d.status for kv in s.values if kv.key == "dropped"]
+    assert any("cam_2" in v for v in dropped), dropped
