@@ -243,6 +243,7 @@ def _anthropometry(model, estimate, truth) -> dict | None:
         true = entity_sizes(model, truth)
         neutral = entity_sizes(model, None)
         out["true_m"] = dict(zip(ENTITY_NAMES, map(float, true)))
+        out["neutral_m"] = dict(zip(ENTITY_NAMES, map(float, neutral)))
         out["error_mm"] = {n: 1000.0 * float(a - b) for n, a, b in zip(ENTITY_NAMES, est, true)}
         out["mean_abs_error_mm"] = 1000.0 * float(np.abs(est - true).mean())
         out["neutral_mean_abs_error_mm"] = 1000.0 * float(np.abs(neutral - true).mean())
