@@ -231,9 +231,10 @@ class DetectorParams:
               "at the maximum's depth d (20 = 10 px at 2 m, about 4 cm at f = 525 px; like the "
               "positive box of training).")
     min_score: float = _param(
-        0.3, "A class is detected when its smoothed density at the maximum is at least this.")
+        0.4, "A class is detected when its smoothed density at the maximum is at least this "
+             "(0.4 and 0.3 below: the best F1 on a validation bag, docs/gestures.md).")
     min_volume: float = _param(
-        0.25, "... and the mean smoothed density over the disk S (eq. 3.5 / |S|) at least this.")
+        0.3, "... and the mean smoothed density over the disk S (eq. 3.5 / |S|) at least this.")
     suppression_radius_px_m: float = _param(
         60.0, "A detection closer than value/d pixels (d its depth) to a higher-scoring detection "
               "of another class is dropped: one place shows one gesture. 0 keeps all.")

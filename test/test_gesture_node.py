@@ -1,0 +1,130 @@
+"""gesture_detection over DDS: the shipped depth bag replayed through the node (one GestureArray per
+frame with the input stamps, gestures found where the ground truth says), and bad input survived:
+a corrupt model file, wrong encodings, short data, NaN depth, no camera_info."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from hmocap_ros.demo import GESTURE_BAG
+from hmocap_ros.io import topics
+from hmocap_ros.io.bag_reader import BagReader
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
+
+NODE = ("gesture_detection", "hmocap_ros.nodes.gesture_detection", ["--ros-args", "-p", "publish_probability:=false"],
+        "detecting gestures")
+
+
+def test_gestures_for_every_frame_with_input_stamps(tmp_path):
+    out = tmp_path / "gestures.mcap"
+    procs = replay_through_nodes(GESTURE_BAG, [NODE], ["/gestures"], out, loopback_dds_env(), tmp_path / "logs",
+                                 replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], settle=2.0)
+    log = procs["gesture_detection"].output()
+    assert "Traceback" not in log and "error" not in log.lower(), log
+    with BagReader(GESTURE_BAG) as reader:
+        truth = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages([topics.GT_GESTURES])}
+        width = reader.first(topics.DEPTH_INFO).width
+    with BagReader(out) as reader:
+        got = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/gestures"])}
+    assert set(got) == set(truth)  # one answer per depth frame, with the frame's stamp
+    radius = 10.0 * width / 640.0
+    found = false = labelled = 0
+    for stamp, gt in truth.items():
+        det = got[stamp].gestures
+        assert got[stamp].header.frame_id == "depth_optical_frame"
+        for g in gt.gestures:
+            if g.position_valid:
+                labelled += 1
+                found += any(d.class_id == g.class_id and np.hypot(d.u - g.u, d.v - g.v) <= radius for d in det)
+        false += sum(not any(d.class_id == g.class_id for g in gt.gestures) for d in det)
+        for d in det:  # camera_info came with the frames: every gesture has its 3D point
+            assert d.position_valid and d.position.z > 0.3
+    assert labelled > 20
+    assert found >= 0.6 * labelled, (found, labelled)
+    assert false <= 0.1 * len(truth), false
+
+
+BAD_INPUT_PUBLISHER = r"""
+import sys, time, numpy as np, rclpy
+from rclpy.qos import QoSProfile
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from sensor_msgs.msg import Image
+from hmocap_ros.io.conversions import numpy_to_image
+from hmocap_ros.io.msg_factory import RclpyFactory
+good_model = sys.argv[1]
+rclpy.init()
+node = rclpy.create_node("bad_input")
+pub = node.create_publisher(Image, "/depth/image_raw", QoSProfile(depth=50))
+end = time.monotonic() + 30
+while pub.get_subscription_count() < 1 and time.monotonic() < end:
+    time.sleep(0.05)
+time.sleep(0.5)
+f = RclpyFactory()
+stamp = 1
+def send(img, enc):
+    global stamp
+    msg = numpy_to_image(img, enc, stamp, "depth_optical_frame", f)
+    pub.publish(msg); stamp += 1; time.sleep(0.05)
+    return msg
+scene = np.full((120, 160), 2500, np.uint16)
+send(scene, "16UC1")                                 # no usable forest yet: dropped, logged
+client = node.create_client(SetParameters, "/gesture_detection/set_parameters")
+assert client.wait_for_service(timeout_sec=20)
+def set_model(path):
+    value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=path)
+    future = client.call_async(SetParameters.Request(parameters=[Parameter(name="model_file", value=value)]))
+    rclpy.spin_until_future_complete(node, future, timeout_sec=60)
+    return future.result().results[0]
+r = set_model("/nonexistent/forest.npz")
+print("refused" if not r.successful else "accepted", r.reason, flush=True)
+r = set_model(good_model)
+print("loaded" if r.successful else "failed " + r.reason, flush=True)
+send(np.zeros((120, 160, 3), np.uint8), "rgb8")      # wrong encoding
+short = numpy_to_image(scene, "16UC1", stamp, "depth_optical_frame", f)
+short.data = short.data[:100]                        # data shorter than step * height
+pub.publish(short); stamp += 1; time.sleep(0.05)
+send(np.full((120, 160), np.nan, np.float32), "32FC1")   # NaN everywhere: no valid depth
+for _ in range(5):                                   # valid frames without camera_info
+    send(scene, "16UC1")
+print("sent", flush=True)
+time.sleep(1.5)
+"""
+
+
+def test_bad_input_is_logged_and_survived(tmp_path):
+    env = loopback_dds_env()
+    corrupt = tmp_path / "corrupt.npz"
+    corrupt.write_bytes(b"PK\x03\x04 not a forest")
+    rec = NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(tmp_path / "o.mcap"), "/gestures"],
+                             env, tmp_path)
+    node = NodeProcess.module("gd", "hmocap_ros.nodes.gesture_detection",
+                              ["--ros-args", "-p", f"model_file:={corrupt}", "-p", "publish_probability:=false"],
+                              env, tmp_path)
+    assert node.wait_for_output("detecting gestures once a forest is loaded", 60), node.output()
+    assert rec.wait_for_output("recording /gestures [", 30), rec.output()
+    from hmocap_ros.nodes.gesture_detection import DEFAULT_MODEL
+
+    pub = NodeProcess("pub", [sys.executable, "-c", BAD_INPUT_PUBLISHER, str(DEFAULT_MODEL)], env, tmp_path)
+    assert pub.wait_for_output("sent", 120), pub.output()
+    pub.stop()
+    assert node.proc.poll() is None, node.output()  # still running
+    log = node.output()
+    node.stop()
+    rec.stop()
+    assert "refused cannot use the gesture forest /nonexistent/forest.npz" in pub.output(), pub.output()
+    assert "loaded" in pub.output(), pub.output()
+    assert f"cannot use the gesture forest {corrupt}" in log, log          # corrupt model at start
+    assert "depth frames are dropped" in log, log
+    assert "encoding 'rgb8'" in log, log
+    assert "no valid depth" in log, log
+    assert "no depth/camera_info yet" in log, log
+    assert "Traceback" not in log, log
+    with BagReader(tmp_path / "o.mcap") as reader:
+        answers = [m.msg for m in reader.messages()]
+    # the NaN frame and the 5 valid frames are answered; nothing before the forest, nor bad frames
+    assert len(answers) == 6, len(answers)
+    assert all(not g.position_valid for a in answers for g in a.gestures)
