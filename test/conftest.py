@@ -7,6 +7,9 @@ processes the DDS tests start (see notes in README "Testing").
 import os
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+# One BLAS thread, as hmocap_ros/__init__.py sets (test modules import numpy before it).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 # A domain of its own per pytest process, so parallel runs on one machine never cross
 # (Fast DDS ports stay valid for ids up to 101 on Linux).
 os.environ["ROS_DOMAIN_ID"] = str(os.environ.get("HMOCAP_TEST_DOMAIN_ID") or 1 + os.getpid() % 100)

@@ -289,12 +289,16 @@ def _check_entities(shape: BodyShape) -> None:
         raise ValueError("BodyShape entity names do not match this module's ENTITIES")
 
 
-def apply_shape(model, shape: BodyShape | None) -> ShapedRest:
+def apply_shape(model, shape: BodyShape | None, vertex_subset: np.ndarray | None = None) -> ShapedRest:
     """Shaped rest geometry for one shape or a batch (sec. 2.3.2, all deformations at rest).
 
     v' = v + sum_b gamma_b B_b + sum_r beta_r R_r, re-grounded, then global scaling.
+    ``vertex_subset``: compute only these vertices (the returned ``vertices`` hold them, in
+    that order); the lowest shaped vertex, which re-grounds the body, must be among them.
     """
     verts0 = np.asarray(model.vertices, dtype=np.float64)
+    if vertex_subset is not None:
+        verts0 = verts0[vertex_subset]
     joints0 = np.asarray(model.joints_rest, dtype=np.float64)
     ends0 = np.asarray(model.end_sites_rest, dtype=np.float64)
     if shape is None:
@@ -307,11 +311,16 @@ def apply_shape(model, shape: BodyShape | None) -> ShapedRest:
     beta = np.exp(np.log(radial) @ basis.radial_membership) - 1.0
     n = len(gamma)
     coef = np.concatenate([gamma, beta], axis=1).astype(np.float32)
-    verts = (coef @ basis.vertex).reshape(n, -1, 3)  # float32: the mesh is float32 anyway
+    vbasis = basis.vertex
+    if vertex_subset is not None:
+        cols = (3 * np.asarray(vertex_subset)[:, None] + np.arange(3)).ravel()
+        vbasis = vbasis[:, cols]
+    verts = (coef @ vbasis).reshape(n, -1, 3)  # float32: the mesh is float32 anyway
     verts += verts0.astype(np.float32)
     joints = joints0 + (gamma @ basis.bone_joint).reshape(n, -1, 3)
     ends = ends0 + (gamma @ basis.bone_end).reshape(n, -1, 3)
-    lift = verts0[:, 1].min() - verts[..., 1].min(-1)  # keep the feet on the floor
+    rest_floor = np.asarray(model.vertices, dtype=np.float64)[:, 1].min()
+    lift = rest_floor - verts[..., 1].min(-1)  # keep the feet on the floor
     for a in (verts, joints, ends):
         a[..., 1] += lift[:, None].astype(a.dtype)
     g = np.broadcast_to(shape.global_scale, (n,))[:, None, None]
@@ -330,9 +339,21 @@ def _end(model, name):
     return list(map(str, model.end_site_names)).index(name)
 
 
+@lru_cache(maxsize=8)
+def _size_vertices(model) -> tuple:
+    """Vertices the entity sizes read: the torso (width, depth) and the soles (the lowest
+    vertex grounds the body), as (subset indices, torso mask within the subset)."""
+    verts = np.asarray(model.vertices, dtype=np.float64)
+    torso = np.isin(np.asarray(model.vertex_part), [_joint(model, n) for n in ("spine", "chest")])
+    soles = verts[:, 1] < verts[:, 1].min() + 0.04
+    subset = np.flatnonzero(torso | soles)
+    return subset, torso[subset]
+
+
 def entity_sizes(model, shape: BodyShape | None = None) -> np.ndarray:
     """Size S_k (metres) of every entity of ``ENTITIES`` -> (E,) or (B, E)."""
-    rest = apply_shape(model, shape)
+    subset, torso_mask = _size_vertices(model)
+    rest = apply_shape(model, shape, vertex_subset=subset)
     j = np.asarray(rest.joints)[None] if np.ndim(rest.joints) == 2 else rest.joints
     e = np.asarray(rest.end_sites)[None] if np.ndim(rest.end_sites) == 2 else rest.end_sites
     v = np.asarray(rest.vertices)[None] if np.ndim(rest.vertices) == 2 else rest.vertices
@@ -349,8 +370,6 @@ def entity_sizes(model, shape: BodyShape | None = None) -> np.ndarray:
     def both(fn):
         return 0.5 * (fn("l") + fn("r"))
 
-    torso_parts = [_joint(model, n) for n in ("spine", "chest")]
-    torso_mask = np.isin(np.asarray(model.vertex_part), torso_parts)
     tv = v[:, torso_mask]
     sizes = {
         "shoulder_height": both(lambda s: jp(f"{s}_shoulder")[:, 1] - v[..., 1].min(-1)),

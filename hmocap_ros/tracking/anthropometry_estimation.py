@@ -98,7 +98,7 @@ TABLE_2_2 = (
      ("spine_flex", "spine_bend", "spine_twist", "neck_flex", "neck_bend", "neck_twist"), 1.0),
 )
 
-#: Coarser limb proposals for the heading search (18 headings x 4 limbs at start-up).
+#: Coarser limb proposals for the heading search (10 headings x 4 limbs at start-up).
 HEADING_SEARCH_SIZES = LimbProposalParams(n_swing=240, top_swings=6, n_distal=40, screen=16,
                                           top_configs=4)
 
@@ -184,8 +184,8 @@ class EstimationParams:
     anneal_alpha: float = 0.5
     powell_scale: bool = False
     prior_on_proportions: bool = True
-    powell_maxfev: int = 200
-    limb_maxfev: int = 60
+    powell_maxfev: int = 120
+    limb_maxfev: int = 30
     scale_limits: tuple = (0.8, 1.2)
     shape_limits: tuple = (0.7, 1.4)
     proposal_fraction: float = 0.0
@@ -529,7 +529,7 @@ class AnthropometryEstimator:
         self.frames_done = 0
 
     def search_headings(self, obs: Observation, hull: Hull, pelvis_y: float, scale0: float,
-                        n_headings: int = 12, keep: int = 2,
+                        n_headings: int = 8, keep: int = 2,
                         min_separation: float = np.deg2rad(60.0)) -> list:
         """The ``keep`` most likely ``(heading, pose (D,))`` of a person standing in the hull.
 
@@ -552,8 +552,8 @@ class AnthropometryEstimator:
         costs, poses = [], []
         for h in cands:
             pose = initial_pose(self.model, hull, h, pelvis_y)
+            support, residual = self.proposer.evidence(obs, pose, rest, self.fitness.faces)
             for limb in self.proposer.limbs:
-                support, residual = self.proposer.evidence(obs, pose, rest, self.fitness.faces)
                 values, c = self.proposer.candidates(
                     limb, pose, rest, obs, support, residual, self.rng,
                     cost_fn=lambda x, rest=rest: self.fitness.costs(x, obs, rest),
