@@ -10,16 +10,16 @@ hidden (``position_valid`` false) neither reward nor penalise: their detections 
 Per gesture, the detections of all frames are ranked by score (the smoothed vote density at
 the maximum, sec. 3.2.4); sweeping the score threshold gives the precision-recall curve, and
 the average precision is its all-point interpolated area (precision made monotone from the
-right, summed over the recall steps). The detector runs with ``min_score`` and ``min_volume``
-lowered (:data:`SWEEP_MIN_SCORE`) so the sweep reaches low thresholds; everything else is the
-node's defaults with the pixel sizes scaled by ``fx / 525``.
+right, summed over the recall steps). A detection in a frame of another gesture or of no
+gesture (including the transitions between gestures) is a false positive; a frame's gesture
+found by no correct detection is a miss. The detector runs with ``min_score`` and
+``min_volume`` lowered (:data:`SWEEP_MIN_SCORE`) so the sweep reaches low thresholds;
+everything else is the node's defaults, with the forest's offsets and the pixel sizes
+rescaled to the bag's focal length (``GestureDetector(..., focal_px=...)``), so one forest
+serves 320x240 and 640x480 cameras.
 
-A forest records the focal length it was trained at (``meta["training"]["focal_px"]``, written
-by ``hmocap train gestures``); on a bag with another focal length its test offsets
-(pixel*metres) are rescaled by the ratio, so one forest serves 320x240 and 640x480 cameras.
-
-Also here: :func:`read_gesture_bag`, the one reader of annotated depth bags that training
-(``hmocap train gestures``) shares.
+Also here: :func:`read_gesture_bag` / :func:`read_gesture_bags`, the one reader of annotated
+depth bags that training (``hmocap train gestures``) shares.
 """
 
 from __future__ import annotations

@@ -1,11 +1,12 @@
 """Gesture localization on depth images with random forests (thesis ch. 3, sec. 3.2).
 
 - :mod:`~hmocap_ros.gestures.depth_features`: depth binary tests, plain (eq. 3.3) and
-  depth-clipped (eq. 3.6), and raw depth -> metres.
-- :mod:`~hmocap_ros.gestures.patches`: patch (sample) collection from annotated frames.
+  depth-clipped (eq. 3.6), and raw depth -> metres (or compact millimetres for training).
+- :mod:`~hmocap_ros.gestures.patches`: patch (sample) collection from annotated frames, and
+  hard negative mining by detection on the training frames.
 - :mod:`~hmocap_ros.gestures.trees`: the forest model (flat node arrays), shared with online forests.
-- :mod:`~hmocap_ros.gestures.forest`: offline training with information gain (eq. 3.2) and
-  boosted tree-by-tree learning (sec. 3.2.3).
+- :mod:`~hmocap_ros.gestures.forest`: offline training with information gain (eq. 3.2),
+  boosted tree-by-tree learning (sec. 3.2.3) and mining rounds.
 - :mod:`~hmocap_ros.gestures.detection`: per-frame localization: votes, Parzen density,
   temporal smoothing (eq. 3.4), volume test (eq. 3.5).
 - :mod:`~hmocap_ros.gestures.forest_file`: the versioned ``.npz`` forest file format.
@@ -13,9 +14,11 @@
 
 Typical use::
 
-    forest = train_forest(depth_frames, labels, TrainParams(), np.random.default_rng(0))
+    params = TrainParams().for_focal(camera_fx)  # pixel sizes are given for f = 525 px
+    forest = train_forest(depth_frames, labels, params, np.random.default_rng(0))
+    forest.meta["training"]["focal_px"] = camera_fx  # lets detectors rescale to other cameras
     save_forest(forest, "gestures.forest.npz")
-    detector = GestureDetector(load_forest("gestures.forest.npz"), DetectorParams())
+    detector = GestureDetector(load_forest("gestures.forest.npz"), DetectorParams(), focal_px=camera_fx)
     for depth, stamp_ns in stream:
         for det in detector.update(depth, stamp_ns):
             print(det.name, det.u, det.v, det.depth_m, det.score)
@@ -23,7 +26,8 @@ Typical use::
 
 from hmocap_ros.gestures.depth_features import depth_to_metres, evaluate_tests, random_offsets
 from hmocap_ros.gestures.detection import Detection, GestureDetector
-from hmocap_ros.gestures.forest import TreeReport, grow_tree, train_forest, train_forest_on_samples
+from hmocap_ros.gestures.forest import (TreeReport, grow_tree, train_forest, train_forest_on_frames,
+                                       train_forest_on_samples)
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest, read_header, save_forest
 from hmocap_ros.gestures.params import (
     DepthFormat,
@@ -33,12 +37,13 @@ from hmocap_ros.gestures.params import (
     PatchParams,
     TrainParams,
 )
-from hmocap_ros.gestures.patches import SampleSet, collect_samples
+from hmocap_ros.gestures.patches import SampleSet, collect_samples, mine_hard_negatives
 from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
 
 __all__ = [
     "DepthFormat", "Detection", "DetectorParams", "FeatureParams", "Forest", "ForestFileError", "ForestParams",
     "GestureDetector", "PatchParams", "PendingTests", "SampleSet", "TrainParams", "Tree", "TreeReport",
-    "collect_samples", "depth_to_metres", "evaluate_tests", "grow_tree", "load_forest", "random_offsets",
-    "read_header", "save_forest", "train_forest", "train_forest_on_samples",
+    "collect_samples", "depth_to_metres", "evaluate_tests", "grow_tree", "load_forest", "mine_hard_negatives",
+    "random_offsets", "read_header", "save_forest", "train_forest", "train_forest_on_frames",
+    "train_forest_on_samples",
 ]

@@ -12,14 +12,19 @@ read the same, so the forest cannot learn the clutter behind the gestures of its
 
 Depth convention (all kernels): images are float32 metres as made by :func:`depth_to_metres`,
 in which every invalid pixel (no depth, NaN, out of the sensor range) holds the constant
-``background_depth_m`` (default 10 m, beyond any valid depth). Training frame stacks may
-instead be compact uint16 millimetres with 0 = invalid (:func:`depth_to_millimetres`, half the
-memory of metres for the thousands of 640x480 frames of a training set): the kernels read a
-pixel through :func:`pixel_metres`, which gives the very float32 that :func:`depth_to_metres`
-gives for that millimetre value, so training and detection see the same numbers. A probe that falls on such a
-pixel or outside the image reads that constant: "far background", which with clipping is
-``d + kappa`` like any real clutter. Reference pixels are the valid ones (``d < background``).
-Probe coordinates are rounded to the nearest pixel.
+``background_depth_m`` (default 10 m, beyond any valid depth). A probe that falls on such a
+pixel reads that constant: "far background", which with clipping is ``d + kappa`` like any real
+clutter. A probe outside the image reads the nearest pixel of the image
+(``FeatureParams.outside = "border"``: the scene goes on beyond the frame, so a person cut by the
+image edge does not look like a hand-sized object in front of far background) or, with
+``"background"`` (forest files of version 1), the background constant. Reference pixels are the
+valid ones (``d < background``). Probe coordinates are rounded to the nearest pixel.
+
+Training frame stacks may instead be compact uint16 millimetres with 0 = invalid
+(:func:`depth_to_millimetres`, half the memory of metres for the thousands of 640x480 frames of
+a training set): the kernels read a pixel through :func:`pixel_metres`, which gives the very
+float32 that :func:`depth_to_metres` gives for that millimetre value, so training and
+detection see the same numbers.
 """
 
 from __future__ import annotations

@@ -1,14 +1,15 @@
 """``hmocap train gestures``: train a gesture forest (thesis sec. 3.2.3) from annotated depth bags.
 
 Reads ``/depth/image_raw``, ``/depth/camera_info`` and ``/ground_truth/gestures`` of each bag
-(the layout of ``hmocap sim gestures``; :func:`hmocap_ros.eval.gesture_eval.read_gesture_bag`),
-scales the pixel*metre sizes (tuned for f = 525 px at 640x480) by ``fx / 525`` of the bags'
-camera, trains a forest with boosted (or plain bagged) learning and saves it. Frames whose
-gesture reference point is hidden (``position_valid`` false) are left out: they are neither a
-gesture sample nor background. All bags must share one image size and focal length.
+(the layout of ``hmocap sim gestures``; :func:`hmocap_ros.eval.gesture_eval.read_gesture_bags`)
+into one compact uint16 millimetre stack, scales the pixel sizes of the defaults (given for
+f = 525 px at 640x480) by ``fx / 525`` of the bags' camera, trains a forest with boosted (or
+plain bagged) learning and hard negative mining, and saves it. Frames whose gesture reference
+point is hidden (``position_valid`` false) are left out: they are neither a gesture sample nor
+background. All bags must share one image size and focal length.
 
 The forest records the focal length it was trained at (``meta["training"]["focal_px"]``), so
-that :mod:`hmocap_ros.eval.gesture_eval` can rescale its test offsets to another camera.
+that the detector can rescale its test offsets to another camera.
 """
 
 from __future__ import annotations
