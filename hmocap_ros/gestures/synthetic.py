@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from hmocap_ros.gestures.forest import train_forest
-from hmocap_ros.gestures.params import DetectorParams, FeatureParams, ForestParams, PatchParams, TrainParams
+from hmocap_ros.gestures.params import DetectorParams, ForestParams, TrainParams
 
 __all__ = ["TOY_CLASSES", "add_sensor_noise", "draw_hand", "toy_detector_params", "toy_forest", "toy_frame",
            "toy_sequence", "toy_train_params"]
