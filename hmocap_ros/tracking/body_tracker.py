@@ -23,10 +23,12 @@ sums over the others); an empty frame set resets to ``searching``; weighting err
 finite cost) count as a collapsed fit. The estimated shape is kept while the person is away
 for fewer than ``forget_shape_frames`` frames, then estimated anew for the next person.
 
-Inter-frame prediction: the thesis' kernel is a zero-mean Gaussian. Optionally
-(``root_velocity_gain`` > 0) the particles' root position is shifted by that fraction of the
-last frame-to-frame displacement of the estimate before the filter runs (a constant-velocity
-prior on the pelvis only), which lets the torso layer follow a walking person.
+Inter-frame prediction: the thesis' kernel is a zero-mean Gaussian around the last estimate.
+Here, before the filter runs, the particles of ``velocity_dofs`` (default the pelvis position)
+are shifted by ``velocity_gain`` times the estimate's last frame-to-frame change: a damped
+constant-velocity prior. A walking or running person moves 5-12 cm per frame, several times
+the Gaussian's std; limbs reverse too quickly for it to help them (see docs/tracking.md for
+the comparison on the tuning clips).
 """
 from __future__ import annotations
 
@@ -92,10 +94,13 @@ class TrackerParams:
     reseed_fraction: float = _param(0.1, "Fraction of the particles whose limb DoFs being "
                                           "diffused are drawn uniformly within the joint "
                                           "limits (lets a lost limb be found again).")
-    velocity_gain: float = _param(0.0, "Fraction of the last frame-to-frame change of every "
-                                       "DoF of the estimate added to the particles before "
+    velocity_gain: float = _param(0.8, "Fraction of the estimate's last frame-to-frame "
+                                       "change of velocity_dofs added to the particles before "
                                        "filtering (a damped constant-velocity prediction; 0: "
                                        "zero-velocity Gaussian as in the thesis).")
+    velocity_dofs: str = _param("root_position", "DoFs the velocity prediction moves: "
+                                                 "'root_position' (pelvis), 'root' (pelvis "
+                                                 "and its rotation) or 'all'.")
     arm_chain: bool = _param(True, "Hierarchical methods: each shoulder layer samples its "
                                     "elbow too (the elbow layer then refines it).")
     box_reach: float = _param(1.05, "Observation boxes of the limb layers: half-size as a "
@@ -106,10 +111,6 @@ class TrackerParams:
                                     "deviations of the particles' part positions added "
                                     "around the mean part.")
     box_margin: float = _param(0.05, "Observation boxes: margin in metres around the parts.")
-    root_velocity_gain: float = _param(0.0, "Fraction of the last frame-to-frame pelvis "
-                                            "displacement added to the particles before "
-                                            "filtering (0: zero-velocity Gaussian as in the "
-                                            "thesis).")
     proposal_fraction: float = _param(0.2, "Fraction of the particles that, per limb and "
                                            "frame, take their limb DoFs from silhouette-driven "
                                            "proposals (limb_proposals); 0: Gaussian only.")
@@ -158,8 +159,9 @@ class TrackerParams:
             (0.0 <= self.jump_fraction <= 1.0 and self.jump_scale >= 1.0,
              "need 0 <= jump_fraction <= 1 and jump_scale >= 1"),
             (0.0 <= self.reseed_fraction <= 1.0, "reseed_fraction must lie in [0, 1]"),
-            (0.0 <= self.velocity_gain <= 1.0 and 0.0 <= self.root_velocity_gain <= 1.0,
-             "velocity gains must lie in [0, 1]"),
+            (0.0 <= self.velocity_gain <= 1.0, "velocity_gain must lie in [0, 1]"),
+            (self.velocity_dofs in ("root_position", "root", "all"),
+             "velocity_dofs must be 'root_position', 'root' or 'all'"),
             (self.estimator in ("mean", "max"), "estimator must be 'mean' or 'max'"),
             (0.0 <= self.proposal_fraction <= 1.0, "proposal_fraction must lie in [0, 1]"),
             (self.proposal_limbs in ("arms", "legs", "all"),
@@ -455,12 +457,12 @@ class BodyTracker:
     def _predict(self) -> None:
         if self._previous_estimate is None or self.estimate is None:
             return
+        if self.params.velocity_gain <= 0.0:
+            return
         step = self.estimate - self._previous_estimate
-        gain = np.full(self.skel.n_dofs, self.params.velocity_gain)
-        gain[self.skel.translation_dofs] = max(self.params.root_velocity_gain,
-                                               self.params.velocity_gain)
-        if np.any(gain > 0):
-            self.particles += gain * step
+        dofs = {"root_position": self.skel.translation_dofs,
+                "root": np.arange(6), "all": np.arange(self.skel.n_dofs)}[self.params.velocity_dofs]
+        self.particles[:, dofs] += self.params.velocity_gain * step[dofs]
 
     def _fit_cost(self, obs: Observation) -> float:
         if self.estimate is None or obs.n_views == 0:
