@@ -14,6 +14,7 @@ NODE_CONFIGS = {
     "camera_rig_publisher": ("hmocap_ros.nodes.camera_rig_publisher", "CameraRigPublisherConfig"),
     "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation", "ForegroundNodeConfig", "hmocap_ros.segmentation", "ForegroundParams"),
     "gesture_detection": ("hmocap_ros.nodes.gesture_detection", "GestureNodeConfig", "hmocap_ros.gestures", "DetectorParams"),
+    "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.body_tracker", "TrackerParams"),
 }
 
 
