@@ -111,7 +111,7 @@ class TrackerParams:
                                     "deviations of the particles' part positions added "
                                     "around the mean part.")
     box_margin: float = _param(0.05, "Observation boxes: margin in metres around the parts.")
-    proposal_fraction: float = _param(0.2, "Fraction of the particles that, per limb and "
+    proposal_fraction: float = _param(0.35, "Fraction of the particles that, per limb and "
                                            "frame, take their limb DoFs from silhouette-driven "
                                            "proposals (limb_proposals); 0: Gaussian only.")
     proposal_limbs: str = _param("arms", "Limbs that get proposals: 'arms', 'legs' or 'all'.")
