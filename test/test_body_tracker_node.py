@@ -62,6 +62,10 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
     assert shapes and shapes[-1].msg.height > 1.0
     states = {kv.value for d in diags for s in d.msg.status for kv in s.values if kv.key == "state"}
     assert {"searching", "tracking"} <= states
+    tracking = [{kv.key: kv.value for kv in s.values} for d in diags for s in d.msg.status
+                if s.message == "tracking"]
+    assert tracking and len(tracking[-1]["ms_per_layer"].split()) == 8  # hpf-apo: 7 + final
+    assert len(tracking[-1]["ess_per_layer"].split()) == 8 and float(tracking[-1]["seconds_per_frame"]) > 0
 
 
 BAD_INPUT = r"""

@@ -15,8 +15,8 @@ Publications (all with the stamp of the frame set):
   ``skeleton`` (hmocap_interfaces/Skeleton): 3D joints in the room frame.
   ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove.
   ``body_shape`` (hmocap_interfaces/BodyShape, latched): the estimated anthropometry.
-  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): state, seconds per frame, ESS per layer,
-  time per stage, views used and dropped.
+  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): state, seconds per frame, ESS and
+  milliseconds per layer, time per stage, views used and dropped.
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``, ``queue_depth``,
 ``seed``, ``body_id`` and every
 field of :class:`~hmocap_ros.tracking.TrackerParams` (``body_tracker --help``).
@@ -238,7 +238,9 @@ class BodyTrackerNode(Node):
                   KeyValue(key="fit_cost", value=f"{result.fit_cost:.4f}"),
                   KeyValue(key="views", value=" ".join(self.rig.names[i] for i in result.views)),
                   KeyValue(key="dropped", value=" ".join(self.rig.names[i] for i in result.dropped)),
-                  KeyValue(key="ess_per_layer", value=" ".join(f"{e:.0f}" for e in result.ess))]
+                  KeyValue(key="ess_per_layer", value=" ".join(f"{e:.0f}" for e in result.ess)),
+                  KeyValue(key="ms_per_layer", value=" ".join(
+                      f"{1000 * (d.weight_time_s + d.filter_time_s):.0f}" for d in result.layers))]
         values += [KeyValue(key=f"time_{k}", value=f"{v:.4f}") for k, v in sorted(result.timings.items())]
         level = DiagnosticStatus.OK if result.state in ("tracking", "initialising", "searching") else \
             DiagnosticStatus.WARN
