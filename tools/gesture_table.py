@@ -152,7 +152,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     default = results[DEFAULT]
     plot_pr(default["test"], out / "gesture_pr.png",
-            f"{DEFAULT}, test bag: mean AP {default['test']['mean_ap']:.3f} ({default['test']['criterion']})")
+            f"{DEFAULT}, test bag: mean AP {default['test']['mean_ap']:.3f}\n"
+            f"correct: class right, within {default['test']['tolerance_px']:g} px at 640x480")
     gestures = list(default["test"]["per_class"])
     lines = ["<!-- written by tools/gesture_table.py; do not edit -->", ""]
     for bag in EVAL:
