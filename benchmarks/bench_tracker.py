@@ -43,10 +43,7 @@ def scene(model, rig, n_frames: int, start: int = 250):
     params = local_rotations_to_pose(model.skeleton, motion.local_rotations[sl],
                                      motion.root_translation[sl])
     verts, _ = model.pose(params, shape)
-    K = np.stack([c.K for c in rig])
-    R = np.stack([c.R for c in rig])
-    t = np.stack([c.t for c in rig])
-    D = np.stack([np.pad(np.ravel(c.D), (0, 8))[:8] for c in rig])
+    K, R, t, D = rig.arrays()
     uv, _ = project_batch(verts, K, R, t, D)
     masks = render_silhouettes(uv, model.faces, rig[0].height, rig[0].width) * np.uint8(255)
     return shape, masks

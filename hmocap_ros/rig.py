@@ -47,6 +47,7 @@ from hmocap_ros.camera_model import DISTORTION_MODELS, PinholeCamera, Projection
 __all__ = [
     "RigError",
     "Rig",
+    "camera_arrays",
     "load_rig",
     "save_rig",
     "rig_from_dict",
@@ -129,6 +130,11 @@ class Rig:
         """:func:`~hmocap_ros.camera_model.project_points` with this rig's cameras."""
         return project_points(self.cameras, points_world, **kwargs)
 
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(K (M, 3, 3), R (M, 3, 3), t (M, 3), D (M, 8))``: the cameras stacked for the
+        batched projectors of :mod:`hmocap_ros.render` (distortion padded to 8 coefficients)."""
+        return camera_arrays(self.cameras)
+
     def isclose(self, other: "Rig", atol: float = 1e-9) -> bool:
         """Same frame, names and camera parameters within ``atol``."""
         return (
@@ -140,6 +146,17 @@ class Rig:
 
     def __repr__(self) -> str:
         return f"Rig(frame_id={self.frame_id!r}, cameras={list(self.names)})"
+
+
+def camera_arrays(cameras) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cameras (a Rig or a sequence of PinholeCamera) stacked as ``(K, R, t, D)``, float64,
+    with the OpenCV distortion padded to 8 coefficients: the arguments of
+    :func:`hmocap_ros.render.project_batch` and the tracker's kernels."""
+    cams = list(cameras)
+    return (np.stack([np.asarray(c.K, np.float64) for c in cams]),
+            np.stack([np.asarray(c.R, np.float64) for c in cams]),
+            np.stack([np.asarray(c.t, np.float64).ravel() for c in cams]),
+            np.stack([np.pad(np.asarray(c.D, np.float64).ravel(), (0, 8))[:8] for c in cams]))
 
 
 # --------------------------------------------------------------------------------------------

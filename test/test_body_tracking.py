@@ -50,11 +50,7 @@ def rig():
 
 
 def camera_arrays(rig):
-    K = np.stack([c.K for c in rig])
-    R = np.stack([c.R for c in rig])
-    t = np.stack([c.t for c in rig])
-    D = np.stack([np.pad(np.ravel(c.D), (0, 8))[:8] for c in rig])
-    return K, R, t, D
+    return rig.arrays()
 
 
 def render_masks(model, rig, params, shape=None):
@@ -198,6 +194,26 @@ def test_visual_hull_centroid_height_and_heading(model, rig):
     assert abs(err) < np.deg2rad(20)
     empty = fitness.observe([np.zeros_like(m) for m in masks[0]])
     assert visual_hull(empty.masks, empty.K, empty.R, empty.t, empty.D, room_bounds(rig)) is None
+
+
+def test_visual_hull_takes_the_best_seen_person_or_the_one_near_the_last_pose(model, rig):
+    """Two people: one in the middle of the room, one under cam_1 (out of its view, close to
+    cam_2): the hull is the one all cameras see; a restart near the other one takes it."""
+    a = model.rest_pose(None).copy()
+    a[model.skeleton.translation_dofs[[0, 2]]] = [0.4, 0.2]
+    b = a.copy()
+    b[model.skeleton.translation_dofs[[0, 2]]] = [-2.3, -1.8]
+    masks, _ = render_masks(model, rig, np.stack([a, b]))
+    both = np.maximum(masks[0], masks[1])
+    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
+    obs = fitness.observe(list(both))
+    args = (obs.masks, obs.K, obs.R, obs.t, obs.D, room_bounds(rig))
+    hull = visual_hull(*args)
+    assert np.linalg.norm(hull.centroid[[0, 2]] - [0.4, 0.2]) < 0.1
+    near_b = visual_hull(*args, near=np.array([-2.2, 0.9, -1.7]))
+    assert np.linalg.norm(near_b.centroid[[0, 2]] - [-2.3, -1.8]) < 0.3
+    far = visual_hull(*args, near=np.array([2.0, 0.9, 2.0]))  # nobody there: best seen
+    assert np.linalg.norm(far.centroid[[0, 2]] - [0.4, 0.2]) < 0.1
 
 
 # ----------------------------------------------------------------------------- anthropometry

@@ -32,8 +32,7 @@ def rig():
 
 
 def cams(rig):
-    return (np.stack([c.K for c in rig]), np.stack([c.R for c in rig]),
-            np.stack([c.t for c in rig]), np.stack([np.pad(np.ravel(c.D), (0, 8))[:8] for c in rig]))
+    return rig.arrays()
 
 
 def masks_of(model, rig, params):

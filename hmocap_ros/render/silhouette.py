@@ -68,6 +68,21 @@ def _fill_silhouette(buf, proj, faces, x_min, y_min, x_max, y_max, front_only):
     return bx0, by0, bx1, by1
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def count_xor_and_clear(buf, observed, x0, y0, x1, y1):
+    """Over ``[x0, x1) x [y0, y1)``: the rendered pixels of ``buf`` and those also set in
+    ``observed`` (``|M|``, ``|M and S|``), clearing ``buf`` for its next use."""
+    rendered = 0
+    both = 0
+    for y in range(y0, y1):
+        for x in range(x0, x1):
+            v = buf[y, x]
+            rendered += v
+            both += v & observed[y, x]
+            buf[y, x] = 0
+    return rendered, both
+
+
 @nb.njit(cache=True, nogil=True, parallel=True)
 def _render_kernel(proj, faces, out, front_only):
     n = proj.shape[0]
@@ -94,15 +109,7 @@ def _xor_kernel(proj, faces, observed, rects, observed_in_rect, front_only, n_ch
             x0, y0, x1, y1 = _fill_silhouette(
                 buf, proj[b, m], faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3],
                 front_only)
-            rendered = 0
-            both = 0
-            obs = observed[m]
-            for y in range(y0, y1):
-                for x in range(x0, x1):
-                    v = buf[y, x]
-                    rendered += v
-                    both += v & obs[y, x]
-                    buf[y, x] = 0
+            rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
             out[b, m] = observed_in_rect[m] + rendered - 2 * both
 
 

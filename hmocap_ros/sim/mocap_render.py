@@ -34,6 +34,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from hmocap_ros.rig import camera_arrays  # noqa: F401 (re-exported)
 from hmocap_ros.render.meshes import vertex_normals
 from hmocap_ros.render.projection import look_at, project_batch
 from hmocap_ros.render.rasterize import rasterize
@@ -110,17 +111,6 @@ class RenderedFrame:
     images: tuple
     silhouettes: tuple
     timings: dict = field(default_factory=dict)
-
-
-def camera_arrays(rig):
-    """Stacked ``K (M, 3, 3), R (M, 3, 3), t (M, 3), dist (M, 8)`` of a rig's cameras."""
-    K = np.stack([c.K for c in rig])
-    R = np.stack([c.R for c in rig])
-    t = np.stack([c.t for c in rig])
-    dist = np.zeros((len(rig), 8))
-    for m, c in enumerate(rig):
-        dist[m, :len(c.D)] = c.D
-    return K, R, t, dist
 
 
 def _vignette_gain(width: int, height: int, strength: float) -> np.ndarray:

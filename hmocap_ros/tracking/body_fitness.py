@@ -38,6 +38,7 @@ from hmocap_ros.body.kinematics import forward_kinematics, skin_vertices, skinni
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.render import project_batch, xor_counts
 from hmocap_ros.render.projection import distortion_valid_r2
+from hmocap_ros.rig import camera_arrays
 from hmocap_ros.tracking.fused_xor import xor_counts_from_vertices
 
 __all__ = ["Observation", "SilhouetteFitness", "StageTimes", "downsample_mask", "posed_mesh",
@@ -173,11 +174,7 @@ class SilhouetteFitness:
             raise ValueError(f"working_scale must lie in (0, 1], got {self.working_scale}")
         self.cameras = tuple(self.cameras)
         self.working = tuple(c.scaled(self.working_scale) for c in self.cameras)
-        self._K = np.stack([c.K for c in self.working])
-        self._R = np.stack([c.R for c in self.working])
-        self._t = np.stack([c.t for c in self.working])
-        self._D = np.stack([np.pad(np.asarray(c.D, np.float64).ravel(), (0, 8))[:8]
-                            for c in self.working])
+        self._K, self._R, self._t, self._D = camera_arrays(self.working)
         self._max_r2 = np.array([distortion_valid_r2(d) for d in self._D])
         self.faces = np.ascontiguousarray(self.model.faces, dtype=np.int32)
         self._rest_cache: tuple | None = None
@@ -277,6 +274,19 @@ class SilhouetteFitness:
         xor = self.view_xor(uv, obs, boxes, faces)
         return (xor / self.normalisers(obs, boxes)).sum(axis=1)
 
+    def view_xor_from_verts(self, verts: np.ndarray, obs: Observation,
+                            boxes: np.ndarray | None = None,
+                            faces: np.ndarray | None = None) -> np.ndarray:
+        """XOR pixel counts (N, M) of posed meshes (N, V, 3), inside ``boxes`` if given
+        (projection and scan-fill fused), timed as "xor"."""
+        t0 = time.perf_counter()
+        xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D,
+                                       self.faces if faces is None else faces, obs.masks, boxes,
+                                       front_only=self.front_only, max_r2=obs.max_r2)
+        self.times.xor += time.perf_counter() - t0
+        self.times.evaluations += verts.shape[0]
+        return xor
+
     def costs_from_verts(self, verts: np.ndarray, obs: Observation,
                          boxes: np.ndarray | None = None,
                          faces: np.ndarray | None = None) -> np.ndarray:
@@ -285,12 +295,7 @@ class SilhouetteFitness:
         :meth:`costs_from_uv` of :meth:`project`), timed as "xor"."""
         if obs.n_views == 0:
             return np.zeros(verts.shape[0])
-        t0 = time.perf_counter()
-        xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D,
-                                       self.faces if faces is None else faces, obs.masks, boxes,
-                                       front_only=self.front_only, max_r2=obs.max_r2)
-        self.times.xor += time.perf_counter() - t0
-        self.times.evaluations += verts.shape[0]
+        xor = self.view_xor_from_verts(verts, obs, boxes, faces)
         return (xor / self.normalisers(obs, boxes)).sum(axis=1)
 
     def costs(self, params: np.ndarray, obs: Observation,

@@ -42,7 +42,8 @@ import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator, EstimationParams
-from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
+from hmocap_ros.render.silhouette import observed_counts
+from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness, serial_below
 from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
 from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
 from hmocap_ros.tracking.limb_proposals import LimbProposer
@@ -139,8 +140,9 @@ class TrackerParams:
     rejection_tau: float = _param(0.7, "Acceptance ratio tau of the rejection-sampling shape "
                                        "kernel (eq. 2.13).")
     rejection_trials: int = _param(8, "Trials of the rejection-sampling kernel per layer.")
-    lost_cost: float = _param(0.6, "Mean per-view silhouette XOR / foreground (eq. 2.8 divided "
-                                   "by the views) above which a frame counts as a failed fit.")
+    lost_cost: float = _param(0.6, "Mean per-view silhouette XOR / foreground, counted in a box "
+                                   "around the estimated body (eq. 2.8 divided by the views), "
+                                   "above which a frame counts as a failed fit.")
     lost_frames: int = _param(8, "Consecutive failed fits after which the track is lost and "
                                  "restarts from the visual hull.")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
@@ -413,9 +415,10 @@ class BodyTracker:
     def _start(self, masks, obs: Observation, stamp_ns: int) -> bool:
         """Visual hull and Powell fit; True when a person was found and the start-up began."""
         p = self.params
+        near = self.estimate[self.skel.translation_dofs] if self.estimate is not None else None
         hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
                            fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
-                           max_misses=p.hull_max_misses)
+                           max_misses=p.hull_max_misses, near=near)
         if hull is None or hull.top < p.min_hull_height:
             return False
         shape_obs = (obs if self.shape_fitness is self.fitness
@@ -465,12 +468,20 @@ class BodyTracker:
         self.particles[:, dofs] += self.params.velocity_gain * step[dofs]
 
     def _fit_cost(self, obs: Observation) -> float:
+        """Eq. 2.8 of the estimate, counted inside a box around its body (10 cm margin) and
+        averaged over the views: a second person or a door elsewhere in the images does not
+        make a good fit look collapsed."""
         if self.estimate is None or obs.n_views == 0:
             return float("nan")
         shape = self.shape if self.shape is not None else (
             self._estimator.shape() if self._estimator is not None else None)
-        cost = self.fitness.costs(self.estimate[None], obs, shape)[0]
-        return float(self.fitness.mean_view_cost(cost, obs))
+        verts, _ = self.fitness.pose(self.estimate[None], shape)
+        lo, hi = part_boxes_3d(verts, np.arange(verts.shape[1]), 0.0, 0.10)
+        boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
+        with serial_below(obs.n_views):
+            xor = self.fitness.view_xor_from_verts(verts, obs, boxes)[0]
+        inside = observed_counts(obs.masks, boxes)
+        return float(np.mean(xor / np.maximum(inside, self.fitness.min_count)))
 
     def _current_shape(self) -> BodyShape | None:
         if self.shape is not None:

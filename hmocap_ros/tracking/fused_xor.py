@@ -15,7 +15,8 @@ import numba as nb
 import numpy as np
 
 from hmocap_ros.render.projection import _dist8, _project_one, distortion_valid_r2
-from hmocap_ros.render.silhouette import _fill_silhouette, clip_boxes, observed_counts
+from hmocap_ros.render.silhouette import (_fill_silhouette, clip_boxes, count_xor_and_clear,
+                                          observed_counts)
 
 __all__ = ["xor_counts_from_vertices"]
 
@@ -37,15 +38,7 @@ def _fused_body(verts, K, R, t, d, near, max_r2, faces, observed, rects, observe
         _project_one(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
         x0, y0, x1, y1 = _fill_silhouette(
             buf, uv, faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3], front_only)
-        rendered = 0
-        both = 0
-        obs = observed[m]
-        for y in range(y0, y1):
-            for x in range(x0, x1):
-                v = buf[y, x]
-                rendered += v
-                both += v & obs[y, x]
-                buf[y, x] = 0
+        rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
         out[b, m] = observed_in_rect[m] + rendered - 2 * both
 
 

@@ -4,8 +4,11 @@ The tracker starts from the visual hull: "the initial position is computed from 
 hull centroid (generated with the available silhouettes), and the model is scaled to fit the
 visual hull height". A voxel of a grid over the room is kept when its centre projects onto
 foreground in every view that sees it (at most ``max_misses`` misses allowed) and at least
-``min_views`` views see it. The largest 26-connected component is the person; the grid is
-coarse over the whole room, then fine inside that component's box.
+``min_views`` views see it. The person is a 26-connected component: of those at least 30% of
+the largest one's size, the one the rig sees best (the highest mean number of views seeing its
+voxels; then the largest). With a second person in the room, the tracker thus takes the one in
+full view of the cameras, not whoever is nearest a camera or half out of its field. The grid
+is coarse over the whole room, then fine inside that component's box.
 
 Outputs (:class:`Hull`): centroid, top height (the feet stand on the floor, y = 0), volume,
 and a heading guess from the principal horizontal axis of the upper-body voxels (the shoulder
@@ -75,11 +78,13 @@ def _grid(lo: np.ndarray, hi: np.ndarray, voxel: float) -> tuple[np.ndarray, tup
 
 
 def carve(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.ndarray,
-          points: np.ndarray, min_views: int = 2, max_misses: int = 0) -> np.ndarray:
+          points: np.ndarray, min_views: int = 2, max_misses: int = 0,
+          return_seen: bool = False):
     """Occupancy (P,) bool of world points ``(P, 3)`` against foreground masks ``(M, H, W)``.
 
     A point is occupied when at least ``min_views`` views see it (it projects inside the
-    image) and it projects onto background in at most ``max_misses`` of them.
+    image) and it projects onto background in at most ``max_misses`` of them. With
+    ``return_seen``: ``(occupancy, views seeing each point (P,))``.
     """
     n_views, height, width = masks.shape
     uv, _ = project_batch(points[None], K, R, t, D)
@@ -95,33 +100,59 @@ def carve(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.
     fg &= seen
     n_seen = seen.sum(axis=0)
     misses = n_seen - fg.sum(axis=0)
-    return (n_seen >= min_views) & (misses <= max_misses)
+    occ = (n_seen >= min_views) & (misses <= max_misses)
+    return (occ, n_seen) if return_seen else occ
 
 
-def _largest_component(occ: np.ndarray) -> np.ndarray | None:
+def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
+                      min_fraction: float = 0.3, centres: np.ndarray | None = None,
+                      near: np.ndarray | None = None,
+                      near_radius: float = 1.0) -> np.ndarray | None:
+    """The component to track: of the connected components at least ``min_fraction`` of the
+    largest one's size, the one the views see best (highest mean number of views seeing its
+    voxels), then the largest. With two people in the room, the rig tracks the one it
+    observes best rather than whoever is closest to a camera or half out of its view.
+    ``near`` (3,) with ``centres`` (the voxel centres, ``occ.shape + (3,)``): the component
+    whose centroid lies nearest that point, if within ``near_radius`` metres (the person the
+    tracker just lost), else as above."""
     labels, n = ndimage.label(occ, structure=np.ones((3, 3, 3), dtype=bool))
     if n == 0:
         return None
     sizes = np.bincount(labels.ravel())[1:]
-    return labels == (1 + int(np.argmax(sizes)))
+    big = sizes >= min_fraction * sizes.max()
+    if near is not None and centres is not None:
+        flat = labels.ravel()
+        c = np.stack([np.bincount(flat, weights=centres[..., k].ravel())[1:] for k in range(3)],
+                     axis=1) / np.maximum(sizes, 1)[:, None]
+        dist = np.linalg.norm(c[:, [0, 2]] - np.asarray(near)[[0, 2]], axis=1)
+        dist[~big] = np.inf
+        if dist.min() <= near_radius:
+            return labels == (1 + int(np.argmin(dist)))
+    if n_seen is None or n == 1:
+        return labels == (1 + int(np.argmax(sizes)))
+    seen = np.bincount(labels.ravel(), weights=n_seen.ravel().astype(np.float64))[1:] / np.maximum(sizes, 1)
+    best = max(np.flatnonzero(big), key=lambda k: (round(float(seen[k]), 1), int(sizes[k])))
+    return labels == (1 + int(best))
 
 
 def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.ndarray,
                 bounds: tuple[np.ndarray, np.ndarray], *, coarse_voxel: float = 0.08,
                 fine_voxel: float = 0.03, min_views: int = 2, max_misses: int = 0,
-                min_volume: float = 0.01) -> Hull | None:
+                min_volume: float = 0.01, near: np.ndarray | None = None) -> Hull | None:
     """Carve the person's visual hull; None when nothing of at least ``min_volume`` m^3 is found.
 
     masks: (M, H, W) foreground (non-zero) at the resolution of the cameras ``K, R, t, D``
     (e.g. an :class:`~hmocap_ros.tracking.body_fitness.Observation`). bounds: the room box
-    (:func:`room_bounds`).
+    (:func:`room_bounds`). near: where the person was last seen (restarts prefer the person
+    there, see :func:`_person_component`).
     """
     if masks.shape[0] < min_views:
         return None
     lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
     points, shape = _grid(lo, hi, coarse_voxel)
-    occ = carve(masks, K, R, t, D, points, min_views, max_misses).reshape(shape)
-    comp = _largest_component(occ)
+    occ, n_seen = carve(masks, K, R, t, D, points, min_views, max_misses, return_seen=True)
+    comp = _person_component(occ.reshape(shape), n_seen.reshape(shape),
+                             centres=points.reshape(shape + (3,)), near=near)
     if comp is None or comp.sum() * coarse_voxel ** 3 < min_volume:
         return None
     idx = np.argwhere(comp)
@@ -130,7 +161,7 @@ def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, 
     flo[1] = max(flo[1], lo[1])
     points, shape = _grid(flo, fhi, fine_voxel)
     occ = carve(masks, K, R, t, D, points, min_views, max_misses).reshape(shape)
-    comp = _largest_component(occ)
+    comp = _person_component(occ)  # inside the chosen person's box: the largest part
     if comp is None:
         return None
     pts = points.reshape(shape + (3,))[comp]
