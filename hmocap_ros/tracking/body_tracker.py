@@ -124,6 +124,9 @@ class TrackerParams:
                                     "or 'max' (its best particle).")
     min_views: int = _param(2, "Views with enough foreground needed to start (and to carve "
                                "the visual hull).")
+    min_full_views: int = _param(3, "Views that must see the whole visual hull (inside the image) "
+                                    "before a track starts: a person half out of view gives a "
+                                    "wrong height and a wrong first pose.")
     min_foreground: int = _param(40, "Foreground pixels at the working resolution for a view "
                                      "to count as seeing a person.")
     voxel_size: float = _param(0.03, "Voxel edge (m) of the fine visual hull grid.")
@@ -268,6 +271,8 @@ class BodyTracker:
         self.estimate: np.ndarray | None = None
         self._previous_estimate: np.ndarray | None = None
         self._estimator: AnthropometryEstimator | None = None
+        self._hull_centroid = np.zeros(3)
+        self._hull_step = np.zeros(3)
         self._bad_frames = 0
         self._absent_frames = 0
         if forget_shape:
@@ -354,6 +359,8 @@ class BodyTracker:
                 return self._result(stamp_ns, obs, t_start, timings)
         if self.state == "initialising":
             t0 = time.perf_counter()
+            if self._estimator.frames_done > 0:
+                self._follow_hull(obs)
             shape_obs = (obs if self.shape_fitness is self.fitness
                          else self.shape_fitness.observe(masks, stamp_ns))
             diags = self._estimator.step(shape_obs)
@@ -421,6 +428,10 @@ class BodyTracker:
                            max_misses=p.hull_max_misses, near=near)
         if hull is None or hull.top < p.min_hull_height:
             return False
+        if self._views_seeing_whole(hull, obs) < min(p.min_full_views, obs.n_views):
+            return False
+        self._hull_centroid = hull.centroid.copy()
+        self._hull_step = np.zeros(3)
         shape_obs = (obs if self.shape_fitness is self.fitness
                      else self.shape_fitness.observe(masks, stamp_ns))
         est_params = EstimationParams(
@@ -442,6 +453,35 @@ class BodyTracker:
         self.state = "initialising"
         return True
 
+    @staticmethod
+    def _views_seeing_whole(hull, obs: Observation, margin_px: float = 1.0) -> int:
+        """Number of views whose image holds the whole hull (its box's 8 corners)."""
+        half = 0.5 * hull.voxel_size
+        boxes = layer_boxes(hull.points.min(axis=0) - half, hull.points.max(axis=0) + half,
+                            obs.K, obs.R, obs.t, obs.D, obs.width, obs.height, pad_px=0.0)
+        inside = ((boxes[:, 0] >= margin_px) & (boxes[:, 1] >= margin_px)
+                  & (boxes[:, 2] <= obs.width - margin_px) & (boxes[:, 3] <= obs.height - margin_px))
+        return int(inside.sum())
+
+    def _follow_hull(self, obs: Observation) -> None:
+        """During the start-up: move the hypotheses with the visual hull's centroid (a runner
+        crosses a metre during a four-frame start-up, far beyond the start-up's diffusion)."""
+        p = self.params
+        hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
+                           fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
+                           max_misses=p.hull_max_misses, near=self._hull_centroid)
+        if hull is None or np.linalg.norm((hull.centroid - self._hull_centroid)[[0, 2]]) > 0.5:
+            self._hull_step = np.zeros(3)
+            return
+        step = np.zeros(3)
+        step[[0, 2]] = (hull.centroid - self._hull_centroid)[[0, 2]]
+        self._hull_centroid = hull.centroid.copy()
+        self._hull_step = step
+        t = self.skel.translation_dofs
+        for hyp in self._estimator.hypotheses:
+            hyp.particles[:, t] += step
+            hyp.estimate[t] += step
+
     def _finish_start(self) -> None:
         est = self._estimator
         best = est.best()
@@ -452,7 +492,9 @@ class BodyTracker:
         pose = est.pose_particles()
         idx = self.rng.choice(len(pose), size=n, replace=len(pose) < n)
         self.particles = pose[idx]
-        self._previous_estimate = None
+        # the hull's last step seeds the pelvis velocity of the first tracked frame
+        self._previous_estimate = self.estimate.copy()
+        self._previous_estimate[self.skel.translation_dofs] -= self._hull_step
         self._estimator = None
         self._bad_frames = 0
         self.state = "tracking"
