@@ -109,17 +109,18 @@ class BodyTrackerNode(Node):
         self.rig = rig
         self.frame_id = rig.frame_id
         self.tracker = BodyTracker(self.model, rig, self.params, self.rng)
-        if first:
-            seconds = self.tracker.warm_up()
-            self.get_logger().info(f"kernels ready ({seconds:.1f} s)")
         self.sync = StampSynchronizer(
             list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
             min_keys=min(self.config.min_views_to_sync, len(rig)), max_delay_ns=int(self.config.max_wait_ms * 1e6))
         if first:
+            # Subscribe before compiling: masks that arrive during the (cold-cache) warm-up
+            # wait in the subscriptions' queues instead of being published to nobody.
             for name in rig.names:
                 self.create_subscription(Image, f"{name}/foreground", self._on_mask(name),
                                          sensor_qos(max(1, self.config.queue_depth)))
+            seconds = self.tracker.warm_up()
+            self.get_logger().info(f"kernels ready ({seconds:.1f} s)")
         self.get_logger().info(f"tracking with {len(rig)} cameras ({', '.join(rig.names)}), method "
                                f"{self.params.method}")
 
