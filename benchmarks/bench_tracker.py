@@ -8,7 +8,8 @@ then every method runs ``--frames`` frames of tracking at its default budget (ab
 weight evaluations per frame: HPF 7 layers x 500 particles as in the thesis' comparison,
 HPF+APO 8 x 438, APF 14 x 250), with 1 and 2 numba threads. Printed per method: seconds per
 frame (median), evaluations per second, and where the time goes (skinning = eq. 2.11/2.12,
-projection, XOR = eq. 2.8/2.15, proposals, the rest = resampling, kernels, boxes).
+projection (fused into the XOR pass by default), XOR = eq. 2.8/2.15, proposals (their own search;
+the re-ranking of proposals counts as skinning and XOR), the rest = resampling, kernels, boxes).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
 """
@@ -82,6 +83,7 @@ def main() -> None:
             spf = float(np.median(totals))
             n = args.frames
             evals = stages["evaluations"] / n
+            # projection is fused into the XOR pass (fused_xor.py) at the default settings
             known = ("skinning", "projection", "xor", "proposals")
             rest = stages["total"] / n - sum(stages.get(k, 0.0) / n for k in known)
             print(f"threads={threads} {method:8s} {spf:6.3f} s/frame  {evals:6.0f} evaluations/frame  "

@@ -109,6 +109,10 @@ class StageTimes:
         self.skinning = self.projection = self.xor = 0.0
         self.evaluations = 0
 
+    def weighting_seconds(self) -> float:
+        """Skinning + projection + XOR so far."""
+        return self.skinning + self.projection + self.xor
+
     def as_dict(self) -> dict:
         return {"skinning_s": self.skinning, "projection_s": self.projection, "xor_s": self.xor,
                 "evaluations": self.evaluations}
