@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
-from hmocap_ros.io.bag_writer import LATCHED, BagWriter, BagWriteError
+from hmocap_ros.io.bag_writer import LATCHED, BagWriter, BagWriteError, whole_bag
 from hmocap_ros.io.conversions import image_to_numpy, numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header, stamp_to_ns
 from hmocap_ros.io.typestore import hmocap_typestore
@@ -91,3 +91,19 @@ def test_errors(tmp_path):
     with BagReader(path) as reader:
         with pytest.raises(BagReadError, match="no topic"):
             list(reader.messages(["/nope"]))
+
+
+@pytest.mark.parametrize("name", ["gen.mcap", "gen_dir"])
+def test_whole_bag_is_complete_or_absent(tmp_path, name):
+    path = tmp_path / name
+    factory = RosbagsFactory(hmocap_typestore())
+    msg = factory.make("std_msgs/msg/String", data="frame")
+    with pytest.raises(KeyboardInterrupt):
+        with whole_bag(path) as bag:
+            bag.write("/text", msg, 1_000)
+            raise KeyboardInterrupt  # Ctrl-C half-way through a generated data set
+    assert not path.exists() and sorted(p.name for p in tmp_path.iterdir()) == []
+    with whole_bag(path) as bag:  # the same path then writes normally
+        bag.write("/text", msg, 1_000)
+    with BagReader(path) as reader:
+        assert [m.msg.data for m in reader.messages()] == ["frame"]

@@ -12,6 +12,7 @@ re-publishes them as latched.
 from __future__ import annotations
 
 import shutil
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -148,3 +149,23 @@ class BagWriter:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@contextmanager
+def whole_bag(path: str | Path, **kwargs):
+    """A :class:`BagWriter` for generated data: if the block raises or is interrupted
+    (Ctrl-C), the bag is removed instead of closed into place, so a data set on disk is either
+    complete or absent (a cache that checks ``exists()`` never takes a truncated one).
+    Recorders keep what they have instead: they use :class:`BagWriter` itself."""
+    path = Path(path)
+    writer = BagWriter(path, **kwargs)
+    try:
+        with writer as bag:
+            yield bag
+    except BaseException:
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+        raise
+

@@ -60,7 +60,7 @@ import numpy as np
 
 from hmocap_ros.body import load_body_model
 from hmocap_ros.io import topics
-from hmocap_ros.io.bag_writer import BagWriter
+from hmocap_ros.io.bag_writer import whole_bag
 from hmocap_ros.io.conversions import dict_to_camera_info, numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
 from hmocap_ros.sim import gesture_set as gs
@@ -370,7 +370,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
     index = take = 0
     layout_id = -1
     bar = tqdm(total=frames, file=sys.stderr, disable=not progress, unit="frame", desc="gestures")
-    with BagWriter(out) as bag:
+    with whole_bag(out) as bag:
         for k, n_frames in enumerate(splits):
             subject_id = subject_offset + k
             actor = Actor(gs.make_subject(model, subject_id))

@@ -467,7 +467,7 @@ def generate(config: MocapSimConfig) -> SimResult:
     from hmocap_ros.body import load_body_model, sample_shape
     from hmocap_ros.camera_model import project_points
     from hmocap_ros.io import topics
-    from hmocap_ros.io.bag_writer import LATCHED, BagWriter
+    from hmocap_ros.io.bag_writer import LATCHED, whole_bag
     from hmocap_ros.io.conversions import make_joint_state, numpy_to_image
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.typestore import hmocap_typestore
@@ -583,7 +583,7 @@ def generate(config: MocapSimConfig) -> SimResult:
         return perf.look.with_hair(v, full.faces)
 
     cams = list(rig.names)
-    with BagWriter(out) as bag:
+    with whole_bag(out) as bag:
         bag.add_topic(topics.CAMERA_RIG, "hmocap_interfaces/msg/CameraRig", LATCHED)
         bag.add_topic(topics.GT_BODY_SHAPE, "hmocap_interfaces/msg/BodyShape", LATCHED)
         bag.write(topics.CAMERA_RIG, rig_to_msg(rig, int(stamps[0]), factory), int(stamps[0]))
