@@ -1,0 +1,175 @@
+#!/usr/bin/env python3
+"""Measure the peer on the tracking table's bags: MediaPipe Pose per view + DLT triangulation.
+
+The issue compares the tracker with "MediaPipe Pose on each of 4 views plus DLT triangulation
+(the FreeMoCap approach)". This runs that pipeline on the same held-out bags as
+``tools/mocap_table.py`` and writes ``docs/peer_mediapipe.md``: the peer's 3D error on the 12
+joints both skeletons define (shoulders, elbows, wrists, hips, knees, ankles), next to the
+tracker's error on the same joints from the table's JSON reports::
+
+    .venv/bin/python tools/mocap_table.py        # first: the bags and the tracker's reports
+    .venv/bin/python tools/peer_mediapipe.py     # then: the peer on the same bags
+
+MediaPipe is not a dependency of hmocap_ros (its last wheel with the pose model inside,
+0.10.14, needs numpy < 2): the first run creates a separate venv, ``.venv-peer``, with
+``pip install mediapipe==0.10.14 "numpy<2"`` and runs ``peer_mediapipe_worker.py`` in it.
+Triangulation is ``hmocap_ros.eval.triangulation.triangulate`` (undistorted DLT; landmarks
+with visibility > 0.5; with ``--max-reprojection-px``, a view that disagrees is left out).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+from mocap_table import SEQUENCES  # noqa: E402
+
+from hmocap_ros.eval.triangulation import triangulate  # noqa: E402
+
+#: our joint -> MediaPipe Pose landmark index
+LANDMARKS = {"l_shoulder": 11, "r_shoulder": 12, "l_elbow": 13, "r_elbow": 14,
+             "l_wrist": 15, "r_wrist": 16, "l_hip": 23, "r_hip": 24, "l_knee": 25,
+             "r_knee": 26, "l_ankle": 27, "r_ankle": 28}
+PEER_REQUIREMENTS = ["mediapipe==0.10.14", "numpy<2"]
+
+
+def peer_python(venv: Path) -> Path:
+    python = venv / "bin" / "python"
+    if not python.exists():
+        print(f"creating {venv} with {' '.join(PEER_REQUIREMENTS)} (once, about a minute)",
+              flush=True)
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+        subprocess.run([str(python), "-m", "pip", "install", "-q", *PEER_REQUIREMENTS], check=True)
+    return python
+
+
+def read_bag(bag: Path, stack_path: Path):
+    """Rig, truth (F, J, 3), joint names and the images of every frame with truth, written to
+    ``stack_path`` as an (F, V, H, W, 3) uint8 array."""
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.conversions import image_to_rgb
+    from hmocap_ros.io.msg_factory import stamp_to_ns
+    from hmocap_ros.rig import rig_from_msg
+
+    with BagReader(bag) as reader:
+        rig = rig_from_msg(reader.first(topics.CAMERA_RIG))
+        truth, names = {}, ()
+        for item in reader.messages([topics.GT_SKELETON]):
+            names = tuple(str(n) for n in item.msg.joint_names)
+            truth[stamp_to_ns(item.msg.header.stamp)] = np.array(
+                [[p.x, p.y, p.z] for p in item.msg.positions])
+        stamps = sorted(truth)
+        image_topics = [topics.camera_image(n) for n in rig.names]
+        cam0 = rig[0]
+        stack = np.lib.format.open_memmap(stack_path, mode="w+", dtype=np.uint8,
+                                          shape=(len(stamps), len(rig), cam0.height, cam0.width, 3))
+        index = {s: i for i, s in enumerate(stamps)}
+        for stamp, msgs in reader.frame_sets(image_topics):
+            if stamp in index:
+                for v, t in enumerate(image_topics):
+                    stack[index[stamp], v] = image_to_rgb(msgs[t])
+        stack.flush()
+    return rig, np.stack([truth[s] for s in stamps]), names
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--workdir", default="/tmp/hmocap_mocap_table",
+                   help="where mocap_table.py left its bags and JSON reports")
+    p.add_argument("--peer-venv", default=str(ROOT / ".venv-peer"))
+    p.add_argument("--max-reprojection-px", type=float, default=20.0,
+                   help="leave out a view that reprojects further than this (0: plain DLT)")
+    p.add_argument("--out", default=str(ROOT / "docs" / "peer_mediapipe.md"))
+    ns = p.parse_args(argv)
+    python = peer_python(Path(ns.peer_venv))
+    work = Path(ns.workdir)
+    joints = list(LANDMARKS)
+    rows, per_joint_all = [], []
+    for i, (label, clip, start, seconds) in enumerate(SEQUENCES):
+        for distractors in (False, True):
+            seed = (201 if distractors else 101) + i
+            stem = f"{Path(clip).stem}_s{seed}{'_distractors' if distractors else ''}_{seconds:g}s"
+            bag, report = work / f"{stem}.mcap", work / f"{stem}.json"
+            if not (bag.exists() and report.exists()):
+                print(f"skip {stem}: run tools/mocap_table.py first", flush=True)
+                continue
+            with tempfile.TemporaryDirectory() as tmp:
+                stack, marks = Path(tmp) / "images.npy", Path(tmp) / "landmarks.npy"
+                rig, truth, names = read_bag(bag, stack)
+                t0 = time.perf_counter()
+                done = subprocess.run([str(python), str(ROOT / "tools" / "peer_mediapipe_worker.py"),
+                                       str(stack), str(marks)], check=True, capture_output=True,
+                                      text=True)
+                wall = time.perf_counter() - t0
+                landmarks = np.load(marks)  # (F, V, 33, 3)
+            ms_per_image = float(done.stdout.split()[0])
+            lm = landmarks[:, :, [LANDMARKS[j] for j in joints]]  # (F, V, 12, 3)
+            gt = truth[:, [names.index(j) for j in joints]]
+            errors = np.full((len(truth), len(joints)), np.nan)
+            for f in range(len(truth)):
+                pix = lm[f, :, :, :2]
+                valid = lm[f, :, :, 2] > 0.5
+                est, _ = triangulate(list(rig), pix, valid, max_reprojection_px=ns.max_reprojection_px or None)
+                errors[f] = 1000 * np.linalg.norm(est - gt[f], axis=1)
+            per_frame = np.nanmean(np.where(np.isfinite(errors), errors, np.nan), axis=1)
+            ours = json.loads(report.read_text())["methods"]["hpf-apo"]
+            ours12 = float(np.mean([ours["per_joint"][j]["mean_mm"] for j in joints]))
+            rows.append((label, seconds, distractors, float(np.nanmean(per_frame)),
+                         float(np.nanstd(per_frame)), float(np.isfinite(errors).mean()),
+                         ms_per_image, ours12, ours["mean_mm"]))
+            per_joint_all.append(np.nanmean(errors, axis=0))
+            print(f"{label:16s} {'distractors' if distractors else 'clean':11s} peer "
+                  f"{rows[-1][3]:.1f} mm ({100 * rows[-1][5]:.0f} % joints triangulated, "
+                  f"{ms_per_image:.1f} ms/image, {wall:.0f} s)  hpf-apo {ours12:.1f} mm on the "
+                  f"same joints", flush=True)
+    if not rows:
+        print("no bags: run tools/mocap_table.py first", file=sys.stderr)
+        return 1
+    lines = ["# The peer: MediaPipe Pose per view + DLT (generated by tools/peer_mediapipe.py)", "",
+             "Same held-out bags as `docs/tracking_results.md` (4 cameras, 640x480, 25 fps). "
+             "Error: mean (std) over frames of the mean 3D error of the 12 joints both "
+             "skeletons define (shoulders, elbows, wrists, hips, knees, ankles), mm.", "",
+             "| sequence | scene | peer: MediaPipe + DLT | joints triangulated | HPF+APO, same 12 joints | HPF+APO, 19 joints |",
+             "|---|---|---|---|---|---|"]
+    for label, seconds, distractors, mean, std, cover, ms, ours12, ours19 in rows:
+        lines.append(f"| {label} ({seconds:g} s) | {'distractors' if distractors else 'clean'} | "
+                     f"{mean:.1f} ({std:.1f}) | {100 * cover:.0f} % | {ours12:.1f} | {ours19:.1f} |")
+    # a bag where both followed the other person (errors of metres) would swamp the means
+    same_person = [k for k, r in enumerate(rows) if r[3] < 500.0 and r[7] < 500.0]
+    if len(same_person) < len(rows):
+        lines.append("| mean of the rows above where both followed the subject | | "
+                     f"**{np.mean([rows[k][3] for k in same_person]):.1f}** | | "
+                     f"**{np.mean([rows[k][7] for k in same_person]):.1f}** | "
+                     f"{np.mean([rows[k][8] for k in same_person]):.1f} |")
+    else:
+        lines.append(f"| mean | | **{np.mean([r[3] for r in rows]):.1f}** | | "
+                     f"**{np.mean([r[7] for r in rows]):.1f}** | {np.mean([r[8] for r in rows]):.1f} |")
+    ms = np.mean([r[6] for r in rows])
+    lines += ["", f"MediaPipe Pose 0.10.14 (model_complexity 1, video mode, one tracker per view): "
+              f"{ms:.1f} ms per 640x480 image on this machine = {1000 / (4 * ms):.1f} frames/s for "
+              "4 views, triangulation not counted. Views with landmark visibility <= 0.5 are not "
+              f"used; a view reprojecting more than {ns.max_reprojection_px:g} px is left out "
+              "(0 = plain DLT).", "",
+              "Peer error per joint (mm, mean over the bags of the mean row): " + ", ".join(
+                  f"{j} {v:.0f}" for j, v in zip(
+                      joints, np.nanmean([per_joint_all[k] for k in same_person], axis=0))) + "."]
+    out = Path(ns.out)
+    out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
