@@ -54,6 +54,8 @@ __all__ = [
     "project_points",
     "pixel_rays",
     "triangulate",
+    "triangulate_robust",
+    "reprojection_errors",
     "quaternion_to_matrix",
     "matrix_to_quaternion",
 ]
@@ -702,3 +704,60 @@ def triangulate(cameras: Sequence[PinholeCamera], pixels, valid=None, min_views:
     points[np.abs(X[:, 3]) < 1e-12] = np.nan
     out[enough] = points
     return out
+
+
+def reprojection_errors(cameras: Sequence[PinholeCamera], points, pixels) -> np.ndarray:
+    """Pixel distance ``(M, N)`` between room points ``(N, 3)`` projected into each camera and
+    the observed ``pixels`` ``(M, N, 2)``; NaN where the point or the pixel is NaN."""
+    points = np.asarray(points, dtype=np.float64)
+    finite = np.all(np.isfinite(points), axis=1)
+    projected = project_points(list(cameras), np.where(finite[:, None], points, 0.0)).pixels
+    errors = np.linalg.norm(projected - np.asarray(pixels, dtype=np.float64), axis=-1)
+    errors[:, ~finite] = np.nan
+    return errors
+
+
+def triangulate_robust(cameras: Sequence[PinholeCamera], pixels, valid=None,
+                       max_reprojection_px: float = 20.0, min_views: int = 2):
+    """:func:`triangulate`, leaving out views that disagree with the others.
+
+    A point whose worst used view reprojects further than ``max_reprojection_px`` is
+    triangulated again without one view, the one whose removal leaves the best worst-view
+    error (the view with the largest error is not always the wrong one: a wrong view drags the
+    point towards itself), repeatedly while more than ``min_views`` remain. Meant for
+    per-view 2D detections, where one view may have found another person or limb.
+    Returns ``(points (N, 3), used (M, N) bool)``.
+    """
+    cameras = list(cameras)
+    pixels = np.asarray(pixels, dtype=np.float64)
+    used = np.all(np.isfinite(pixels), axis=-1)
+    if valid is not None:
+        used &= np.asarray(valid, dtype=bool)
+    points = triangulate(cameras, pixels, used, min_views)
+
+    def worst_error(pts, pix, use):
+        err = np.where(use, reprojection_errors(cameras, pts, pix), -np.inf)
+        return np.nan_to_num(err.max(axis=0), nan=np.inf)
+
+    while True:
+        bad = (worst_error(points, pixels, used) > max_reprojection_px) & (used.sum(axis=0) > min_views)
+        if not bad.any():
+            return points, used
+        best_error = np.full(points.shape[0], np.inf)
+        best_view = np.full(points.shape[0], -1)
+        for m in range(len(cameras)):  # leave one view out at a time (M is a handful)
+            candidates = np.flatnonzero(bad & used[m])
+            if candidates.size == 0:
+                continue
+            trial = used[:, candidates].copy()
+            trial[m] = False
+            error = worst_error(triangulate(cameras, pixels[:, candidates], trial, min_views),
+                                pixels[:, candidates], trial)
+            better = error < best_error[candidates]
+            best_error[candidates[better]] = error[better]
+            best_view[candidates[better]] = m
+        drop = np.flatnonzero(bad & (best_view >= 0))
+        if drop.size == 0:
+            return points, used
+        used[best_view[drop], drop] = False
+        points[drop] = triangulate(cameras, pixels[:, drop], used[:, drop], min_views)

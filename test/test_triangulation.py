@@ -1,10 +1,11 @@
-"""DLT triangulation on the example rig: exact on noise-free projections (with distortion),
-a wrong view is dropped by the reprojection test, too few views give NaN."""
+"""Robust DLT triangulation (camera_model.triangulate_robust) on the example rig: exact on
+noise-free projections (with distortion), a wrong view is dropped by the reprojection test, too
+few views give NaN."""
 from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.eval.triangulation import reprojection_errors, triangulate
+from hmocap_ros.camera_model import reprojection_errors, triangulate, triangulate_robust
 from hmocap_ros.rig import load_rig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,7 +23,7 @@ def _setup(n=50, seed=0):
 def test_noise_free_projections_triangulate_exactly():
     cams, points, pixels = _setup()
     assert any(np.abs(np.asarray(c.D)).max() > 0 for c in cams)  # distortion is exercised
-    est, used = triangulate(cams, pixels)
+    est, used = triangulate_robust(cams, pixels)
     np.testing.assert_allclose(est, points, atol=1e-6)
     assert used.all()
     assert np.nanmax(reprojection_errors(cams, est, pixels)) < 1e-4
@@ -34,13 +35,13 @@ def test_a_wrong_view_is_dropped_and_too_few_views_give_nan():
     pixels = pixels + rng.normal(0, 0.5, pixels.shape)  # detector noise
     bad = pixels.copy()
     bad[2, :10] += 80.0  # view 2 saw something else for the first ten points
-    plain, _ = triangulate(cams, bad)
-    robust, used = triangulate(cams, bad, max_reprojection_px=15.0)
+    plain = triangulate(cams, bad)
+    robust, used = triangulate_robust(cams, bad, max_reprojection_px=15.0)
     err_plain = np.linalg.norm(plain[:10] - points[:10], axis=1)
     err_robust = np.linalg.norm(robust[:10] - points[:10], axis=1)
     assert err_plain.min() > 0.02 and err_robust.max() < 0.01
     assert not used[2, :10].any() and used[:, 10:].all()
     valid = np.zeros(pixels.shape[:2], bool)
     valid[0] = True  # one view only
-    one, _ = triangulate(cams, pixels, valid=valid)
+    one, _ = triangulate_robust(cams, pixels, valid=valid)
     assert np.isnan(one).all()

@@ -43,9 +43,18 @@ SEQUENCES = (
 )
 
 
+def bag_seed(index: int, distractors: bool) -> int:
+    """Simulator seed of the ``index``-th sequence: 101.. without, 201.. with distractors."""
+    return (201 if distractors else 101) + index
+
+
+def bag_stem(clip: str, seconds: float, seed: int, distractors: bool) -> str:
+    """File stem of an evaluation bag (and of its JSON report) in the work directory."""
+    return f"{Path(clip).stem}_s{seed}{'_distractors' if distractors else ''}_{seconds:g}s"
+
+
 def _bag(work: Path, clip: str, start: float, seconds: float, seed: int, distractors: bool) -> Path:
-    name = f"{Path(clip).stem}_s{seed}{'_distractors' if distractors else ''}_{seconds:g}s.mcap"
-    path = work / name
+    path = work / f"{bag_stem(clip, seconds, seed, distractors)}.mcap"
     if not path.exists():
         t0 = time.perf_counter()
         generate(MocapSimConfig(out=path, bvh=BVH / clip, start=start, seconds=seconds, seed=seed,
@@ -83,7 +92,7 @@ def main(argv=None) -> int:
             continue
         seconds = min(seconds, ns.seconds) if ns.seconds else seconds
         for distractors in conditions:
-            seed = (201 if distractors else 101) + i
+            seed = bag_seed(i, distractors)
             bag = _bag(work, clip, start, seconds, seed, distractors)
             report = evaluate(bag, ns.methods, silhouettes="fg", seed=ns.seed)
             stem = bag.stem

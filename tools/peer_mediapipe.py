@@ -13,8 +13,9 @@ tracker's error on the same joints from the table's JSON reports::
 MediaPipe is not a dependency of hmocap_ros (its last wheel with the pose model inside,
 0.10.14, needs numpy < 2): the first run creates a separate venv, ``.venv-peer``, with
 ``pip install mediapipe==0.10.14 "numpy<2"`` and runs ``peer_mediapipe_worker.py`` in it.
-Triangulation is ``hmocap_ros.eval.triangulation.triangulate`` (undistorted DLT; landmarks
-with visibility > 0.5; with ``--max-reprojection-px``, a view that disagrees is left out).
+Triangulation is ``hmocap_ros.camera_model.triangulate_robust`` (undistorted DLT on the
+landmarks with visibility > 0.5, a view that reprojects more than ``--max-reprojection-px``
+away left out; 0 gives the plain DLT of ``triangulate``).
 """
 from __future__ import annotations
 
@@ -32,9 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from mocap_table import SEQUENCES  # noqa: E402
+from mocap_table import SEQUENCES, bag_seed, bag_stem  # noqa: E402
 
-from hmocap_ros.eval.triangulation import triangulate  # noqa: E402
+from hmocap_ros.camera_model import triangulate, triangulate_robust  # noqa: E402
 
 #: our joint -> MediaPipe Pose landmark index
 LANDMARKS = {"l_shoulder": 11, "r_shoulder": 12, "l_elbow": 13, "r_elbow": 14,
@@ -99,8 +100,7 @@ def main(argv=None) -> int:
     rows, per_joint_all = [], []
     for i, (label, clip, start, seconds) in enumerate(SEQUENCES):
         for distractors in (False, True):
-            seed = (201 if distractors else 101) + i
-            stem = f"{Path(clip).stem}_s{seed}{'_distractors' if distractors else ''}_{seconds:g}s"
+            stem = bag_stem(clip, seconds, bag_seed(i, distractors), distractors)
             bag, report = work / f"{stem}.mcap", work / f"{stem}.json"
             if not (bag.exists() and report.exists()):
                 print(f"skip {stem}: run tools/mocap_table.py first", flush=True)
@@ -117,13 +117,15 @@ def main(argv=None) -> int:
             ms_per_image = float(done.stdout.split()[0])
             lm = landmarks[:, :, [LANDMARKS[j] for j in joints]]  # (F, V, 12, 3)
             gt = truth[:, [names.index(j) for j in joints]]
-            errors = np.full((len(truth), len(joints)), np.nan)
-            for f in range(len(truth)):
-                pix = lm[f, :, :, :2]
-                valid = lm[f, :, :, 2] > 0.5
-                est, _ = triangulate(list(rig), pix, valid, max_reprojection_px=ns.max_reprojection_px or None)
-                errors[f] = 1000 * np.linalg.norm(est - gt[f], axis=1)
-            per_frame = np.nanmean(np.where(np.isfinite(errors), errors, np.nan), axis=1)
+            # every frame's joints in one call: (V, F * 12, 2) pixels
+            pix = lm[..., :2].transpose(1, 0, 2, 3).reshape(len(rig), -1, 2)
+            valid = lm[..., 2].transpose(1, 0, 2).reshape(len(rig), -1) > 0.5
+            if ns.max_reprojection_px > 0:
+                est, _ = triangulate_robust(list(rig), pix, valid, ns.max_reprojection_px)
+            else:
+                est = triangulate(list(rig), pix, valid)
+            errors = 1000 * np.linalg.norm(est.reshape(gt.shape) - gt, axis=-1)  # (F, 12)
+            per_frame = np.nanmean(errors, axis=1)
             ours = json.loads(report.read_text())["methods"]["hpf-apo"]
             ours12 = float(np.mean([ours["per_joint"][j]["mean_mm"] for j in joints]))
             rows.append((label, seconds, distractors, float(np.nanmean(per_frame)),

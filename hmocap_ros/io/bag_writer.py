@@ -168,4 +168,3 @@ def whole_bag(path: str | Path, **kwargs):
         else:
             path.unlink(missing_ok=True)
         raise
-
