@@ -46,7 +46,9 @@ __all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames"
 
 log = logging.getLogger(__name__)
 
-METHODS = ("apf", "hpf", "hpf-apo")
+METHODS = ("apf", "hpf", "hpf-apo", "dd-hpf")
+#: methods that need the per-view extremity (skin) detector maps
+DETECTOR_METHODS = ("dd-hpf",)
 
 
 @dataclass
@@ -58,6 +60,8 @@ class BagFrames:
     (NaN where the frame has no skeleton); joint_names: names of ``truth``'s joints;
     body_shape: the subject's BodyShape or None; silhouettes / fallback: what was used and why.
     segmentation_s: seconds of foreground segmentation per frame set.
+    maps: per frame a list of one skin probability map per camera (uint8) or None, when
+    loaded for ``dd-hpf``; detector_s: seconds of skin detection per frame set.
     """
 
     rig: object
@@ -70,6 +74,8 @@ class BagFrames:
     fallback: str = ""
     segmentation_s: float = 0.0
     shape_hw: tuple = ()
+    maps: list | None = None
+    detector_s: float = 0.0
 
     def mask_list(self, k: int) -> list:
         h, w = self.shape_hw
@@ -120,11 +126,14 @@ def _body_shape_from_msg(msg):
 
 
 def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None = None,
-                slop_ns: int = 0, fg_params: dict | None = None, out=None) -> BagFrames:
+                slop_ns: int = 0, fg_params: dict | None = None, out=None,
+                detector_maps: bool = False) -> BagFrames:
     """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
 
     max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
     ForegroundParams fields to override (``learn_frames`` is set from the bag).
+    detector_maps: also compute each image's skin probability map (``segmentation.skin``,
+    the extremity detector of ``dd-hpf``).
     """
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
@@ -132,6 +141,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     from hmocap_ros.io.msg_factory import stamp_to_ns
     from hmocap_ros.rig import rig_from_msg
     from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
+    from hmocap_ros.segmentation.skin import skin_probability
 
     out = sys.stderr if out is None else out
     if silhouettes not in ("fg", "gt"):
@@ -188,11 +198,27 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
             kw["learn_frames"] = learn
             bg = [BackgroundModel(ForegroundParams(**kw)) for _ in names]
         stamps, masks, truth = [], [], []
+        maps = [] if detector_maps else None
         shape_hw: tuple = ()
-        seg_time = 0.0
+        seg_time = det_time = 0.0
         n_truth = 0
-        for stamp, msgs in reader.frame_sets(use_present, slop_ns, allow_partial=True,
+        read = list(use_present)
+        if detector_maps:
+            read += [t for t in image_topics if t in available and t not in read]
+        for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True,
                                              min_topics=1):
+            if detector_maps:
+                t0 = time.perf_counter()
+                map_row = []
+                for topic in image_topics:
+                    msg = msgs.get(topic)
+                    try:
+                        map_row.append(None if msg is None else skin_probability(image_to_rgb(msg)))
+                    except ValueError as err:
+                        log.warning("frame %d, %s: %s (no detector map)", stamp, topic, err)
+                        map_row.append(None)
+                maps.append(map_row)
+                det_time += time.perf_counter() - t0
             row = []
             t0 = time.perf_counter()
             for k, topic in enumerate(use):
@@ -225,7 +251,8 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                      truth=np.stack(truth) if truth else np.zeros((0, len(joint_names), 3)),
                      joint_names=joint_names, body_shape=body_shape, silhouettes=silhouettes,
                      fallback=fallback, segmentation_s=seg_time / max(len(stamps), 1),
-                     shape_hw=tuple(shape_hw))
+                     shape_hw=tuple(shape_hw), maps=maps,
+                     detector_s=det_time / max(len(stamps), 1))
 
 
 # ----------------------------------------------------------------------------- runs
@@ -270,13 +297,15 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     states, costs = [], []
     times, stage, evals = [], {}, []
     for k, stamp in enumerate(frames.stamps):
-        result = tracker.update(frames.mask_list(k), int(stamp))
+        maps = frames.maps[k] if (frames.maps is not None and method in DETECTOR_METHODS) else None
+        result = tracker.update(frames.mask_list(k), int(stamp), maps)
         if has_truth[k]:
             states.append(result.state)
             costs.append(None if not np.isfinite(result.fit_cost) else float(result.fit_cost))
             times.append(result.timings["total"])
             evals.append(result.timings["evaluations"])
-            for key in ("observe", "hull", "init", "filter", "skinning", "projection", "xor"):
+            for key in ("observe", "hull", "init", "filter", "skinning", "projection", "xor",
+                        "detection", "proposals"):
                 stage[key] = stage.get(key, 0.0) + result.timings.get(key, 0.0)
         if result.has_pose:
             estimates[k] = result.joints[est_idx]
@@ -286,7 +315,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     summary = summarize_errors(errors, names)
     n = max(len(times), 1)
     spf = float(np.sum(times) / n)
-    seg = frames.segmentation_s
+    seg = frames.segmentation_s + (frames.detector_s if method in DETECTOR_METHODS else 0.0)
     return EvalResult(
         method=method, summary=summary, seconds_per_frame=spf,
         fps=1.0 / spf if spf > 0 else float("inf"),
@@ -304,7 +333,8 @@ def evaluate(bag: str | Path, methods=("hpf-apo",), *, silhouettes: str = "fg",
     """Evaluate ``methods`` on one bag; returns the JSON-ready report."""
     out = sys.stderr if out is None else out
     t0 = time.perf_counter()
-    frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out)
+    frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,
+                         detector_maps=any(m in DETECTOR_METHODS for m in methods))
     report = {
         "bag": str(bag),
         "silhouettes": frames.silhouettes,
@@ -314,6 +344,7 @@ def evaluate(bag: str | Path, methods=("hpf-apo",), *, silhouettes: str = "fg",
         "cameras": list(frames.rig.names),
         "image_size": list(frames.shape_hw[::-1]),
         "segmentation_seconds_per_frame": frames.segmentation_s,
+        "skin_detection_seconds_per_frame": frames.detector_s,
         "seed": seed,
         "given_shape": bool(given_shape),
         "methods": {},
@@ -392,7 +423,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="bag (.mcap or rosbag2 folder) in the documented layout")
     parser.add_argument("--method", action="append", choices=METHODS,
                         help="tracker method; repeat to compare several (default hpf-apo)")
-    parser.add_argument("--compare", action="store_true", help="run apf, hpf and hpf-apo")
+    parser.add_argument("--compare", action="store_true", help="run every method (" + ", ".join(METHODS) + ")")
     parser.add_argument("--particles", type=int, default=0,
                         help="particles per layer (default: the method's, ~3500 evaluations)")
     parser.add_argument("--layers", type=int, default=0, help="APF layers (default 14)")

@@ -9,6 +9,8 @@ Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
   is set; the masks are expected at the rig's resolution.
   ``<camera>/foreground`` (sensor_msgs/Image mono8, sensor-data QoS), per rig camera.
+  ``<camera>/skin`` (sensor_msgs/Image mono8, any resolution), per rig camera, with method
+  ``dd-hpf`` only: the extremity detector's maps (foreground_segmentation publishes them).
 Publications (all with the stamp of the frame set):
   ``joint_states`` (sensor_msgs/JointState): the pose parameters (root translation in metres,
   angles in radians) by DoF name.
@@ -109,8 +111,10 @@ class BodyTrackerNode(Node):
         self.rig = rig
         self.frame_id = rig.frame_id
         self.tracker = BodyTracker(self.model, rig, self.params, self.rng)
+        self.use_maps = self.params.method == "dd-hpf"
+        keys = list(rig.names) + ([f"{n}/skin" for n in rig.names] if self.use_maps else [])
         self.sync = StampSynchronizer(
-            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
+            keys, slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
             min_keys=min(self.config.min_views_to_sync, len(rig)), max_delay_ns=int(self.config.max_wait_ms * 1e6))
         if first:
@@ -119,25 +123,30 @@ class BodyTrackerNode(Node):
             for name in rig.names:
                 self.create_subscription(Image, f"{name}/foreground", self._on_mask(name),
                                          sensor_qos(max(1, self.config.queue_depth)))
+                if self.use_maps:
+                    self.create_subscription(Image, f"{name}/skin", self._on_mask(name, "skin"),
+                                             sensor_qos(max(1, self.config.queue_depth)))
             seconds = self.tracker.warm_up()
             self.get_logger().info(f"kernels ready ({seconds:.1f} s)")
         self.get_logger().info(f"tracking with {len(rig)} cameras ({', '.join(rig.names)}), method "
                                f"{self.params.method}")
 
-    def _on_mask(self, name: str):
+    def _on_mask(self, name: str, kind: str = "foreground"):
+        key = name if kind == "foreground" else f"{name}/{kind}"
+
         def on_mask(msg: Image) -> None:
             if self.sync is None or name not in self.rig:
                 return
             try:
                 mask = image_to_numpy(msg)
             except ConversionError as err:
-                self.get_logger().error(f"{name}/foreground: {err}", throttle_duration_sec=5.0)
+                self.get_logger().error(f"{name}/{kind}: {err}", throttle_duration_sec=5.0)
                 return
             if mask.ndim != 2:
-                self.get_logger().error(f"{name}/foreground must be mono8, got {msg.encoding}",
+                self.get_logger().error(f"{name}/{kind} must be mono8, got {msg.encoding}",
                                         throttle_duration_sec=5.0)
                 return
-            for synced in self.sync.add(name, stamp_to_ns(msg.header.stamp), mask):
+            for synced in self.sync.add(key, stamp_to_ns(msg.header.stamp), mask):
                 self._process(synced.stamp_ns, synced.items)
 
         return on_mask
@@ -152,9 +161,10 @@ class BodyTrackerNode(Node):
                           f"{cam.width}x{cam.height}: view dropped", throttle_duration_sec=5.0)
                 mask = None
             masks.append(mask)
+        maps = [items.get(f"{n}/skin") for n in self.rig.names] if self.use_maps else None
         t0 = time.perf_counter()
         try:
-            result = self.tracker.update(masks, stamp_ns)
+            result = self.tracker.update(masks, stamp_ns, maps)
         except Exception as err:  # a tracker bug must not take the room's node down
             log.error(f"tracking failed on frame {stamp_ns}: {err!r}; restarting the track")
             self.tracker.reset(forget_shape=False)

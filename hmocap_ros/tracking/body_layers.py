@@ -1,6 +1,6 @@
-"""Layer schedules of the body tracker: APF, HPF and HPF with approximate partitioning.
+"""Layer schedules of the body tracker: APF, HPF, HPF with approximate partitioning, DD-HPF.
 
-Three schedules of the layered particle filter (:mod:`.layered_filter`, alg. 5) over the
+Four schedules of the layered particle filter (:mod:`.layered_filter`, alg. 5) over the
 30-DoF "tracking" parameterisation of the body (:mod:`hmocap_ros.body.skeleton`), at about
 the same number of weight evaluations per frame (the comparison of thesis sec. 2.4.2 and
 2.5.2, where the APF runs 14 layers x 250 particles and the HPF 7 layers x 500):
@@ -18,6 +18,9 @@ hpf        7 layers along the kinematic tree: torso and head (root 6    7 x 500 
 hpf-apo    the same 7 layers, each weighing only inside the boxes of    8 x 438 = 3504
            its body parts (eq. 2.15, :mod:`.observation_boxes`), plus
            the final whole-body re-weighting layer (eq. 2.8)
+dd-hpf     the hpf-apo schedule; the tracker adds IK particles from     8 x 438 = 3504
+           detected hands and makes the final layer the refinement
+           layer of eq. 2.21 (sec. 2.5.2, :mod:`.ik_proposals`)
 =========  ==========================================================  ==========================
 
 Choices where the thesis is vague:
@@ -60,11 +63,12 @@ __all__ = [
     "pose_kernel",
 ]
 
-METHODS = ("apf", "hpf", "hpf-apo")
+METHODS = ("apf", "hpf", "hpf-apo", "dd-hpf")
 #: DoF groups of the tracking skeleton in kinematic-tree order (sec. 2.5.2).
 BODY_BLOCKS = ("torso", "l_leg", "r_leg", "l_shoulder", "r_shoulder", "l_elbow", "r_elbow")
 #: (layers, particles) per method at ~3500 evaluations per frame.
-DEFAULT_EVALUATIONS = {"apf": (14, 250), "hpf": (7, 500), "hpf-apo": (8, 438)}
+DEFAULT_EVALUATIONS = {"apf": (14, 250), "hpf": (7, 500), "hpf-apo": (8, 438),
+                       "dd-hpf": (8, 438)}
 SIGMA0_FACTOR = 1.5
 
 #: RMS frame-to-frame change per DoF at 25 fps (metres, degrees) on the held-out clips (see
@@ -239,7 +243,7 @@ def _block_dims(skel: Skeleton, arm_chain: bool = False) -> list[np.ndarray]:
     return dims
 
 
-def _hierarchical(skel: Skeleton, n_particles: int, sigma0: np.ndarray, *, boxed: bool,
+def _hierarchical(skel: Skeleton, method: str, n_particles: int, sigma0: np.ndarray, *, boxed: bool,
                   survival_rate: float, refine_nu: float, kernel,
                   arm_chain: bool = False) -> BodySchedule:
     blocks = _block_dims(skel, arm_chain)
@@ -262,7 +266,7 @@ def _hierarchical(skel: Skeleton, n_particles: int, sigma0: np.ndarray, *, boxed
                         final=final)
     names = [(BODY_BLOCKS[l],) for l in range(n_block_layers)]
     final_blocks = () if boxed else (BODY_BLOCKS[-1],)
-    return BodySchedule(method="hpf-apo" if boxed else "hpf", filter=lpf,
+    return BodySchedule(method=method, filter=lpf,
                         layer_blocks=tuple(names) + (final_blocks,),
                         boxed=tuple([boxed] * n_block_layers + [False]))
 
@@ -274,7 +278,7 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
                   reseed_fraction: float = 0.0, arm_chain: bool = False,
                   room_lo: np.ndarray | None = None,
                   room_hi: np.ndarray | None = None) -> BodySchedule:
-    """The layer schedule of ``method`` ("apf", "hpf" or "hpf-apo"); see the module table.
+    """The layer schedule of ``method`` (one of :data:`METHODS`); see the module table.
 
     n_particles / n_layers: None gives :data:`DEFAULT_EVALUATIONS`. ``n_layers`` only applies
     to the APF (the hierarchical schedules have one layer per body block).
@@ -297,6 +301,6 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
         final = Layer(survival_rate=survival_rate, n_particles=n, kernel=kernel)
         lpf = LayeredFilter(layers=layers, sigma0=sigma0, final=final)
         return BodySchedule("apf", lpf, tuple(() for _ in range(k)), tuple(False for _ in range(k)))
-    return _hierarchical(skel, n, sigma0, boxed=method == "hpf-apo",
+    return _hierarchical(skel, method, n, sigma0, boxed=method != "hpf",
                          survival_rate=survival_rate, refine_nu=refine_nu, kernel=kernel,
                          arm_chain=arm_chain)

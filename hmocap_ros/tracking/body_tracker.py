@@ -13,7 +13,10 @@ the same method. States:
 ``tracking``
     layered particle filtering per frame with the chosen schedule (:mod:`.body_layers`: APF,
     HPF, or HPF with approximate partitioning of observations, sec. 2.4) and the silhouette
-    XOR weighting (:mod:`.body_fitness`, eq. 2.8 / 2.15).
+    XOR weighting (:mod:`.body_fitness`, eq. 2.8 / 2.15). ``dd-hpf`` (sec. 2.5) also takes
+    per-view detector maps (``update(masks, stamp, detector_maps)``): hands and head are
+    located in 3D (:mod:`.extremity_detection`), IK particles put the arms where the hands
+    are (:mod:`.ik_proposals`) and the final layer adds the detection cost of eq. 2.20-2.21.
 ``lost``
     the fit cost of the estimate stayed above ``lost_cost`` for ``lost_frames`` frames; the
     next frame starts again from the visual hull (keeping the estimated shape).
@@ -45,6 +48,8 @@ from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator,
 from hmocap_ros.render.silhouette import observed_counts
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness, serial_below
 from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
+from hmocap_ros.tracking.extremity_detection import Extremities, ExtremityDetector
+from hmocap_ros.tracking.ik_proposals import IKProposer
 from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.body_layers import BODY_BLOCKS
@@ -72,8 +77,11 @@ class TrackerParams:
     ROS node's parameter declarations). Defaults: 4 cameras at 640x480, 25 fps."""
 
     method: str = _param("hpf-apo", "Layered filter: 'apf' (annealing, 14 x 250), 'hpf' "
-                                    "(hierarchical, 7 x 500) or 'hpf-apo' (hierarchical with "
-                                    "approximate partitioning of observations, 8 x 438).")
+                                    "(hierarchical, 7 x 500), 'hpf-apo' (hierarchical with "
+                                    "approximate partitioning of observations, 8 x 438) or "
+                                    "'dd-hpf' (hpf-apo driven by hand detections: IK "
+                                    "particles and the refinement layer, sec. 2.5; needs "
+                                    "detector maps).")
     n_particles: int = _param(0, "Particles per layer; 0 uses the method's default (about 3500 "
                                  "weight evaluations per frame).")
     n_layers: int = _param(0, "Layers of the APF; 0 uses the default (14). The hierarchical "
@@ -116,6 +124,8 @@ class TrackerParams:
                                            "frame, take their limb DoFs from silhouette-driven "
                                            "proposals (limb_proposals); 0: Gaussian only.")
     proposal_limbs: str = _param("arms", "Limbs that get proposals: 'arms', 'legs' or 'all'.")
+    refine_kappa: float = _param(2.0, "dd-hpf: weight kappa (per metre) of the detection "
+                                      "cost of eq. 2.20 in the refinement layer (eq. 2.21).")
     render_filtered_parts: bool = _param(False, "Hierarchical methods: each layer renders only "
                                               "the body parts filtered so far (sec. 2.4); "
                                               "False renders the whole body at its predicted "
@@ -176,6 +186,7 @@ class TrackerParams:
             (self.shape_frames >= 1 and self.shape_particles >= 2, "shape_frames >= 1, "
                                                                    "shape_particles >= 2"),
             (self.lost_frames >= 1, "lost_frames must be >= 1"),
+            (self.refine_kappa >= 0.0, "refine_kappa must be >= 0"),
         ]
         for ok, message in checks:
             if not ok:
@@ -193,7 +204,8 @@ class TrackResult:
     views: rig indices used; dropped: rig indices whose mask was missing or invalid.
     layers: per-layer diagnostics (ESS, beta, times) of the filter run, if one ran.
     timings: seconds per stage ("total", "observe", "hull", "init", "filter", "skinning",
-    "projection", "xor") and "evaluations".
+    "projection", "xor", "detection") and "evaluations".
+    extremities: dd-hpf's hand and head detections of this frame (None otherwise).
     """
 
     stamp_ns: int
@@ -207,6 +219,7 @@ class TrackResult:
     dropped: tuple = ()
     layers: tuple = ()
     timings: dict = field(default_factory=dict)
+    extremities: Extremities | None = None
 
     @property
     def has_pose(self) -> bool:
@@ -260,6 +273,10 @@ class BodyTracker:
                  "all": ("l_arm", "r_arm", "l_leg", "r_leg")}[p.proposal_limbs]
         self.proposer = LimbProposer(model, limbs)
         self.start_proposer = LimbProposer(model, ("l_arm", "r_arm", "l_leg", "r_leg"))
+        self.detector = self.ik = None
+        if p.method == "dd-hpf":
+            self.detector = ExtremityDetector(self.cameras)
+            self.ik = IKProposer(model)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -275,6 +292,8 @@ class BodyTracker:
         self._hull_step = np.zeros(3)
         self._bad_frames = 0
         self._absent_frames = 0
+        if self.ik is not None:
+            self.ik.reset()
         if forget_shape:
             self.shape: BodyShape | None = self.given_shape
 
@@ -303,11 +322,18 @@ class BodyTracker:
 
     # ------------------------------------------------------------------ weighting
 
-    def weight_fn(self, obs: Observation, shape: BodyShape):
-        """The schedule's weighting: eq. 2.8, or eq. 2.15 in the layer's observation boxes."""
+    def weight_fn(self, obs: Observation, shape: BodyShape, detections: np.ndarray | None = None):
+        """The schedule's weighting: eq. 2.8, or eq. 2.15 in the layer's observation boxes.
+
+        detections: (U, 3) detected hands (dd-hpf); the final layer then becomes the
+        refinement layer of eq. 2.21: cost + kappa * D(C_t, x), D of eq. 2.20.
+        """
         rest = self.fitness.rest(shape)
         sched, p = self.schedule, self.params
         lengths = chain_lengths(self.model, rest)
+        last = sched.n_weightings - 1
+        refine = (detections is not None and len(detections) > 0 and p.refine_kappa > 0
+                  and self.ik is not None)
 
         def weight(particles: np.ndarray, layer: int) -> np.ndarray:
             verts, joints = self.fitness.pose(particles, rest)
@@ -322,19 +348,31 @@ class BodyTracker:
                     lo, hi = part_boxes_3d(verts, self._layer_vertices[layer], p.box_spread,
                                            p.box_margin)
                 boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
-            return self.fitness.costs_from_verts(verts, obs, boxes, self._layer_faces[layer])
+            cost = self.fitness.costs_from_verts(verts, obs, boxes, self._layer_faces[layer])
+            if refine and layer == last:
+                ee = self.ik.end_effectors(particles, rest)  # (N, 3, 3)
+                d = np.linalg.norm(detections[None, :, None] - ee[:, None], axis=3)  # (N, U, 3)
+                cost = cost + p.refine_kappa * d.min(axis=2).mean(axis=1)
+            return cost
 
         return weight
 
     # ------------------------------------------------------------------ update
 
-    def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int) -> TrackResult:
-        """Process one frame set: one foreground mask per rig camera (None where missing)."""
+    def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int,
+               detector_maps: Sequence[np.ndarray | None] | None = None) -> TrackResult:
+        """Process one frame set: one foreground mask per rig camera (None where missing).
+
+        detector_maps: per camera the extremity detector's probability map (uint8, 255 = 1,
+        any resolution; ``segmentation.skin``) or None; used by ``dd-hpf`` only, which
+        without them runs as ``hpf-apo``.
+        """
         t_start = time.perf_counter()
         self.fitness.times.reset()
         if self.shape_fitness is not self.fitness:
             self.shape_fitness.times.reset()
-        timings = {"observe": 0.0, "hull": 0.0, "init": 0.0, "filter": 0.0, "proposals": 0.0}
+        timings = {"observe": 0.0, "hull": 0.0, "init": 0.0, "filter": 0.0, "proposals": 0.0,
+                   "detection": 0.0}
         masks = list(masks) if masks is not None else [None] * len(self.cameras)
         if len(masks) != len(self.cameras):
             log.error("expected %d masks, got %d: frame skipped", len(self.cameras), len(masks))
@@ -375,8 +413,9 @@ class BodyTracker:
             return self._result(stamp_ns, obs, t_start, timings, fit_cost, result_layers)
         # tracking
         t0 = time.perf_counter()
+        extremities = None
         try:
-            self._predict()
+            reference = self._predict()
             if self.params.proposal_fraction > 0.0 and self.estimate is not None:
                 t1 = time.perf_counter()
                 spent = self.fitness.times.weighting_seconds()
@@ -387,8 +426,17 @@ class BodyTracker:
                 # their own search only: the re-ranking's skinning and XOR count under those
                 timings["proposals"] = (time.perf_counter() - t1
                                         - (self.fitness.times.weighting_seconds() - spent))
-            res = lpf_run(self.particles, self.schedule.filter, self.weight_fn(obs, self.shape),
-                          self.rng)
+            if self.detector is not None and detector_maps is not None and reference is not None:
+                t1 = time.perf_counter()
+                extremities = self._detect(masks, detector_maps, reference)
+                timings["detection"] = time.perf_counter() - t1
+            detections = None if extremities is None else extremities.assigned[:2]
+            detections = None if detections is None else detections[np.isfinite(detections).all(axis=1)]
+            res = lpf_run(self.particles, self.schedule.filter,
+                          self.weight_fn(obs, self.shape, detections), self.rng)
+            if extremities is not None:
+                self.ik.update_fraction(res.weighted_particles, res.weights,
+                                        extremities.assigned, self.fitness.rest(self.shape))
         except ValueError as err:
             log.warning("frame %d: filter failed (%s); restarting from the visual hull",
                         stamp_ns, err)
@@ -412,9 +460,24 @@ class BodyTracker:
                      fit_cost, self.params.lost_cost, self._bad_frames)
             self.state = "lost"
             self._bad_frames = 0
-        return self._result(stamp_ns, obs, t_start, timings, fit_cost, res.layers)
+        return self._result(stamp_ns, obs, t_start, timings, fit_cost, res.layers, extremities)
 
     # ------------------------------------------------------------------ steps
+
+    def _detect(self, masks, detector_maps, reference: np.ndarray) -> Extremities:
+        """Sec. 2.5.1 around the predicted pose, then IK particles for the detected hands."""
+        maps = list(detector_maps)
+        if len(maps) != len(self.cameras):
+            log.error("expected %d detector maps, got %d: none used", len(self.cameras), len(maps))
+            maps = [None] * len(self.cameras)
+        rest = self.fitness.rest(self.shape)
+        _, joints = self.fitness.pose(reference[None], rest)
+        targets = self.ik.end_effectors(reference[None], rest)[0]
+        ok_masks = [m if m is not None and np.shape(m) == (c.height, c.width) else None
+                    for m, c in zip(masks, self.cameras)]
+        extremities = self.detector.detect(ok_masks, maps, np.asarray(joints[0]), targets)
+        self.ik.apply(self.particles, extremities.assigned, reference, rest, self.rng)
+        return extremities
 
     def _person_absent(self) -> None:
         self._absent_frames += 1
@@ -502,15 +565,19 @@ class BodyTracker:
         self._bad_frames = 0
         self.state = "tracking"
 
-    def _predict(self) -> None:
-        if self._previous_estimate is None or self.estimate is None:
-            return
-        if self.params.velocity_gain <= 0.0:
-            return
+    def _predict(self) -> np.ndarray | None:
+        """Apply the velocity prediction to the particles; returns the predicted pose."""
+        if self.estimate is None:
+            return None
+        predicted = self.estimate.copy()
+        if self._previous_estimate is None or self.params.velocity_gain <= 0.0:
+            return predicted
         step = self.estimate - self._previous_estimate
         dofs = {"root_position": self.skel.translation_dofs,
                 "root": np.arange(6), "all": np.arange(self.skel.n_dofs)}[self.params.velocity_dofs]
         self.particles[:, dofs] += self.params.velocity_gain * step[dofs]
+        predicted[dofs] += self.params.velocity_gain * step[dofs]
+        return predicted
 
     def _fit_cost(self, obs: Observation) -> float:
         """Eq. 2.8 of the estimate, counted inside a box around its body (10 cm margin) and
@@ -536,7 +603,8 @@ class BodyTracker:
         return None
 
     def _result(self, stamp_ns: int, obs: Observation, t_start: float, timings: dict,
-                fit_cost: float = float("nan"), layers: tuple = ()) -> TrackResult:
+                fit_cost: float = float("nan"), layers: tuple = (),
+                extremities: Extremities | None = None) -> TrackResult:
         times = self.fitness.times
         extra = self.shape_fitness.times if self.shape_fitness is not self.fitness else None
         timings = dict(timings)
@@ -554,4 +622,5 @@ class BodyTracker:
         return TrackResult(stamp_ns=int(stamp_ns), state=self.state, params=params,
                            joints=joints, joint_names=tuple(self.model.joint_names), shape=shape,
                            fit_cost=fit_cost, views=tuple(int(v) for v in obs.views),
-                           dropped=tuple(obs.dropped), layers=tuple(layers), timings=timings)
+                           dropped=tuple(obs.dropped), layers=tuple(layers), timings=timings,
+                           extremities=extremities)
