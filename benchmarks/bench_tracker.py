@@ -6,10 +6,13 @@ rendered at 640x480 in the 4 cameras of ``config/rig_example.yaml`` (no segmenta
 measures the tracker). The tracker is started on the first frame (the start-up is not timed),
 then every method runs ``--frames`` frames of tracking at its default budget (about 3,500
 weight evaluations per frame: HPF 7 layers x 500 particles as in the thesis' comparison,
-HPF+APO 8 x 438, APF 14 x 250), with 1 and 2 numba threads. Printed per method: seconds per
+HPF+APO and DD-HPF 8 x 438, APF 14 x 250), with 1 and 2 numba threads. DD-HPF gets ideal
+hand-detector maps (1 where the hands are seen; the skin detector's own cost, about 3 ms per
+640x480 image, is the foreground node's). Printed per method: seconds per
 frame (median), evaluations per second, and where the time goes (skinning = eq. 2.11/2.12,
 projection (fused into the XOR pass by default), XOR = eq. 2.8/2.15, proposals (their own search;
-the re-ranking of proposals counts as skinning and XOR), the rest = resampling, kernels, boxes).
+the re-ranking of proposals counts as skinning and XOR), detection (DD-HPF: 3D extremities and
+IK solutions), the rest = resampling, kernels, boxes).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
 """
@@ -47,7 +50,10 @@ def scene(model, rig, n_frames: int, start: int = 250):
     K, R, t, D = rig.arrays()
     uv, _ = project_batch(verts, K, R, t, D)
     masks = render_silhouettes(uv, model.faces, rig[0].height, rig[0].width) * np.uint8(255)
-    return shape, masks
+    hands = np.isin(model.vertex_part, [model.joint_index("l_wrist"), model.joint_index("r_wrist")])
+    hand_faces = model.faces[hands[model.faces].all(axis=1)]
+    maps = render_silhouettes(uv, hand_faces, rig[0].height, rig[0].width) * np.uint8(255)
+    return shape, masks, maps
 
 
 def main() -> None:
@@ -59,7 +65,7 @@ def main() -> None:
     args = ap.parse_args()
     model = load_body_model("tracking")
     rig = load_rig(ROOT / "config" / "rig_example.yaml")
-    shape, masks = scene(model, rig, args.frames + 1)
+    shape, masks, maps = scene(model, rig, args.frames + 1)
     print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
           f"{platform.machine()}, cpus {numba.config.NUMBA_NUM_THREADS}")
     print(f"4 views {rig[0].width}x{rig[0].height}, working scale {args.working_scale} "
@@ -72,11 +78,11 @@ def main() -> None:
                                                             working_scale=args.working_scale),
                                   np.random.default_rng(0), shape=shape)
             tracker.update(list(masks[0]), 0)  # start-up (hull, Powell): not timed
-            tracker.update(list(masks[1 % len(masks)]), 1)  # warm-up (numba caches)
+            tracker.update(list(masks[1 % len(masks)]), 1, list(maps[1 % len(masks)]))  # warm-up
             totals, stages = [], {}
             for f in range(1, args.frames + 1):
                 t0 = time.perf_counter()
-                res = tracker.update(list(masks[f]), f)
+                res = tracker.update(list(masks[f]), f, list(maps[f]))
                 totals.append(time.perf_counter() - t0)
                 for k, v in res.timings.items():
                     stages[k] = stages.get(k, 0.0) + v
@@ -84,7 +90,7 @@ def main() -> None:
             n = args.frames
             evals = stages["evaluations"] / n
             # projection is fused into the XOR pass (fused_xor.py) at the default settings
-            known = ("skinning", "projection", "xor", "proposals")
+            known = ("skinning", "projection", "xor", "proposals", "detection")
             rest = stages["total"] / n - sum(stages.get(k, 0.0) / n for k in known)
             print(f"threads={threads} {method:8s} {spf:6.3f} s/frame  {evals:6.0f} evaluations/frame  "
                   f"{evals / spf:8.0f} evaluations/s  | " + "  ".join(

@@ -1,6 +1,9 @@
 """body_tracker over DDS: the shipped bag through foreground_segmentation -> body_tracker gives
 joint states with the input stamps and a bounded 3D error; bad input is logged and survived.
 
+The replay runs ``dd-hpf``, which is ``hpf-apo`` plus the skin maps the foreground node
+publishes beside the masks (both synchronised by stamp), so it covers both paths.
+
 Small particle budgets keep this fast on a 2-core machine; the figures of the README come
 from ``tools/mocap_table.py`` and ``hmocap eval mocap``, not from here.
 """
@@ -31,7 +34,7 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
               ["--ros-args", "-p", f"cameras:=[{','.join(CAMERAS)}]", "-p", "learn_frames:=8",
                "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
              ("body_tracker", "hmocap_ros.nodes.body_tracker",
-              ["--ros-args", "-p", "method:=hpf-apo", "-p", "queue_depth:=100", *FAST],
+              ["--ros-args", "-p", "method:=dd-hpf", "-p", "queue_depth:=100", *FAST],
               "waiting for the rig")]
     procs = replay_through_nodes(
         DEMO_BAG, nodes, ["/joint_states", "/skeleton", "/body_shape", "/diagnostics"], out,
@@ -65,6 +68,8 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
     tracking = [{kv.key: kv.value for kv in s.values} for d in diags for s in d.msg.status
                 if s.message == "tracking"]
     assert tracking and len(tracking[-1]["ms_per_layer"].split()) == 8  # hpf-apo: 7 + final
+    # the skin maps arrived with the masks: hands were searched for in 3D on tracked frames
+    assert any(float(t.get("time_detection", 0)) > 0 for t in tracking), tracking[-1]
     assert len(tracking[-1]["ess_per_layer"].split()) == 8 and float(tracking[-1]["seconds_per_frame"]) > 0
 
 

@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from mocap_table import SEQUENCES, bag_seed, bag_stem  # noqa: E402
+from mocap_table import LABELS, SEQUENCES, bag_seed, bag_stem  # noqa: E402
 
 from hmocap_ros.camera_model import triangulate, triangulate_robust  # noqa: E402
 
@@ -93,6 +93,8 @@ def main(argv=None) -> int:
     p.add_argument("--max-reprojection-px", type=float, default=20.0,
                    help="leave out a view that reprojects further than this (0: plain DLT)")
     p.add_argument("--out", default=str(ROOT / "docs" / "peer_mediapipe.md"))
+    p.add_argument("--methods", nargs="*", default=["hpf-apo", "dd-hpf"],
+                   help="tracker methods of the table's reports to compare (those present)")
     ns = p.parse_args(argv)
     python = peer_python(Path(ns.peer_venv))
     work = Path(ns.workdir)
@@ -126,16 +128,20 @@ def main(argv=None) -> int:
                 est = triangulate(list(rig), pix, valid)
             errors = 1000 * np.linalg.norm(est.reshape(gt.shape) - gt, axis=-1)  # (F, 12)
             per_frame = np.nanmean(errors, axis=1)
-            ours = json.loads(report.read_text())["methods"]["hpf-apo"]
-            ours12 = float(np.mean([ours["per_joint"][j]["mean_mm"] for j in joints]))
+            reported = json.loads(report.read_text())["methods"]
+            methods = [m for m in ns.methods if m in reported]
+            ours12 = {m: float(np.mean([reported[m]["per_joint"][j]["mean_mm"] for j in joints]))
+                      for m in methods}
+            ours19 = {m: reported[m]["mean_mm"] for m in methods}
             rows.append((label, seconds, distractors, float(np.nanmean(per_frame)),
                          float(np.nanstd(per_frame)), float(np.isfinite(errors).mean()),
-                         ms_per_image, ours12, ours["mean_mm"]))
+                         ms_per_image, ours12, ours19))
             per_joint_all.append(np.nanmean(errors, axis=0))
             print(f"{label:16s} {'distractors' if distractors else 'clean':11s} peer "
                   f"{rows[-1][3]:.1f} mm ({100 * rows[-1][5]:.0f} % joints triangulated, "
-                  f"{ms_per_image:.1f} ms/image, {wall:.0f} s)  hpf-apo {ours12:.1f} mm on the "
-                  f"same joints", flush=True)
+                  f"{ms_per_image:.1f} ms/image, {wall:.0f} s)  " + ", ".join(
+                      f"{m} {v:.1f} mm" for m, v in ours12.items()) + " on the same joints",
+                  flush=True)
     if not rows:
         print("no bags: run tools/mocap_table.py first", file=sys.stderr)
         return 1
@@ -143,21 +149,24 @@ def main(argv=None) -> int:
              "Same held-out bags as `docs/tracking_results.md` (4 cameras, 640x480, 25 fps). "
              "Error: mean (std) over frames of the mean 3D error of the 12 joints both "
              "skeletons define (shoulders, elbows, wrists, hips, knees, ankles), mm.", "",
-             "| sequence | scene | peer: MediaPipe + DLT | joints triangulated | HPF+APO, same 12 joints | HPF+APO, 19 joints |",
-             "|---|---|---|---|---|---|"]
+             "| sequence | scene | peer: MediaPipe + DLT | joints triangulated | " + " | ".join(
+                 f"{LABELS.get(m, m)}, same 12 joints" for m in methods) + " | " + " | ".join(
+                 f"{LABELS.get(m, m)}, 19 joints" for m in methods) + " |",
+             "|---|---|---|---|" + "---|" * (2 * len(methods))]
     for label, seconds, distractors, mean, std, cover, ms, ours12, ours19 in rows:
         lines.append(f"| {label} ({seconds:g} s) | {'distractors' if distractors else 'clean'} | "
-                     f"{mean:.1f} ({std:.1f}) | {100 * cover:.0f} % | {ours12:.1f} | {ours19:.1f} |")
+                     f"{mean:.1f} ({std:.1f}) | {100 * cover:.0f} % | "
+                     + " | ".join(f"{ours12[m]:.1f}" for m in methods) + " | "
+                     + " | ".join(f"{ours19[m]:.1f}" for m in methods) + " |")
     # a bag where both followed the other person (errors of metres) would swamp the means
-    same_person = [k for k, r in enumerate(rows) if r[3] < 500.0 and r[7] < 500.0]
-    if len(same_person) < len(rows):
-        lines.append("| mean of the rows above where both followed the subject | | "
-                     f"**{np.mean([rows[k][3] for k in same_person]):.1f}** | | "
-                     f"**{np.mean([rows[k][7] for k in same_person]):.1f}** | "
-                     f"{np.mean([rows[k][8] for k in same_person]):.1f} |")
-    else:
-        lines.append(f"| mean | | **{np.mean([r[3] for r in rows]):.1f}** | | "
-                     f"**{np.mean([r[7] for r in rows]):.1f}** | {np.mean([r[8] for r in rows]):.1f} |")
+    same_person = [k for k, r in enumerate(rows)
+                   if r[3] < 500.0 and all(v < 500.0 for v in r[7].values())]
+    head = ("| mean of the rows above where both followed the subject | |"
+            if len(same_person) < len(rows) else "| mean | |")
+    lines.append(f"{head} **{np.mean([rows[k][3] for k in same_person]):.1f}** | | " + " | ".join(
+        f"**{np.mean([rows[k][7][m] for k in same_person]):.1f}**" for m in methods) + " | "
+        + " | ".join(f"{np.mean([rows[k][8][m] for k in same_person]):.1f}" for m in methods)
+        + " |")
     ms = np.mean([r[6] for r in rows])
     lines += ["", f"MediaPipe Pose 0.10.14 (model_complexity 1, video mode, one tracker per view): "
               f"{ms:.1f} ms per 640x480 image on this machine = {1000 / (4 * ms):.1f} frames/s for "
