@@ -19,7 +19,7 @@ from hmocap_ros.sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.extremity_detection import (ExtremityDetector, ExtremityParams, classify,
-                                                     surface_points, visibility)
+                                                     geodesic_extrema, surface_points, visibility)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -127,6 +127,24 @@ def test_visibility_sees_the_front_of_a_ball_only(rig):
     assert not visibility(pts, normals, list(rig), voxel, views=views)[1].any()
 
 
+def test_geodesic_extrema_are_the_ends_of_the_limbs():
+    # a star: a 5x5 core (the centre) with four bars, the one along +x bent back along +y
+    occ = np.zeros((40, 40, 5), bool)
+    occ[18:23, 2:38, :] = True        # bar along y through the core
+    occ[2:38, 18:23, :] = True        # bar along x
+    occ[34:38, 23:37, :] = True       # the +x bar bends towards +y: its tip is at (36, 36)
+    voxel = 0.01
+    tips = geodesic_extrema(occ, np.zeros(3), voxel, np.array([0.2, 0.2, 0.02]), 4, 0.02)
+    expected = voxel * np.array([[20, 2, 2], [20, 37, 2], [2, 20, 2], [36, 36, 2]])
+    assert tips.shape == (4, 3)
+    d = np.linalg.norm(tips[:, None] - expected[None], axis=2)
+    # each end found once, within a voxel or two (the tip mean lies inside the bar)
+    assert np.all(d.min(axis=0) < 0.025) and len(set(np.argmin(d, axis=1))) == 4, d.round(3)
+    # the farthest end along the body (the bent bar: about 30 voxels of path) comes first
+    assert np.argmin(d[0]) == 3
+    assert len(geodesic_extrema(np.zeros((3, 3, 3), bool), np.zeros(3), 0.01, np.zeros(3), 3, 0.02)) == 0
+
+
 def test_classify_is_the_greedy_solution_of_eq_2_19():
     targets = np.array([[0.0, 1.0, 0.0], [0.5, 1.0, 0.0], [0.25, 1.6, 0.0]])
     cands = np.array([[0.45, 1.0, 0.0], [0.1, 1.0, 0.0], [0.25, 1.55, 0.0], [2.0, 0.0, 0.0]])
@@ -142,23 +160,28 @@ def test_extremity_detector_finds_the_hands_in_3d(model, rig, rest):
     params = arms_out(model)
     masks, maps = scene(model, rig, params)
     ik = IKProposer(model)
-    truth = ik.end_effectors(params[None], rest)[0]  # l_hand, r_hand, head
+    truth = ik.end_effectors(params[None], rest)[0]  # l_hand, r_hand, head, l_foot, r_foot
     _, joints = model.pose(params[None])
     detector = ExtremityDetector(list(rig), ExtremityParams(mask_scale=1.0, voxel=0.025))
     # the previous pose: hands 15-20 cm away from where they are now
-    targets = truth + np.array([[0.1, -0.1, 0.08], [-0.12, 0.1, 0.0], [0.0, 0.0, 0.0]])
+    targets = truth + np.array([[0.1, -0.1, 0.08], [-0.12, 0.1, 0.0], [0.0, 0.0, 0.0],
+                                [0.1, 0.05, 0.1], [-0.1, 0.05, -0.1]])
     found = detector.detect(list(masks), list(maps), joints[0], targets)
-    assert found.found[:2].all()
-    err = np.linalg.norm(found.assigned[:2] - truth[:2], axis=1)
+    assert found.found[[0, 1, 3, 4]].all()
+    err = np.linalg.norm(found.assigned[[0, 1]] - truth[[0, 1]], axis=1)
     assert err.max() < 0.05, err
+    # the feet are the hull's geodesic extremes (mean of the hull within 8 cm of the tip)
+    err = np.linalg.norm(found.assigned[[3, 4]] - truth[[3, 4]], axis=1)
+    assert err.max() < 0.08, err
+    assert len(found.detections) == 4  # hands and feet: the set C_t of eq. 2.20
     assert len(found.surface) == len(found.probability) > 500
     # a view without its map or its mask is left out, not an error
     maps_missing = [None, maps[1], maps[2], None]
     masks_missing = [masks[0], masks[1], masks[2], None]
     again = detector.detect(masks_missing, maps_missing, joints[0], targets)
-    assert again.assigned.shape == (3, 3)
+    assert again.assigned.shape == (5, 3)
     none = detector.detect(list(masks), [None] * 4, joints[0], targets)
-    assert not none.found.any() and len(none.candidates) == 0
+    assert not none.found[:3].any() and len(none.candidates) == 0 and none.found[3:].all()
 
 
 # ----------------------------------------------------------------------------- IK particles
@@ -187,7 +210,7 @@ def test_ik_solutions_put_the_hand_on_the_detection(model, rig, rest):
     far = target + np.array([2.0, 0.0, 0.0])
     assert len(ik.solve("l_arm", far, reference, rest, rng)[0]) == 0
     particles = np.repeat(reference[None], 200, axis=0)
-    det = np.full((3, 3), np.nan)
+    det = np.full((5, 3), np.nan)
     det[0] = target
     made = ik.apply(particles, det, reference, rest, rng)
     assert made["r_arm"] == 0 and 60 < made["l_arm"] < 140  # start share 0.5
@@ -215,11 +238,11 @@ def test_dd_hpf_tracks_with_detector_maps_and_runs_without(model, rig, rest):
         res = tracker.update(list(masks), STAMP0 + f, list(maps))
         errors.append(np.linalg.norm(res.joints - truth, axis=1).mean())
     assert res.state == "tracking" and res.extremities is not None
-    assert res.extremities.found[:2].all() and res.timings["detection"] > 0
+    assert res.extremities.found[[0, 1, 3, 4]].all() and res.timings["detection"] > 0
     assert errors[-1] < 0.08, errors
     # without maps (a foreground node that does not publish them) it runs as hpf-apo
     res = tracker.update(list(masks), STAMP0 + 10)
     assert res.state == "tracking" and res.extremities is None
     # the wrong number of maps is logged and ignored
     res = tracker.update(list(masks), STAMP0 + 11, [maps[0]])
-    assert res.state == "tracking" and not res.extremities.found.any()
+    assert res.state == "tracking" and not res.extremities.found[:3].any()

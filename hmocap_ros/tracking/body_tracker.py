@@ -48,7 +48,8 @@ from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator,
 from hmocap_ros.render.silhouette import observed_counts
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness, serial_below
 from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
-from hmocap_ros.tracking.extremity_detection import Extremities, ExtremityDetector
+from hmocap_ros.tracking.extremity_detection import (Extremities, ExtremityDetector,
+                                                     ExtremityParams)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
 from hmocap_ros.tracking.limb_proposals import LimbProposer
@@ -126,6 +127,9 @@ class TrackerParams:
     proposal_limbs: str = _param("arms", "Limbs that get proposals: 'arms', 'legs' or 'all'.")
     refine_kappa: float = _param(2.0, "dd-hpf: weight kappa (per metre) of the detection "
                                       "cost of eq. 2.20 in the refinement layer (eq. 2.21).")
+    dd_feet: bool = _param(True, "dd-hpf: also locate the feet (geodesic extrema of the visual "
+                                 "hull) and draw IK particles for the legs; False: hands only, "
+                                 "as the thesis' skin detector.")
     render_filtered_parts: bool = _param(False, "Hierarchical methods: each layer renders only "
                                               "the body parts filtered so far (sec. 2.4); "
                                               "False renders the whole body at its predicted "
@@ -275,7 +279,7 @@ class BodyTracker:
         self.start_proposer = LimbProposer(model, ("l_arm", "r_arm", "l_leg", "r_leg"))
         self.detector = self.ik = None
         if p.method == "dd-hpf":
-            self.detector = ExtremityDetector(self.cameras)
+            self.detector = ExtremityDetector(self.cameras, ExtremityParams(feet=p.dd_feet))
             self.ik = IKProposer(model)
         self.reset()
 
@@ -430,8 +434,7 @@ class BodyTracker:
                 t1 = time.perf_counter()
                 extremities = self._detect(masks, detector_maps, reference)
                 timings["detection"] = time.perf_counter() - t1
-            detections = None if extremities is None else extremities.assigned[:2]
-            detections = None if detections is None else detections[np.isfinite(detections).all(axis=1)]
+            detections = None if extremities is None else extremities.detections
             res = lpf_run(self.particles, self.schedule.filter,
                           self.weight_fn(obs, self.shape, detections), self.rng)
             if extremities is not None:

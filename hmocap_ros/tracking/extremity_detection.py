@@ -25,6 +25,12 @@ Per frame set:
    of the previous pose (left hand, right hand, head) by repeatedly taking the closest pair
    within the maximum distances ``Upsilon`` (35 cm hands, 25 cm head), the thesis' greedy
    solution.
+7. **Feet** (``geodesic_extrema``, beyond the thesis' skin detector, which cannot see shoes;
+   the thesis lists feet among the extremities it localises): the extremities of the carved
+   hull itself, the points geodesically farthest from the body's centre (after Baak et al.'s
+   accumulative geodesic extrema: the farthest voxel becomes a source too, ``n_extrema``
+   times), each taken as the mean of the hull within ``tip_radius`` of it, and classified
+   to the feet of the previous pose like the skin candidates (Upsilon 35 cm).
 """
 from __future__ import annotations
 
@@ -45,7 +51,10 @@ __all__ = ["END_EFFECTORS", "ExtremityParams", "Extremities", "ExtremityDetector
            "cluster_candidates"]
 
 #: End-effectors the detections are classified into (thesis: hands and head).
-END_EFFECTORS = ("l_hand", "r_hand", "head")
+END_EFFECTORS = ("l_hand", "r_hand", "head", "l_foot", "r_foot")
+#: the end-effectors the skin detector serves; the others come from the hull's extrema
+SKIN_EFFECTORS = (0, 1, 2)
+FOOT_EFFECTORS = (3, 4)
 
 
 @dataclass(frozen=True)
@@ -61,33 +70,39 @@ class ExtremityParams:
     cluster_min: int = 3         #: [theta_min] points
     cluster_max: int = 600       #: [theta_max] points
     tip_radius: float = 0.08     #: candidate = mean of the cluster within this of its far end (m)
-    max_distance: tuple = (0.35, 0.35, 0.25)  #: [Upsilon] per END_EFFECTORS (m)
+    max_distance: tuple = (0.35, 0.35, 0.25, 0.35, 0.35)  #: [Upsilon] per END_EFFECTORS (m)
     depth_tolerance: float = 2.0  #: z-buffer tolerance in voxels
+    feet: bool = True            #: locate the feet as geodesic extrema of the hull
+    n_extrema: int = 6           #: geodesic extrema searched (head, hands, feet and a spare)
 
 
 @dataclass(frozen=True, eq=False)
 class Extremities:
     """One frame set's detections.
 
-    candidates: (E, 3) candidate locations; assigned: (3, 3) per :data:`END_EFFECTORS` the
-    candidate assigned to it (NaN rows: none); surface / probability: the oriented points
-    and eq. 2.17 (for plots and tests).
+    candidates: (E, 3) skin candidate locations; assigned: (5, 3) per :data:`END_EFFECTORS`
+    the candidate assigned to it (NaN rows: none); extrema: (X, 3) the hull's geodesic
+    extrema; surface / probability: the oriented points and eq. 2.17 (for plots and tests).
     """
 
     candidates: np.ndarray
     assigned: np.ndarray
     surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     probability: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    extrema: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def found(self) -> np.ndarray:
-        """(3,) bool: which end-effectors got a detection."""
+        """(5,) bool: which end-effectors got a detection."""
         return np.isfinite(self.assigned).all(axis=1)
 
     @property
     def detections(self) -> np.ndarray:
-        """(U, 3) the assigned detections, the set C_t of eq. 2.20."""
-        return self.assigned[self.found]
+        """(U, 3) the set C_t of eq. 2.20: the assigned hands and feet (not the head, see
+        ``ik_proposals``)."""
+        use = self.found.copy()
+        use[2] = False
+        return self.assigned[use]
 
 
 def surface_points(occupancy: np.ndarray, origin: np.ndarray, voxel: float
@@ -196,6 +211,52 @@ def cluster_candidates(points: np.ndarray, prob: np.ndarray, centre: np.ndarray,
     return np.array(out).reshape(-1, 3)
 
 
+def geodesic_extrema(occupancy: np.ndarray, origin: np.ndarray, voxel: float,
+                     centre: np.ndarray, n: int, tip_radius: float) -> np.ndarray:
+    """Accumulative geodesic extrema of a voxel body: (<= n, 3) tip locations.
+
+    Geodesic distance over 26-connected occupied voxels (edge length the step's length) from
+    the voxel nearest ``centre``; the farthest voxel is an extremum and becomes a source too,
+    ``n`` times (an extremum at distance 0 ends the search). Each extremum is reported as the
+    mean of the occupied voxels within ``tip_radius`` (Euclidean) of it.
+    """
+    from scipy.sparse.csgraph import dijkstra
+
+    idx = np.argwhere(occupancy)
+    if len(idx) < 2:
+        return np.zeros((0, 3))
+    shape = np.array(occupancy.shape)
+    lut = -np.ones(occupancy.shape, np.int64)
+    lut[tuple(idx.T)] = np.arange(len(idx))
+    rows, cols, lens = [], [], []
+    for off in np.argwhere(np.ones((3, 3, 3), bool)) - 1:
+        if tuple(off) <= (0, 0, 0):
+            continue  # each undirected edge once
+        nb = idx + off
+        ok = np.all((nb >= 0) & (nb < shape), axis=1)
+        j = np.full(len(idx), -1)
+        j[ok] = lut[tuple(nb[ok].T)]
+        has = j >= 0
+        rows.append(np.flatnonzero(has))
+        cols.append(j[has])
+        lens.append(np.full(has.sum(), voxel * float(np.linalg.norm(off))))
+    graph = coo_matrix((np.concatenate(lens), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(len(idx), len(idx))).tocsr()
+    pts = origin + voxel * idx
+    sources = [int(np.argmin(np.linalg.norm(pts - centre, axis=1)))]
+    out = []
+    for _ in range(n):
+        d = dijkstra(graph, directed=False, indices=sources, min_only=True)
+        d[~np.isfinite(d)] = -1.0
+        far = int(np.argmax(d))
+        if d[far] <= 0:
+            break
+        tip = pts[np.linalg.norm(pts - pts[far], axis=1) <= tip_radius]
+        out.append(tip.mean(axis=0))
+        sources.append(far)
+    return np.array(out).reshape(-1, 3)
+
+
 def classify(candidates: np.ndarray, targets: np.ndarray, max_distance: Sequence[float]
              ) -> np.ndarray:
     """Eq. 2.19 by the thesis' greedy rule: (I, 3) assigned candidate per target (NaN: none).
@@ -256,14 +317,14 @@ class ExtremityDetector:
 
         masks: per camera (H, W) foreground at the cameras' resolution or None; maps: per
         camera detector map (any resolution) or None; joints: (J, 3) the previous pose's joints
-        (the carving box); targets: (3, 3) its end-effectors (:data:`END_EFFECTORS`);
+        (the carving box); targets: (5, 3) its end-effectors (:data:`END_EFFECTORS`);
         centre: the body's centre for the candidates' far ends (default: mean of ``joints``).
         """
         p = self.params
         small, ok = self._small_masks(masks)
         have_map = np.array([m is not None for m in maps]) & ok
         empty = Extremities(np.zeros((0, 3)), np.full((len(END_EFFECTORS), 3), np.nan))
-        if ok.sum() < 2 or not have_map.any():
+        if ok.sum() < 2 or not (have_map.any() or p.feet):
             return empty
         lo = joints.min(axis=0) - p.margin
         hi = joints.max(axis=0) + p.margin
@@ -284,7 +345,16 @@ class ExtremityDetector:
                                      [m if h else None for m, h in zip(maps, have_map)])
         c = joints.mean(axis=0) if centre is None else centre
         cand = cluster_candidates(pts, prob, c, p)
-        return Extremities(cand, classify(cand, targets, p.max_distance), pts, prob)
+        targets = np.asarray(targets, dtype=np.float64)
+        upsilon = np.asarray(p.max_distance, dtype=np.float64)
+        assigned = np.full((len(END_EFFECTORS), 3), np.nan)
+        skin, feet = list(SKIN_EFFECTORS), list(FOOT_EFFECTORS)
+        assigned[skin] = classify(cand, targets[skin], upsilon[skin])
+        extrema = np.zeros((0, 3))
+        if p.feet:
+            extrema = geodesic_extrema(occ, lo, p.voxel, c, p.n_extrema, p.tip_radius)
+            assigned[feet] = classify(extrema, targets[feet], upsilon[feet])
+        return Extremities(cand, assigned, pts, prob, extrema)
 
 
 def _largest_component(occ: np.ndarray) -> np.ndarray | None:

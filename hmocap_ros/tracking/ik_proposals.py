@@ -1,4 +1,4 @@
-"""Detector-driven propagation: IK particles for the arms (thesis sec. 2.5.2).
+"""Detector-driven propagation: IK particles for the arms and legs (thesis sec. 2.5.2).
 
 "Pose variables from the appropriate layer are drawn by means of Inverse Kinematics using the
 detected end-effector locations. Particles drawn from this proposal are termed IK particles";
@@ -18,10 +18,10 @@ along the swivel. Batched forward kinematics, no loop over seeds.
 Choices where the thesis is vague:
 
 - End-effectors: a hand is the midpoint of wrist and hand tip (the detector returns the end
-  of a skin blob, see ``extremity_detection``); the head is the midpoint of head joint and
-  head top. IK drives the arms only; the head detection serves the classification (it keeps
-  the face from being taken for a hand) and not the torso layer, whose 6 root DoFs the
-  silhouettes fix well.
+  of a skin blob, see ``extremity_detection``), a foot the midpoint of ankle and toe; the
+  head is the midpoint of head joint and head top. IK drives the arms and legs; the head
+  detection serves the classification (it keeps the face from being taken for a hand) and
+  not the torso layer, whose 6 root DoFs the silhouettes fix well.
 - IK survival rate: the weighted share of the final layer's particles whose hand lies within
   ``survival_radius`` of the detection (the particles the filter kept where the detector
   said), measured per arm; the IK fraction moves by ``fraction_step`` per frame within
@@ -37,10 +37,10 @@ from hmocap_ros.body.kinematics import end_site_positions, forward_kinematics
 from hmocap_ros.body.skeleton import SWING_NORM_MAX, pose_to_local_rotations
 from hmocap_ros.tracking.limb_proposals import LIMBS
 
-__all__ = ["IKParams", "IKProposer", "ARM_OF"]
+__all__ = ["IKParams", "IKProposer", "LIMB_OF"]
 
-#: end-effector index (extremity_detection.END_EFFECTORS) -> arm limb it drives
-ARM_OF = {0: "l_arm", 1: "r_arm"}
+#: end-effector index (extremity_detection.END_EFFECTORS) -> limb it drives
+LIMB_OF = {0: "l_arm", 1: "r_arm", 3: "l_leg", 4: "r_leg"}
 
 
 @dataclass(frozen=True)
@@ -70,9 +70,11 @@ class IKProposer:
             (names.index("l_wrist"), ends.index("l_hand_tip")),
             (names.index("r_wrist"), ends.index("r_hand_tip")),
             (names.index("head"), ends.index("head_top")),
+            (names.index("l_ankle"), ends.index("l_toe")),
+            (names.index("r_ankle"), ends.index("r_toe")),
         )
         self._dofs = {}
-        for limb in ARM_OF.values():
+        for limb in LIMB_OF.values():
             swing, other, _, _ = LIMBS[limb]
             self._dofs[limb] = (np.array([self.skel.dof_index(d) for d in swing]),
                                 np.array([self.skel.dof_index(d) for d in other]))
@@ -80,14 +82,15 @@ class IKProposer:
 
     def reset(self) -> None:
         """Back to the starting IK share (a new track)."""
-        self.fraction = {limb: self.params.start_fraction for limb in ARM_OF.values()}
+        self.fraction = {limb: self.params.start_fraction for limb in LIMB_OF.values()}
 
     def dofs(self, limb: str) -> np.ndarray:
         swing, other = self._dofs[limb]
         return np.concatenate([swing, other])
 
     def end_effectors(self, params: np.ndarray, rest) -> np.ndarray:
-        """(B, 3, 3) left hand, right hand, head centres of poses (B, D) on the shaped rest."""
+        """(B, 5, 3) left hand, right hand, head, left foot, right foot centres of poses (B, D)
+        on the shaped rest (the order of ``extremity_detection.END_EFFECTORS``)."""
         rot, root_t = pose_to_local_rotations(self.skel, np.atleast_2d(params))
         transforms, joints = forward_kinematics(rot, root_t, rest.joints, self.model.parents)
         ends = end_site_positions(transforms, rest.end_sites, self.model.end_site_parents,
@@ -104,7 +107,7 @@ class IKProposer:
         p = self.params
         swing, other = self._dofs[limb]
         dofs = np.concatenate([swing, other])
-        e_idx = 0 if limb == "l_arm" else 1
+        e_idx = {limb_: e for e, limb_ in LIMB_OF.items()}[limb]
         lower = np.asarray(self.skel.lower)[dofs]
         upper = np.asarray(self.skel.upper)[dofs]
         n_dofs = dofs.size
@@ -143,12 +146,12 @@ class IKProposer:
               rng: np.random.Generator) -> dict:
         """Turn each arm's IK share of the particles (N, D) into IK particles (in place).
 
-        detections: (3, 3) per end-effector (NaN rows: not detected). Returns per arm the
+        detections: (5, 3) per end-effector (NaN rows: not detected). Returns per limb the
         number of IK particles made (0 where there was no detection or no solution).
         """
         made = {}
         n = particles.shape[0]
-        for e, limb in ARM_OF.items():
+        for e, limb in LIMB_OF.items():
             made[limb] = 0
             if not np.isfinite(detections[e]).all():
                 continue
@@ -170,7 +173,7 @@ class IKProposer:
         w = np.asarray(weights, dtype=np.float64)
         w = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
         ee = None
-        for e, limb in ARM_OF.items():
+        for e, limb in LIMB_OF.items():
             if not np.isfinite(detections[e]).all():
                 continue
             if ee is None:
