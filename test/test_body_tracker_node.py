@@ -70,6 +70,7 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
     assert tracking and len(tracking[-1]["ms_per_layer"].split()) == 8  # hpf-apo: 7 + final
     # the skin maps arrived with the masks: hands were searched for in 3D on tracked frames
     assert any(float(t.get("time_detection", 0)) > 0 for t in tracking), tracking[-1]
+    assert any("hand" in t.get("extremities", "") for t in tracking), tracking[-1]
     assert len(tracking[-1]["ess_per_layer"].split()) == 8 and float(tracking[-1]["seconds_per_frame"]) > 0
 
 

@@ -18,7 +18,8 @@ Publications (all with the stamp of the frame set):
   ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove.
   ``body_shape`` (hmocap_interfaces/BodyShape, latched): the estimated anthropometry.
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray): state, seconds per frame, ESS and
-  milliseconds per layer, time per stage, views used and dropped.
+  milliseconds per layer, time per stage, views used and dropped, and with ``dd-hpf`` the
+  extremities detected.
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``, ``queue_depth``,
 ``seed``, ``body_id`` and every
 field of :class:`~hmocap_ros.tracking.TrackerParams` (``body_tracker --help``).
@@ -49,6 +50,7 @@ from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters
 from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
 from hmocap_ros.stamp_sync import StampSynchronizer
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+from hmocap_ros.tracking.extremity_detection import END_EFFECTORS
 
 NODE_NAME = "body_tracker"
 
@@ -253,6 +255,9 @@ class BodyTrackerNode(Node):
                   KeyValue(key="ms_per_layer", value=" ".join(
                       f"{1000 * (d.weight_time_s + d.filter_time_s):.0f}" for d in result.layers))]
         values += [KeyValue(key=f"time_{k}", value=f"{v:.4f}") for k, v in sorted(result.timings.items())]
+        if result.extremities is not None:  # dd-hpf: which hands/feet/head were detected
+            values.append(KeyValue(key="extremities", value=" ".join(
+                n for n, ok in zip(END_EFFECTORS, result.extremities.found) if ok)))
         level = DiagnosticStatus.OK if result.state in ("tracking", "initialising", "searching") else \
             DiagnosticStatus.WARN
         diag = self._header(DiagnosticArray(), stamp_ns)

@@ -127,9 +127,10 @@ class TrackerParams:
     proposal_limbs: str = _param("arms", "Limbs that get proposals: 'arms', 'legs' or 'all'.")
     refine_kappa: float = _param(2.0, "dd-hpf: weight kappa (per metre) of the detection "
                                       "cost of eq. 2.20 in the refinement layer (eq. 2.21).")
-    dd_feet: bool = _param(True, "dd-hpf: also locate the feet (geodesic extrema of the visual "
-                                 "hull) and draw IK particles for the legs; False: hands only, "
-                                 "as the thesis' skin detector.")
+    dd_feet: bool = _param(False, "dd-hpf: also locate the feet (geodesic extrema of the visual "
+                                  "hull) and draw IK particles for the legs (off: it cost 10-20 "
+                                  "mm on the tuning clips, see docs/tracking.md); False: hands "
+                                  "only, as the thesis' skin detector.")
     render_filtered_parts: bool = _param(False, "Hierarchical methods: each layer renders only "
                                               "the body parts filtered so far (sec. 2.4); "
                                               "False renders the whole body at its predicted "
