@@ -1,6 +1,6 @@
 """``hmocap eval mocap``: replay a multi-view bag through the body tracker and score it.
 
-    hmocap eval mocap BAG [--method apf|hpf|hpf-apo ...] [--compare] [--particles N]
+    hmocap eval mocap BAG [--method apf|hpf|hpf-apo|dd-hpf ...] [--compare] [--particles N]
         [--layers L] [--frames N] [--seed S] [--silhouettes fg|gt] [--json OUT] [--plot OUT.png]
 
 No DDS: the bag is read with :class:`~hmocap_ros.io.bag_reader.BagReader` and every frame set
@@ -326,7 +326,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
         params={f.name: getattr(params, f.name) for f in fields(params)})
 
 
-def evaluate(bag: str | Path, methods=("hpf-apo",), *, silhouettes: str = "fg",
+def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
              max_frames: int | None = None, seed: int = 0, particles: int = 0, layers: int = 0,
              overrides: dict | None = None, given_shape: bool = False,
              fg_params: dict | None = None, out=None) -> dict:
@@ -422,7 +422,7 @@ def _overrides(items) -> dict:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="bag (.mcap or rosbag2 folder) in the documented layout")
     parser.add_argument("--method", action="append", choices=METHODS,
-                        help="tracker method; repeat to compare several (default hpf-apo)")
+                        help="tracker method; repeat to compare several (default dd-hpf)")
     parser.add_argument("--compare", action="store_true", help="run every method (" + ", ".join(METHODS) + ")")
     parser.add_argument("--particles", type=int, default=0,
                         help="particles per layer (default: the method's, ~3500 evaluations)")
@@ -446,7 +446,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
         import numba
 
         numba.set_num_threads(ns.threads)
-    methods = list(METHODS) if ns.compare else (ns.method or ["hpf-apo"])
+    methods = list(METHODS) if ns.compare else (ns.method or ["dd-hpf"])
     methods = list(dict.fromkeys(methods))
     try:
         overrides = _overrides(ns.param)

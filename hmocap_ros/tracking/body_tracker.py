@@ -77,7 +77,7 @@ class TrackerParams:
     """Tunables of :class:`BodyTracker` (each field's metadata has a ``description`` for the
     ROS node's parameter declarations). Defaults: 4 cameras at 640x480, 25 fps."""
 
-    method: str = _param("hpf-apo", "Layered filter: 'apf' (annealing, 14 x 250), 'hpf' "
+    method: str = _param("dd-hpf", "Layered filter: 'apf' (annealing, 14 x 250), 'hpf' "
                                     "(hierarchical, 7 x 500), 'hpf-apo' (hierarchical with "
                                     "approximate partitioning of observations, 8 x 438) or "
                                     "'dd-hpf' (hpf-apo driven by hand detections: IK "
