@@ -10,7 +10,10 @@ Subscriptions:
   is set; the masks are expected at the rig's resolution.
   ``<camera>/foreground`` (sensor_msgs/Image mono8, sensor-data QoS), per rig camera.
   ``<camera>/skin`` (sensor_msgs/Image mono8, any resolution), per rig camera, with method
-  ``dd-hpf`` only: the extremity detector's maps (foreground_segmentation publishes them).
+  ``dd-hpf`` only: the extremity detector's maps (foreground_segmentation publishes them, each
+  just before its mask). They are not waited for: a frame set is processed when its masks are
+  complete, with the maps of its stamp that have arrived (a view without one is not searched
+  for hands), so a foreground node that publishes none costs no latency.
 Publications (all with the stamp of the frame set):
   ``joint_states`` (sensor_msgs/JointState): the pose parameters (root translation in metres,
   angles in radians) by DoF name.
@@ -114,9 +117,9 @@ class BodyTrackerNode(Node):
         self.frame_id = rig.frame_id
         self.tracker = BodyTracker(self.model, rig, self.params, self.rng)
         self.use_maps = self.params.method == "dd-hpf"
-        keys = list(rig.names) + ([f"{n}/skin" for n in rig.names] if self.use_maps else [])
+        self.maps = {name: {} for name in rig.names}  # camera -> stamp -> skin map (recent)
         self.sync = StampSynchronizer(
-            keys, slop_ns=int(self.config.slop_ms * 1e6),
+            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
             min_keys=min(self.config.min_views_to_sync, len(rig)), max_delay_ns=int(self.config.max_wait_ms * 1e6))
         if first:
@@ -126,29 +129,56 @@ class BodyTrackerNode(Node):
                 self.create_subscription(Image, f"{name}/foreground", self._on_mask(name),
                                          sensor_qos(max(1, self.config.queue_depth)))
                 if self.use_maps:
-                    self.create_subscription(Image, f"{name}/skin", self._on_mask(name, "skin"),
+                    self.create_subscription(Image, f"{name}/skin", self._on_skin(name),
                                              sensor_qos(max(1, self.config.queue_depth)))
             seconds = self.tracker.warm_up()
             self.get_logger().info(f"kernels ready ({seconds:.1f} s)")
         self.get_logger().info(f"tracking with {len(rig)} cameras ({', '.join(rig.names)}), method "
                                f"{self.params.method}")
 
-    def _on_mask(self, name: str, kind: str = "foreground"):
-        key = name if kind == "foreground" else f"{name}/{kind}"
+    def _mono8(self, msg: Image, topic: str) -> np.ndarray | None:
+        try:
+            image = image_to_numpy(msg)
+        except ConversionError as err:
+            self.get_logger().error(f"{topic}: {err}", throttle_duration_sec=5.0)
+            return None
+        if image.ndim != 2:
+            self.get_logger().error(f"{topic} must be mono8, got {msg.encoding}",
+                                    throttle_duration_sec=5.0)
+            return None
+        return image
 
+    def _on_skin(self, name: str):
+        def on_skin(msg: Image) -> None:
+            if self.rig is None or name not in self.maps:
+                return
+            image = self._mono8(msg, f"{name}/skin")
+            if image is None:
+                return
+            recent = self.maps[name]
+            recent[stamp_to_ns(msg.header.stamp)] = image
+            while len(recent) > max(10, self.config.queue_depth):  # masks that never came
+                recent.pop(next(iter(recent)))
+
+        return on_skin
+
+    def _map_for(self, name: str, stamp_ns: int) -> np.ndarray | None:
+        """The skin map of ``name`` within the slop of ``stamp_ns`` (taken out), or None."""
+        recent = self.maps.get(name, {})
+        slop = int(self.config.slop_ms * 1e6)
+        for stamp in list(recent):
+            if abs(stamp - stamp_ns) <= slop:
+                return recent.pop(stamp)
+        return None
+
+    def _on_mask(self, name: str):
         def on_mask(msg: Image) -> None:
             if self.sync is None or name not in self.rig:
                 return
-            try:
-                mask = image_to_numpy(msg)
-            except ConversionError as err:
-                self.get_logger().error(f"{name}/{kind}: {err}", throttle_duration_sec=5.0)
+            mask = self._mono8(msg, f"{name}/foreground")
+            if mask is None:
                 return
-            if mask.ndim != 2:
-                self.get_logger().error(f"{name}/{kind} must be mono8, got {msg.encoding}",
-                                        throttle_duration_sec=5.0)
-                return
-            for synced in self.sync.add(key, stamp_to_ns(msg.header.stamp), mask):
+            for synced in self.sync.add(name, stamp_to_ns(msg.header.stamp), mask):
                 self._process(synced.stamp_ns, synced.items)
 
         return on_mask
@@ -163,7 +193,7 @@ class BodyTrackerNode(Node):
                           f"{cam.width}x{cam.height}: view dropped", throttle_duration_sec=5.0)
                 mask = None
             masks.append(mask)
-        maps = [items.get(f"{n}/skin") for n in self.rig.names] if self.use_maps else None
+        maps = [self._map_for(n, stamp_ns) for n in self.rig.names] if self.use_maps else None
         t0 = time.perf_counter()
         try:
             result = self.tracker.update(masks, stamp_ns, maps)

@@ -127,10 +127,10 @@ class ForegroundSegmentation(Node):
             skin = skin_probability(rgb, mask=mask) if name in self.skin_pubs else None
             state.seconds += time.perf_counter() - t0
             state.frames += 1
-            self.mask_pubs[name].publish(numpy_to_image(mask, "mono8", stamp, msg.header.frame_id, self.factory))
-            if skin is not None:
+            if skin is not None:  # before the mask: body_tracker takes the maps that are there
                 self.skin_pubs[name].publish(numpy_to_image(skin, "mono8", stamp, msg.header.frame_id,
                                                             self.factory))
+            self.mask_pubs[name].publish(numpy_to_image(mask, "mono8", stamp, msg.header.frame_id, self.factory))
 
         return on_image
 
