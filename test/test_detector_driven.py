@@ -19,7 +19,8 @@ from hmocap_ros.sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.extremity_detection import (ExtremityDetector, ExtremityParams, classify,
-                                                     geodesic_extrema, surface_points, visibility)
+                                                     geodesic_extrema, reacquire_hands,
+                                                     surface_points, visibility)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -143,6 +144,24 @@ def test_geodesic_extrema_are_the_ends_of_the_limbs():
     # the farthest end along the body (the bent bar: about 30 voxels of path) comes first
     assert np.argmin(d[0]) == 3
     assert len(geodesic_extrema(np.zeros((3, 3, 3), bool), np.zeros(3), 0.01, np.zeros(3), 3, 0.02)) == 0
+
+
+def test_reacquisition_gives_a_lost_hand_a_candidate_within_reach():
+    shoulders = np.array([[0.2, 1.4, 0.0], [-0.2, 1.4, 0.0]])
+    reach = np.array([0.7, 0.7])
+    head = np.array([0.0, 1.65, 0.0])
+    face = np.array([0.0, 1.6, 0.08])
+    left_far = np.array([0.6, 1.0, 0.3])     # the left hand, where the tracker has no arm
+    shoe = np.array([0.1, 0.05, 0.1])        # brown shoes look like skin
+    cands = np.array([face, shoe, left_far])
+    assigned = np.full((3, 3), np.nan)
+    assigned[1] = [-0.5, 1.0, 0.0]           # the right hand was found by eq. 2.19
+    hands = reacquire_hands(np.vstack([cands, assigned[1]]), assigned, shoulders, reach, head, 0.3)
+    np.testing.assert_allclose(hands[0], left_far)  # not the face, not the shoe
+    np.testing.assert_allclose(hands[1], assigned[1])
+    # nothing within reach: the hand stays undetected
+    hands = reacquire_hands(cands[:2], assigned, shoulders, reach, head, 0.3)
+    assert np.isnan(hands[0]).all()
 
 
 def test_classify_is_the_greedy_solution_of_eq_2_19():

@@ -131,6 +131,9 @@ class TrackerParams:
                                   "hull) and draw IK particles for the legs (off: it cost 10-20 "
                                   "mm on the tuning clips, see docs/tracking.md); False: hands "
                                   "only, as the thesis' skin detector.")
+    dd_reacquire: bool = _param(False, "dd-hpf: a hand that eq. 2.19 leaves unassigned (the arm "
+                                       "lost by more than 35 cm) takes a skin cluster within "
+                                       "arm's reach of its shoulder.")
     render_filtered_parts: bool = _param(False, "Hierarchical methods: each layer renders only "
                                               "the body parts filtered so far (sec. 2.4); "
                                               "False renders the whole body at its predicted "
@@ -280,7 +283,8 @@ class BodyTracker:
         self.start_proposer = LimbProposer(model, ("l_arm", "r_arm", "l_leg", "r_leg"))
         self.detector = self.ik = None
         if p.method == "dd-hpf":
-            self.detector = ExtremityDetector(self.cameras, ExtremityParams(feet=p.dd_feet))
+            self.detector = ExtremityDetector(self.cameras, ExtremityParams(
+                feet=p.dd_feet, reacquire=p.dd_reacquire))
             self.ik = IKProposer(model)
         self.reset()
 
@@ -479,7 +483,15 @@ class BodyTracker:
         targets = self.ik.end_effectors(reference[None], rest)[0]
         ok_masks = [m if m is not None and np.shape(m) == (c.height, c.width) else None
                     for m, c in zip(masks, self.cameras)]
-        extremities = self.detector.detect(ok_masks, maps, np.asarray(joints[0]), targets)
+        j = np.asarray(joints[0])
+        names = list(self.model.joint_names)
+        sides = [[names.index(f"{s}_{n}") for n in ("shoulder", "elbow", "wrist")] for s in "lr"]
+        shoulders = np.array([j[s[0]] for s in sides])
+        reach = np.array([np.linalg.norm(j[s[1]] - j[s[0]]) + np.linalg.norm(j[s[2]] - j[s[1]])
+                          + np.linalg.norm(targets[k] - j[s[2]]) + 0.05
+                          for k, s in enumerate(sides)])
+        extremities = self.detector.detect(ok_masks, maps, j, targets, shoulders=shoulders,
+                                           reach=reach)
         self.ik.apply(self.particles, extremities.assigned, reference, rest, self.rng)
         return extremities
 

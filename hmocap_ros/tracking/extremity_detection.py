@@ -25,6 +25,10 @@ Per frame set:
    of the previous pose (left hand, right hand, head) by repeatedly taking the closest pair
    within the maximum distances ``Upsilon`` (35 cm hands, 25 cm head), the thesis' greedy
    solution.
+6b. **Re-acquisition** (``reacquire``, beyond the thesis): a hand left unassigned by eq. 2.19
+   (the tracked arm is lost, farther than Upsilon from its hand) takes the closest remaining
+   candidate within arm's reach of its shoulder (the reference pose's arm length + 5 cm) that
+   is not near the predicted head (30 cm), so a lost arm can be drawn back by IK particles.
 7. **Feet** (``geodesic_extrema``, beyond the thesis' skin detector, which cannot see shoes;
    the thesis lists feet among the extremities it localises): the extremities of the carved
    hull itself, the points geodesically farthest from the body's centre (after Baak et al.'s
@@ -73,6 +77,8 @@ class ExtremityParams:
     max_distance: tuple = (0.35, 0.35, 0.25, 0.35, 0.35)  #: [Upsilon] per END_EFFECTORS (m)
     depth_tolerance: float = 2.0  #: z-buffer tolerance in voxels
     feet: bool = True            #: locate the feet as geodesic extrema of the hull
+    reacquire: bool = False      #: second pass for unassigned hands (module docstring, 6b)
+    head_exclusion: float = 0.30  #: m, re-acquisition ignores candidates this near the head
     n_extrema: int = 6           #: geodesic extrema searched (head, hands, feet and a spare)
 
 
@@ -257,6 +263,35 @@ def geodesic_extrema(occupancy: np.ndarray, origin: np.ndarray, voxel: float,
     return np.array(out).reshape(-1, 3)
 
 
+def reacquire_hands(candidates: np.ndarray, assigned: np.ndarray, shoulders: np.ndarray,
+                    reach: np.ndarray, head: np.ndarray, head_exclusion: float) -> np.ndarray:
+    """Second pass for hands eq. 2.19 left unassigned: (2, 3) hands (see the module's 6b).
+
+    assigned: (3, 3) left hand, right hand, head after eq. 2.19 (NaN: none). Candidates
+    already used, or within ``head_exclusion`` of the predicted ``head``, are not taken; the
+    closest (candidate, shoulder) pair within that arm's ``reach`` goes first.
+    """
+    hands = np.array(assigned[:2], dtype=np.float64)
+    if len(candidates) == 0 or np.isfinite(hands).all():
+        return hands
+    used = np.zeros(len(candidates), bool)
+    for row in assigned:
+        if np.isfinite(row).all():
+            used |= np.all(np.isclose(candidates, row), axis=1)
+    if np.isfinite(head).all():
+        used |= np.linalg.norm(candidates - head, axis=1) <= head_exclusion
+    d = np.linalg.norm(shoulders[:, None] - candidates[None], axis=2)  # (2, E)
+    d[:, used] = np.inf
+    d[d > np.asarray(reach, dtype=np.float64)[:, None]] = np.inf
+    d[np.isfinite(hands).all(axis=1)] = np.inf
+    while np.isfinite(d).any():
+        i, e = np.unravel_index(np.argmin(d), d.shape)
+        hands[i] = candidates[e]
+        d[i, :] = np.inf
+        d[:, e] = np.inf
+    return hands
+
+
 def classify(candidates: np.ndarray, targets: np.ndarray, max_distance: Sequence[float]
              ) -> np.ndarray:
     """Eq. 2.19 by the thesis' greedy rule: (I, 3) assigned candidate per target (NaN: none).
@@ -311,7 +346,8 @@ class ExtremityDetector:
         return np.stack(out), np.array(ok)
 
     def detect(self, masks: Sequence[np.ndarray | None], maps: Sequence[np.ndarray | None],
-               joints: np.ndarray, targets: np.ndarray, centre: np.ndarray | None = None
+               joints: np.ndarray, targets: np.ndarray, centre: np.ndarray | None = None,
+               shoulders: np.ndarray | None = None, reach: np.ndarray | None = None
                ) -> Extremities:
         """Detections of one frame set.
 
@@ -319,6 +355,8 @@ class ExtremityDetector:
         camera detector map (any resolution) or None; joints: (J, 3) the previous pose's joints
         (the carving box); targets: (5, 3) its end-effectors (:data:`END_EFFECTORS`);
         centre: the body's centre for the candidates' far ends (default: mean of ``joints``).
+        shoulders (2, 3) and reach (2,): left/right shoulder and arm length of the reference
+        pose, for re-acquisition (``params.reacquire``).
         """
         p = self.params
         small, ok = self._small_masks(masks)
@@ -350,6 +388,9 @@ class ExtremityDetector:
         assigned = np.full((len(END_EFFECTORS), 3), np.nan)
         skin, feet = list(SKIN_EFFECTORS), list(FOOT_EFFECTORS)
         assigned[skin] = classify(cand, targets[skin], upsilon[skin])
+        if p.reacquire and shoulders is not None and reach is not None:
+            assigned[:2] = reacquire_hands(cand, assigned[:3], shoulders, reach,
+                                           targets[2], p.head_exclusion)
         extrema = np.zeros((0, 3))
         if p.feet:
             extrema = geodesic_extrema(occ, lo, p.voxel, c, p.n_extrema, p.tip_radius)
