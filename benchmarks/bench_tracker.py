@@ -7,8 +7,8 @@ measures the tracker). The tracker is started on the first frame (the start-up i
 then every method runs ``--frames`` frames of tracking at its default budget (about 3,500
 weight evaluations per frame: HPF 7 layers x 500 particles as in the thesis' comparison,
 HPF+APO and DD-HPF 8 x 438, APF 14 x 250), with 1 and 2 numba threads. DD-HPF gets ideal
-hand-detector maps (1 where the hands are seen; the skin detector's own cost, about 3 ms per
-640x480 image, is the foreground node's). Printed per method: seconds per
+hand-detector maps (1 where the hands are seen; the skin detector's own cost, 0.6 ms per
+640x480 image by ``bench_skin.py``, is the foreground node's). Printed per method: seconds per
 frame (median), evaluations per second, and where the time goes (skinning = eq. 2.11/2.12,
 projection (fused into the XOR pass by default), XOR = eq. 2.8/2.15, proposals (their own search;
 the re-ranking of proposals counts as skinning and XOR), detection (DD-HPF: 3D extremities and
