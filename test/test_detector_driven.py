@@ -6,36 +6,21 @@ the hands are seen (the skin detector's ideal output) so that the 3D fusion is t
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from hmocap_ros.body import load_body_model, rest_pose
+from hmocap_ros.body import rest_pose
 from hmocap_ros.render import project_batch, render_silhouettes
-from hmocap_ros.rig import Rig, load_rig
 from hmocap_ros.segmentation.skin import skin_probability
 from hmocap_ros.sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.extremity_detection import (ExtremityDetector, ExtremityParams, classify,
-                                                     geodesic_extrema, reacquire_hands,
-                                                     surface_points, visibility)
+                                                     detection_cost, geodesic_extrema,
+                                                     reacquire_hands, surface_points, visibility)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 
-ROOT = Path(__file__).resolve().parents[1]
 STAMP0 = 1_700_000_000_000_000_000
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_body_model("tracking")
-
-
-@pytest.fixture(scope="module")
-def rig():
-    full = load_rig(ROOT / "config" / "rig_example.yaml")
-    return Rig(full.frame_id, tuple(c.scaled(0.5) for c in full))
 
 
 @pytest.fixture(scope="module")
@@ -162,6 +147,24 @@ def test_reacquisition_gives_a_lost_hand_a_candidate_within_reach():
     # nothing within reach: the hand stays undetected
     hands = reacquire_hands(cands[:2], assigned, shoulders, reach, head, 0.3)
     assert np.isnan(hands[0]).all()
+
+
+def test_detection_cost_eq_2_20_matches_each_detection_to_its_own_kind():
+    assigned = np.full((5, 3), np.nan)
+    assigned[0] = [0.5, 1.0, 0.0]            # a left hand
+    assigned[2] = [0.0, 1.7, 0.0]            # the head: not in eq. 2.20
+    ee = np.zeros((2, 5, 3))
+    ee[:, 0] = [0.5, 1.1, 0.0]               # pose 0: left hand 10 cm off
+    ee[:, 1] = [-0.5, 1.0, 0.0]
+    ee[:, 3] = [0.5, 0.0, 0.0]
+    ee[1, 0] = [0.0, 0.2, 0.0]               # pose 1: a hand far off, a foot kicked up to it
+    ee[1, 4] = [0.5, 1.0, 0.0]
+    cost = detection_cost(assigned, ee)
+    assert cost[0] == pytest.approx(0.1)
+    assert cost[1] > 0.5                     # the foot does not explain the hand
+    assigned[3] = [0.5, 0.0, 0.05]           # a detected left foot: nearest of the feet
+    np.testing.assert_allclose(detection_cost(assigned, ee)[0], (0.1 + 0.05) / 2)
+    assert np.all(detection_cost(np.full((5, 3), np.nan), ee) == 0)
 
 
 def test_classify_is_the_greedy_solution_of_eq_2_19():

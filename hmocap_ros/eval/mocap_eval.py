@@ -207,18 +207,13 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
             read += [t for t in image_topics if t in available and t not in read]
         for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True,
                                              min_topics=1):
-            if detector_maps:
-                t0 = time.perf_counter()
-                map_row = []
-                for topic in image_topics:
-                    msg = msgs.get(topic)
-                    try:
-                        map_row.append(None if msg is None else skin_probability(image_to_rgb(msg)))
-                    except ValueError as err:
-                        log.warning("frame %d, %s: %s (no detector map)", stamp, topic, err)
-                        map_row.append(None)
-                maps.append(map_row)
-                det_time += time.perf_counter() - t0
+            decoded: dict = {}  # each image decoded once, for its mask and its skin map
+
+            def rgb_of(topic: str) -> np.ndarray:
+                if topic not in decoded:
+                    decoded[topic] = image_to_rgb(msgs[topic])
+                return decoded[topic]
+
             row = []
             t0 = time.perf_counter()
             for k, topic in enumerate(use):
@@ -228,7 +223,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                     continue
                 try:
                     if bg is not None:
-                        mask = bg[k].apply(image_to_rgb(msg), stamp)
+                        mask = bg[k].apply(rgb_of(topic), stamp)
                     else:
                         mask = image_to_numpy(msg)
                         mask = mask[..., 0] if mask.ndim == 3 else mask
@@ -239,6 +234,17 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                 shape_hw = shape_hw or mask.shape[:2]
                 row.append(np.packbits(mask != 0) if mask.shape[:2] == shape_hw else None)
             seg_time += time.perf_counter() - t0
+            if detector_maps:
+                t0 = time.perf_counter()
+                map_row = []
+                for topic in image_topics:
+                    try:
+                        map_row.append(skin_probability(rgb_of(topic)) if topic in msgs else None)
+                    except ValueError as err:
+                        log.warning("frame %d, %s: %s (no detector map)", stamp, topic, err)
+                        map_row.append(None)
+                maps.append(map_row)
+                det_time += time.perf_counter() - t0
             stamps.append(stamp)
             masks.append(row)
             gt = truth_by_stamp.get(stamp)

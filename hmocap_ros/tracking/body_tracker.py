@@ -49,7 +49,7 @@ from hmocap_ros.render.silhouette import observed_counts
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness, serial_below
 from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
 from hmocap_ros.tracking.extremity_detection import (Extremities, ExtremityDetector,
-                                                     ExtremityParams)
+                                                     ExtremityParams, detection_cost)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
 from hmocap_ros.tracking.limb_proposals import LimbProposer
@@ -286,6 +286,10 @@ class BodyTracker:
             self.detector = ExtremityDetector(self.cameras, ExtremityParams(
                 feet=p.dd_feet, reacquire=p.dd_reacquire))
             self.ik = IKProposer(model)
+            names = list(model.joint_names)
+            #: per side, (shoulder, elbow, wrist) joint indices: the arm's reach (dd_reacquire)
+            self._arms = np.array([[names.index(f"{s}_{n}") for n in ("shoulder", "elbow", "wrist")]
+                                   for s in "lr"])
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -331,18 +335,19 @@ class BodyTracker:
 
     # ------------------------------------------------------------------ weighting
 
-    def weight_fn(self, obs: Observation, shape: BodyShape, detections: np.ndarray | None = None):
+    def weight_fn(self, obs: Observation, shape: BodyShape,
+                  extremities: Extremities | None = None):
         """The schedule's weighting: eq. 2.8, or eq. 2.15 in the layer's observation boxes.
 
-        detections: (U, 3) detected hands (dd-hpf); the final layer then becomes the
-        refinement layer of eq. 2.21: cost + kappa * D(C_t, x), D of eq. 2.20.
+        extremities: dd-hpf's detections; with any hand (or foot) detected, the final layer
+        becomes the refinement layer of eq. 2.21: cost + kappa * D(C_t, x), D of eq. 2.20.
         """
         rest = self.fitness.rest(shape)
         sched, p = self.schedule, self.params
         lengths = chain_lengths(self.model, rest)
         last = sched.n_weightings - 1
-        refine = (detections is not None and len(detections) > 0 and p.refine_kappa > 0
-                  and self.ik is not None)
+        refine = (extremities is not None and len(extremities.detections) > 0
+                  and p.refine_kappa > 0 and self.ik is not None)
 
         def weight(particles: np.ndarray, layer: int) -> np.ndarray:
             verts, joints = self.fitness.pose(particles, rest)
@@ -359,9 +364,8 @@ class BodyTracker:
                 boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
             cost = self.fitness.costs_from_verts(verts, obs, boxes, self._layer_faces[layer])
             if refine and layer == last:
-                ee = self.ik.end_effectors(particles, rest)  # (N, 3, 3)
-                d = np.linalg.norm(detections[None, :, None] - ee[:, None], axis=3)  # (N, U, 3)
-                cost = cost + p.refine_kappa * d.min(axis=2).mean(axis=1)
+                cost = cost + p.refine_kappa * detection_cost(
+                    extremities.assigned, self.ik.end_effectors(particles, rest))
             return cost
 
         return weight
@@ -439,9 +443,8 @@ class BodyTracker:
                 t1 = time.perf_counter()
                 extremities = self._detect(masks, detector_maps, reference)
                 timings["detection"] = time.perf_counter() - t1
-            detections = None if extremities is None else extremities.detections
             res = lpf_run(self.particles, self.schedule.filter,
-                          self.weight_fn(obs, self.shape, detections), self.rng)
+                          self.weight_fn(obs, self.shape, extremities), self.rng)
             if extremities is not None:
                 self.ik.update_fraction(res.weighted_particles, res.weights,
                                         extremities.assigned, self.fitness.rest(self.shape))
@@ -484,12 +487,9 @@ class BodyTracker:
         ok_masks = [m if m is not None and np.shape(m) == (c.height, c.width) else None
                     for m, c in zip(masks, self.cameras)]
         j = np.asarray(joints[0])
-        names = list(self.model.joint_names)
-        sides = [[names.index(f"{s}_{n}") for n in ("shoulder", "elbow", "wrist")] for s in "lr"]
-        shoulders = np.array([j[s[0]] for s in sides])
-        reach = np.array([np.linalg.norm(j[s[1]] - j[s[0]]) + np.linalg.norm(j[s[2]] - j[s[1]])
-                          + np.linalg.norm(targets[k] - j[s[2]]) + 0.05
-                          for k, s in enumerate(sides)])
+        chain = np.concatenate([j[self._arms], targets[:2, None]], axis=1)  # (2, 4, 3)
+        shoulders = chain[:, 0]
+        reach = np.linalg.norm(np.diff(chain, axis=1), axis=2).sum(axis=1) + 0.05
         extremities = self.detector.detect(ok_masks, maps, j, targets, shoulders=shoulders,
                                            reach=reach)
         self.ik.apply(self.particles, extremities.assigned, reference, rest, self.rng)

@@ -47,10 +47,12 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from hmocap_ros.camera_model import project_points
+from hmocap_ros.camera_model import Projection, project_points
+from hmocap_ros.rig import camera_arrays
 from hmocap_ros.tracking.visual_hull import carve
 
 __all__ = ["END_EFFECTORS", "ExtremityParams", "Extremities", "ExtremityDetector",
+           "detection_cost",
            "classify", "surface_points", "visibility", "extremity_probability",
            "cluster_candidates"]
 
@@ -111,6 +113,27 @@ class Extremities:
         return self.assigned[use]
 
 
+def detection_cost(assigned: np.ndarray, effectors: np.ndarray) -> np.ndarray:
+    """Eq. 2.20 for a batch of poses: (N,) mean over the detections C_t of the distance to the
+    nearest model end-effector.
+
+    assigned: (5, 3) detections per :data:`END_EFFECTORS` (NaN: none; the head is left out, see
+    ``ik_proposals``); effectors: (N, 5, 3) the poses' end-effectors. "Nearest" ranges over the
+    end-effectors of the detection's own detector (a skin blob is a hand or the head, a hull
+    extremum a foot), so a hand seen where a wrong particle has a foot is not explained by it.
+    """
+    cost = np.zeros(effectors.shape[0])
+    count = 0
+    for kind in (SKIN_EFFECTORS, FOOT_EFFECTORS):
+        rows = [i for i in kind if i != 2 and np.isfinite(assigned[i]).all()]
+        if not rows:
+            continue
+        d = np.linalg.norm(assigned[rows][None, :, None] - effectors[:, None, list(kind)], axis=3)
+        cost += d.min(axis=2).sum(axis=1)
+        count += len(rows)
+    return cost / max(count, 1)
+
+
 def surface_points(occupancy: np.ndarray, origin: np.ndarray, voxel: float
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Oriented surface points of a boolean voxel grid: (points (S, 3), unit normals (S, 3)).
@@ -136,17 +159,19 @@ def surface_points(occupancy: np.ndarray, origin: np.ndarray, voxel: float
 
 
 def visibility(points: np.ndarray, normals: np.ndarray, cameras: Sequence, voxel: float,
-               depth_tolerance: float = 2.0, views: np.ndarray | None = None) -> np.ndarray:
+               depth_tolerance: float = 2.0, views: np.ndarray | None = None,
+               proj: Projection | None = None) -> np.ndarray:
     """Eq. 2.16, normalised over the cameras: eta (M, S), each column sums to 1 (or is 0).
 
     A point is visible in a camera when it is in its image and no other surface point lies in
     front of it (z-buffer with cells of about one projected voxel; ``depth_tolerance`` voxels
-    of slack). ``views`` (M,) bool leaves cameras out (missing views).
+    of slack). ``views`` (M,) bool leaves cameras out (missing views). ``proj``: the points'
+    :func:`~hmocap_ros.camera_model.project_points` in ``cameras``, if already computed.
     """
     M, S = len(cameras), len(points)
     if S == 0:
         return np.zeros((M, 0))
-    proj = project_points(cameras, points)
+    proj = project_points(cameras, points) if proj is None else proj
     eta = np.zeros((M, S))
     for c, cam in enumerate(cameras):
         if views is not None and not views[c]:
@@ -170,16 +195,18 @@ def visibility(points: np.ndarray, normals: np.ndarray, cameras: Sequence, voxel
 
 
 def extremity_probability(points: np.ndarray, eta: np.ndarray, cameras: Sequence,
-                          maps: Sequence[np.ndarray | None]) -> np.ndarray:
+                          maps: Sequence[np.ndarray | None],
+                          proj: Projection | None = None) -> np.ndarray:
     """Eq. 2.17: Prob(q) = sum_c eta_c(q) T_c(proj_c(q)); maps uint8 (255 = 1) or float.
 
     A camera without a map (None) contributes nothing (its eta share is lost, not moved to
     the others: a view that cannot say "hand" does not make the others more certain).
+    ``proj`` as in :func:`visibility`.
     """
     prob = np.zeros(len(points))
     if len(points) == 0:
         return prob
-    proj = project_points(cameras, points)
+    proj = project_points(cameras, points) if proj is None else proj
     for c, (cam, tmap) in enumerate(zip(cameras, maps)):
         if tmap is None:
             continue
@@ -263,6 +290,18 @@ def geodesic_extrema(occupancy: np.ndarray, origin: np.ndarray, voxel: float,
     return np.array(out).reshape(-1, 3)
 
 
+def _greedy_pairs(d: np.ndarray) -> list[tuple[int, int]]:
+    """The thesis' greedy solution of an assignment (eq. 2.19): repeatedly the closest finite
+    (row, column) pair of ``d`` (modified), each row and column used once."""
+    pairs = []
+    while np.isfinite(d).any():
+        i, e = np.unravel_index(np.argmin(d), d.shape)
+        pairs.append((int(i), int(e)))
+        d[i, :] = np.inf
+        d[:, e] = np.inf
+    return pairs
+
+
 def reacquire_hands(candidates: np.ndarray, assigned: np.ndarray, shoulders: np.ndarray,
                     reach: np.ndarray, head: np.ndarray, head_exclusion: float) -> np.ndarray:
     """Second pass for hands eq. 2.19 left unassigned: (2, 3) hands (see the module's 6b).
@@ -284,11 +323,8 @@ def reacquire_hands(candidates: np.ndarray, assigned: np.ndarray, shoulders: np.
     d[:, used] = np.inf
     d[d > np.asarray(reach, dtype=np.float64)[:, None]] = np.inf
     d[np.isfinite(hands).all(axis=1)] = np.inf
-    while np.isfinite(d).any():
-        i, e = np.unravel_index(np.argmin(d), d.shape)
+    for i, e in _greedy_pairs(d):
         hands[i] = candidates[e]
-        d[i, :] = np.inf
-        d[:, e] = np.inf
     return hands
 
 
@@ -306,11 +342,8 @@ def classify(candidates: np.ndarray, targets: np.ndarray, max_distance: Sequence
     d = np.linalg.norm(targets[:, None] - candidates[None], axis=2)
     d[d > np.asarray(max_distance, dtype=np.float64)[:, None]] = np.inf
     d[~np.isfinite(targets).all(axis=1)] = np.inf
-    while np.isfinite(d).any():
-        i, e = np.unravel_index(np.argmin(d), d.shape)
+    for i, e in _greedy_pairs(d):
         out[i] = candidates[e]
-        d[i, :] = np.inf
-        d[:, e] = np.inf
     return out
 
 
@@ -325,10 +358,7 @@ class ExtremityDetector:
         self.params = params or ExtremityParams()
         p = self.params
         self._small = tuple(c.scaled(p.mask_scale) for c in self.cameras)
-        self._K = np.stack([c.K for c in self._small])
-        self._R = np.stack([c.R for c in self._small])
-        self._t = np.stack([c.t for c in self._small])
-        self._D = np.stack([c._d8 for c in self._small])
+        self._K, self._R, self._t, self._D = camera_arrays(self._small)
 
     def _small_masks(self, masks: Sequence[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray]:
         import cv2
@@ -378,9 +408,10 @@ class ExtremityDetector:
         if occ is None:
             return empty
         pts, normals = surface_points(occ, lo, p.voxel)
-        eta = visibility(pts, normals, self.cameras, p.voxel, p.depth_tolerance, ok)
+        proj = project_points(self.cameras, pts)
+        eta = visibility(pts, normals, self.cameras, p.voxel, p.depth_tolerance, ok, proj)
         prob = extremity_probability(pts, eta, self.cameras,
-                                     [m if h else None for m, h in zip(maps, have_map)])
+                                     [m if h else None for m, h in zip(maps, have_map)], proj)
         c = joints.mean(axis=0) if centre is None else centre
         cand = cluster_candidates(pts, prob, c, p)
         targets = np.asarray(targets, dtype=np.float64)

@@ -68,13 +68,12 @@ class IKProposer:
         self.params = params or IKParams()
         names = list(map(str, model.joint_names))
         ends = list(map(str, model.end_site_names))
-        self._pairs = (  # (joint, end site, w): the end-effector is w joint + (1 - w) end site
-            (names.index("l_wrist"), ends.index("l_hand_tip"), 0.5),
-            (names.index("r_wrist"), ends.index("r_hand_tip"), 0.5),
-            (names.index("head"), ends.index("head_top"), 0.5),
-            (names.index("l_ankle"), ends.index("l_toe"), 0.0),
-            (names.index("r_ankle"), ends.index("r_toe"), 0.0),
+        self._midpoints = (  # (joint, end site) whose midpoint is the hand / head end-effector
+            (names.index("l_wrist"), ends.index("l_hand_tip")),
+            (names.index("r_wrist"), ends.index("r_hand_tip")),
+            (names.index("head"), ends.index("head_top")),
         )
+        self._toes = (ends.index("l_toe"), ends.index("r_toe"))  # the feet's end-effectors
         self._dofs = {}
         for limb in LIMB_OF.values():
             swing, other, _, _ = LIMBS[limb]
@@ -97,8 +96,8 @@ class IKProposer:
         transforms, joints = forward_kinematics(rot, root_t, rest.joints, self.model.parents)
         ends = end_site_positions(transforms, rest.end_sites, self.model.end_site_parents,
                                   rest.joints)
-        return np.stack([w * joints[:, j] + (1.0 - w) * ends[:, e] for j, e, w in self._pairs],
-                        axis=1)
+        return np.stack([0.5 * (joints[:, j] + ends[:, e]) for j, e in self._midpoints]
+                        + [ends[:, e] for e in self._toes], axis=1)
 
     def solve(self, limb: str, target: np.ndarray, reference: np.ndarray, rest,
               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
