@@ -14,3 +14,25 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 # (Fast DDS ports stay valid for ids up to 101 on Linux).
 os.environ["ROS_DOMAIN_ID"] = str(os.environ.get("HMOCAP_TEST_DOMAIN_ID") or 1 + os.getpid() % 100)
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
+
+
+import pytest  # noqa: E402  (after the environment above)
+
+
+@pytest.fixture(scope="session")
+def model():
+    """The tracking body model (test modules about other models define their own ``model``)."""
+    from hmocap_ros.body import load_body_model
+
+    return load_body_model("tracking")
+
+
+@pytest.fixture(scope="session")
+def rig():
+    """The cameras of ``config/rig_example.yaml`` at half resolution (320x240)."""
+    from pathlib import Path
+
+    from hmocap_ros.rig import Rig, load_rig
+
+    full = load_rig(Path(__file__).resolve().parents[1] / "config" / "rig_example.yaml")
+    return Rig(full.frame_id, tuple(c.scaled(0.5) for c in full))

@@ -15,11 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hmocap_ros.body import (BodyShape, entity_sizes, load_body_model, local_rotations_to_pose,
+from hmocap_ros.body import (BodyShape, entity_sizes, local_rotations_to_pose,
                              rest_pose)
 from hmocap_ros.render import project_batch, render_silhouettes
 from hmocap_ros.render.reference import silhouette_reference
-from hmocap_ros.rig import Rig, load_rig
 from hmocap_ros.sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_PARAMS, AnthropometryEstimator,
                                                           EstimationParams, shape_from_state,
@@ -36,17 +35,6 @@ from hmocap_ros.tracking.visual_hull import room_bounds, visual_hull
 ROOT = Path(__file__).resolve().parents[1]
 CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"
 STAMP0 = 1_700_000_000_000_000_000
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_body_model("tracking")
-
-
-@pytest.fixture(scope="module")
-def rig():
-    full = load_rig(ROOT / "config" / "rig_example.yaml")
-    return Rig(full.frame_id, tuple(c.scaled(0.5) for c in full))
 
 
 def camera_arrays(rig):

@@ -5,30 +5,14 @@ cameras of ``config/rig_example.yaml`` at 320x240 (working resolution 160x120).
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from hmocap_ros.body import load_body_model, rest_pose, sample_pose
+from hmocap_ros.body import rest_pose, sample_pose
 from hmocap_ros.render import project_batch, render_silhouettes, xor_counts
-from hmocap_ros.rig import Rig, load_rig
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.fused_xor import xor_counts_from_vertices
 from hmocap_ros.tracking.limb_proposals import LIMBS, LimbProposer
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_body_model("tracking")
-
-
-@pytest.fixture(scope="module")
-def rig():
-    full = load_rig(ROOT / "config" / "rig_example.yaml")
-    return Rig(full.frame_id, tuple(c.scaled(0.5) for c in full))
 
 
 def cams(rig):
