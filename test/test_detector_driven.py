@@ -147,6 +147,13 @@ def test_reacquisition_gives_a_lost_hand_a_candidate_within_reach():
     # nothing within reach: the hand stays undetected
     hands = reacquire_hands(cands[:2], assigned, shoulders, reach, head, 0.3)
     assert np.isnan(hands[0]).all()
+    # within the left arm's reach, but on the right of the body (nearer the right shoulder):
+    # another skin blob of the right arm, not the lost left hand
+    right_side = np.array([-0.35, 1.1, 0.3])
+    assert np.linalg.norm(right_side - shoulders[0]) < reach[0]
+    hands = reacquire_hands(np.vstack([right_side, assigned[1]]), assigned, shoulders, reach,
+                            head, 0.3)
+    assert np.isnan(hands[0]).all()
 
 
 def test_detection_cost_eq_2_20_matches_each_detection_to_its_own_kind():

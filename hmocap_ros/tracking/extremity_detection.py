@@ -28,7 +28,9 @@ Per frame set:
 6b. **Re-acquisition** (``reacquire``, beyond the thesis): a hand left unassigned by eq. 2.19
    (the tracked arm is lost, farther than Upsilon from its hand) takes the closest remaining
    candidate within arm's reach of its shoulder (the reference pose's arm length + 5 cm) that
-   is not near the predicted head (30 cm), so a lost arm can be drawn back by IK particles.
+   is not near the predicted head (30 cm) and lies nearer its own shoulder than the other
+   shoulder (so that the other hand is not taken), so a lost arm can be drawn back by IK
+   particles.
 7. **Feet** (``geodesic_extrema``, beyond the thesis' skin detector, which cannot see shoes;
    the thesis lists feet among the extremities it localises): the extremities of the carved
    hull itself, the points geodesically farthest from the body's centre (after Baak et al.'s
@@ -307,8 +309,9 @@ def reacquire_hands(candidates: np.ndarray, assigned: np.ndarray, shoulders: np.
     """Second pass for hands eq. 2.19 left unassigned: (2, 3) hands (see the module's 6b).
 
     assigned: (3, 3) left hand, right hand, head after eq. 2.19 (NaN: none). Candidates
-    already used, or within ``head_exclusion`` of the predicted ``head``, are not taken; the
-    closest (candidate, shoulder) pair within that arm's ``reach`` goes first.
+    already used, within ``head_exclusion`` of the predicted ``head``, or not nearer the hand's
+    own shoulder than the other one, are not taken; the closest (candidate, shoulder) pair
+    within that arm's ``reach`` goes first.
     """
     hands = np.array(assigned[:2], dtype=np.float64)
     if len(candidates) == 0 or np.isfinite(hands).all():
@@ -320,6 +323,7 @@ def reacquire_hands(candidates: np.ndarray, assigned: np.ndarray, shoulders: np.
     if np.isfinite(head).all():
         used |= np.linalg.norm(candidates - head, axis=1) <= head_exclusion
     d = np.linalg.norm(shoulders[:, None] - candidates[None], axis=2)  # (2, E)
+    d[d >= d[::-1]] = np.inf  # each hand keeps to its own side
     d[:, used] = np.inf
     d[d > np.asarray(reach, dtype=np.float64)[:, None]] = np.inf
     d[np.isfinite(hands).all(axis=1)] = np.inf
