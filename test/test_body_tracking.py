@@ -202,6 +202,26 @@ def test_visual_hull_takes_the_best_seen_person_or_the_one_near_the_last_pose(mo
     assert np.linalg.norm(near_b.centroid[[0, 2]] - [-2.3, -1.8]) < 0.3
     far = visual_hull(*args, near=np.array([2.0, 0.9, 2.0]))  # nobody there: best seen
     assert np.linalg.norm(far.centroid[[0, 2]] - [0.4, 0.2]) < 0.1
+    # a track region around the second person: the best-seen one is outside it
+    in_region = visual_hull(*args, region=(-2.8, -2.3, -1.5, -1.0))
+    assert np.linalg.norm(in_region.centroid[[0, 2]] - [-2.3, -1.8]) < 0.3
+    assert visual_hull(*args, region=(1.5, 1.5, 2.5, 2.5)) is None  # nobody in it
+
+
+def test_tracker_starts_only_on_a_person_in_its_track_region(model, rig):
+    """``track_region``: a person outside it is not followed, one inside is."""
+    pose = model.rest_pose(None).copy()
+    pose[model.skeleton.translation_dofs[[0, 2]]] = [0.4, 0.2]
+    masks, _ = render_masks(model, rig, pose[None])
+    elsewhere = TrackerParams(method="hpf", shape_frames=1, shape_particles=8,
+                              track_region=[-2.0, -2.0, -1.0, -1.0])
+    tracker = BodyTracker(model, rig, elsewhere, np.random.default_rng(0))
+    assert tracker.update(list(masks[0]), 1).state == "searching"
+    around = dataclasses.replace(elsewhere, track_region=[0.0, -0.2, 0.8, 0.6])
+    tracker = BodyTracker(model, rig, around, np.random.default_rng(0))
+    assert tracker.update(list(masks[0]), 1).state != "searching"
+    with pytest.raises(ValueError, match="track_region"):
+        TrackerParams(track_region=[1.0, 0.0, 0.0, 1.0])
 
 
 # ----------------------------------------------------------------------------- anthropometry

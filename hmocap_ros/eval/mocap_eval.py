@@ -34,7 +34,7 @@ import json
 import logging
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -418,7 +418,9 @@ def _overrides(items) -> dict:
         if key not in known:
             raise ValueError(f"unknown tracker parameter {key!r}; known: {sorted(known)}")
         default = known[key].default
-        if isinstance(default, bool):
+        if default is MISSING:  # a list (track_region): comma-separated numbers
+            out[key] = [float(v) for v in value.split(",") if v.strip()]
+        elif isinstance(default, bool):
             out[key] = value.lower() in ("1", "true", "yes", "on")
         else:
             out[key] = type(default)(value)

@@ -148,6 +148,13 @@ class TrackerParams:
                                     "wrong height and a wrong first pose.")
     min_foreground: int = _param(40, "Foreground pixels at the working resolution for a view "
                                      "to count as seeing a person.")
+    track_region: list[float] = dataclasses.field(default_factory=list, metadata={
+        "read_only": False,
+        "description": "Floor box [x_min, z_min, x_max, z_max] (m, room frame) where a track may "
+                       "start: only a person whose visual hull centroid stands in it is "
+                       "followed (e.g. the interaction area in front of a display, so that "
+                       "people passing by are ignored); once started, the track follows the "
+                       "person anywhere. Empty: the whole room, the best-seen person."})
     voxel_size: float = _param(0.03, "Voxel edge (m) of the fine visual hull grid.")
     min_hull_height: float = _param(0.9, "Smallest hull top (m) accepted as a person.")
     hull_max_misses: int = _param(0, "Views in which a hull voxel may project onto background "
@@ -195,6 +202,10 @@ class TrackerParams:
             (self.shape_frames >= 1 and self.shape_particles >= 2, "shape_frames >= 1, "
                                                                    "shape_particles >= 2"),
             (self.lost_frames >= 1, "lost_frames must be >= 1"),
+            (len(self.track_region) in (0, 4) and all(np.isfinite(self.track_region))
+             and (not self.track_region or (self.track_region[0] < self.track_region[2]
+                                            and self.track_region[1] < self.track_region[3])),
+             "track_region must be empty or [x_min, z_min, x_max, z_max] with min < max"),
             (self.refine_kappa >= 0.0, "refine_kappa must be >= 0"),
         ]
         for ok, message in checks:
@@ -508,7 +519,8 @@ class BodyTracker:
         near = self.estimate[self.skel.translation_dofs] if self.estimate is not None else None
         hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
                            fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
-                           max_misses=p.hull_max_misses, near=near)
+                           max_misses=p.hull_max_misses, near=near,
+                           region=p.track_region or None)
         if hull is None or hull.top < p.min_hull_height:
             return False
         if self._views_seeing_whole(hull, obs) < min(p.min_full_views, obs.n_views):

@@ -7,8 +7,9 @@ foreground in every view that sees it (at most ``max_misses`` misses allowed) an
 ``min_views`` views see it. The person is a 26-connected component: of those at least 30% of
 the largest one's size, the one the rig sees best (the highest mean number of views seeing its
 voxels; then the largest). With a second person in the room, the tracker thus takes the one in
-full view of the cameras, not whoever is nearest a camera or half out of its field. The grid
-is coarse over the whole room, then fine inside that component's box.
+full view of the cameras, not whoever is nearest a camera or half out of its field. A
+``region`` of the floor (x/z box) restricts the choice to people whose centroid stands in it.
+The grid is coarse over the whole room, then fine inside that component's box.
 
 Outputs (:class:`Hull`): centroid, top height (the feet stand on the floor, y = 0), volume,
 and a heading guess from the principal horizontal axis of the upper-body voxels (the shoulder
@@ -107,23 +108,34 @@ def carve(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.
 def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
                       min_fraction: float = 0.3, centres: np.ndarray | None = None,
                       near: np.ndarray | None = None,
-                      near_radius: float = 1.0) -> np.ndarray | None:
+                      near_radius: float = 1.0,
+                      region: Sequence[float] | None = None) -> np.ndarray | None:
     """The component to track: of the connected components at least ``min_fraction`` of the
     largest one's size, the one the views see best (highest mean number of views seeing its
     voxels), then the largest. With two people in the room, the rig tracks the one it
     observes best rather than whoever is closest to a camera or half out of its view.
     ``near`` (3,) with ``centres`` (the voxel centres, ``occ.shape + (3,)``): the component
     whose centroid lies nearest that point, if within ``near_radius`` metres (the person the
-    tracker just lost), else as above."""
+    tracker just lost), else as above. ``region`` ``(x_min, z_min, x_max, z_max)`` with
+    ``centres``: only components whose centroid lies in that floor box count (None when there
+    is none)."""
     labels, n = ndimage.label(occ, structure=np.ones((3, 3, 3), dtype=bool))
     if n == 0:
         return None
     sizes = np.bincount(labels.ravel())[1:]
-    big = sizes >= min_fraction * sizes.max()
-    if near is not None and centres is not None:
+    c = None
+    if centres is not None and (near is not None or region is not None):
         flat = labels.ravel()
         c = np.stack([np.bincount(flat, weights=centres[..., k].ravel())[1:] for k in range(3)],
                      axis=1) / np.maximum(sizes, 1)[:, None]
+    if region is not None and c is not None:
+        x0, z0, x1, z1 = (float(v) for v in region)
+        inside = (c[:, 0] >= x0) & (c[:, 0] <= x1) & (c[:, 2] >= z0) & (c[:, 2] <= z1)
+        if not inside.any():
+            return None
+        sizes = np.where(inside, sizes, 0)
+    big = sizes >= min_fraction * sizes.max()
+    if near is not None and c is not None:
         dist = np.linalg.norm(c[:, [0, 2]] - np.asarray(near)[[0, 2]], axis=1)
         dist[~big] = np.inf
         if dist.min() <= near_radius:
@@ -138,13 +150,15 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
 def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.ndarray,
                 bounds: tuple[np.ndarray, np.ndarray], *, coarse_voxel: float = 0.08,
                 fine_voxel: float = 0.03, min_views: int = 2, max_misses: int = 0,
-                min_volume: float = 0.01, near: np.ndarray | None = None) -> Hull | None:
+                min_volume: float = 0.01, near: np.ndarray | None = None,
+                region: Sequence[float] | None = None) -> Hull | None:
     """Carve the person's visual hull; None when nothing of at least ``min_volume`` m^3 is found.
 
     masks: (M, H, W) foreground (non-zero) at the resolution of the cameras ``K, R, t, D``
     (e.g. an :class:`~hmocap_ros.tracking.body_fitness.Observation`). bounds: the room box
     (:func:`room_bounds`). near: where the person was last seen (restarts prefer the person
-    there, see :func:`_person_component`).
+    there, see :func:`_person_component`). region: ``(x_min, z_min, x_max, z_max)``, the
+    floor box a person's centroid must stand in (None: anywhere in the room).
     """
     if masks.shape[0] < min_views:
         return None
@@ -152,7 +166,7 @@ def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, 
     points, shape = _grid(lo, hi, coarse_voxel)
     occ, n_seen = carve(masks, K, R, t, D, points, min_views, max_misses, return_seen=True)
     comp = _person_component(occ.reshape(shape), n_seen.reshape(shape),
-                             centres=points.reshape(shape + (3,)), near=near)
+                             centres=points.reshape(shape + (3,)), near=near, region=region)
     if comp is None or comp.sum() * coarse_voxel ** 3 < min_volume:
         return None
     idx = np.argwhere(comp)
