@@ -150,6 +150,20 @@ def test_console_scripts_answer_help(script):
     assert "usage" in res.stdout.lower()
 
 
+def test_invalid_parameter_is_one_clear_line_and_exit_code_2(tmp_path):
+    import subprocess
+
+    exe = Path(sys.executable).parent / "body_tracker"
+    if not exe.exists():
+        pytest.skip(f"{exe} not installed (run make setup)")
+    res = subprocess.run([str(exe), "--ros-args", "-p", "method:=annealing", "-p",
+                          f"rig_file:={DEMO_RIG}"], capture_output=True, text=True, timeout=60,
+                         env=loopback_dds_env(domain_id=93))
+    assert res.returncode == 2
+    assert "method must be one of" in res.stderr + res.stdout
+    assert "Traceback" not in res.stderr
+
+
 def test_every_hmocap_subcommand_answers_help(capsys):
     from hmocap_ros.cli import COMMAND_GROUPS, main
 

@@ -152,7 +152,10 @@ def run_node(
     args: Sequence[str] | None = None,
     on_shutdown: Callable[[Node], None] | None = None,
 ) -> int:
-    """Standard ``main`` of a node: --help, default config, spin until Ctrl-C/SIGTERM, clean shutdown."""
+    """Standard ``main`` of a node: --help, default config, spin until Ctrl-C/SIGTERM, clean shutdown.
+
+    A node whose construction rejects its parameters (``ValueError``) logs one fatal line
+    naming the problem and returns 2, without a traceback."""
     argv = list(sys.argv if args is None else args)
     if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv[1:2]:
         print_help(node_name, doc, config_cls)
@@ -162,7 +165,11 @@ def run_node(
     flag.install()
     node = None
     try:
-        node = node_factory()
+        try:
+            node = node_factory()
+        except ValueError as err:
+            rclpy.logging.get_logger(node_name).fatal(f"cannot start: {err}")
+            return 2
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         while not flag.requested and rclpy.ok():
