@@ -131,10 +131,11 @@ class TrackerParams:
                                   "hull) and draw IK particles for the legs (off: it cost 10-20 "
                                   "mm on the tuning clips, see docs/tracking.md); False: hands "
                                   "only, as the thesis' skin detector.")
-    dd_reacquire: bool = _param(False, "dd-hpf: a hand that eq. 2.19 leaves unassigned (the arm "
-                                       "lost by more than 35 cm) takes a skin cluster within "
-                                       "arm's reach of its shoulder, on its own side (off: "
-                                       "49.9 against 49.2 mm on the tuning clips).")
+    dd_reacquire: bool = _param(True, "dd-hpf: a hand that eq. 2.19 leaves unassigned (the arm "
+                                      "lost by more than 35 cm) takes a skin cluster within "
+                                      "arm's reach of its shoulder, on its own side, so that IK "
+                                      "particles can draw a lost arm back (tuning clips, two "
+                                      "tracker seeds: 84.0 against 85.5 mm without).")
     render_filtered_parts: bool = _param(False, "Hierarchical methods: each layer renders only "
                                               "the body parts filtered so far (sec. 2.4); "
                                               "False renders the whole body at its predicted "
