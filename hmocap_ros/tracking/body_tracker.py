@@ -179,6 +179,8 @@ class TrackerParams:
                                           "shape is forgotten.")
 
     def __post_init__(self):
+        # a list from ROS or the command line; kept as a tuple so the params stay immutable
+        object.__setattr__(self, "track_region", tuple(float(v) for v in self.track_region))
         checks = [
             (self.method in METHODS, f"method must be one of {METHODS}"),
             (self.n_particles >= 0 and self.n_layers >= 0, "n_particles, n_layers must be >= 0"),
