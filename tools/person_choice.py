@@ -32,7 +32,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -41,7 +40,7 @@ from hmocap_ros.body import load_body_model  # noqa: E402
 from hmocap_ros.eval.mocap_eval import load_frames  # noqa: E402
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams  # noqa: E402
-from hmocap_ros.tracking.visual_hull import _grid, carve  # noqa: E402
+from hmocap_ros.tracking.visual_hull import coarse_people  # noqa: E402
 
 SHARED_BVH = ROOT.parent / "shared" / "data" / "bvh"
 #: (name, clip, start s, seconds or None for --seconds): tuning clips, never the evaluation
@@ -65,18 +64,9 @@ def _bag(work: Path, bvh: Path, start: float, seed: int, seconds: float) -> Path
 
 def people_seen(tracker: BodyTracker, obs) -> list[tuple[int, float, list]]:
     """(voxels, mean views seeing them, floor x/z) of the coarse hull's large components."""
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in tracker.room)
-    points, shape = _grid(lo, hi, 0.08)
-    occ, n_seen = carve(obs.masks, obs.K, obs.R, obs.t, obs.D, points, 2, 0, return_seen=True)
-    labels, n = ndimage.label(occ.reshape(shape), np.ones((3, 3, 3), dtype=bool))
-    if n == 0:
-        return []
-    flat = labels.ravel()
-    sizes = np.bincount(flat)[1:]
-    seen = np.bincount(flat, n_seen.astype(np.float64))[1:] / np.maximum(sizes, 1)
-    return [(int(sizes[i]), round(float(seen[i]), 2),
-             points[flat == i + 1].mean(axis=0)[[0, 2]].round(2).tolist())
-            for i in range(n) if sizes[i] >= 0.3 * sizes.max()]
+    return [(size, round(seen, 2), centroid[[0, 2]].round(2).tolist())
+            for size, seen, centroid in coarse_people(obs.masks, obs.K, obs.R, obs.t, obs.D,
+                                                      tracker.room)]
 
 
 def start_position(frames, model):

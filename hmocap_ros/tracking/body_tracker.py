@@ -205,9 +205,10 @@ class TrackerParams:
             (self.shape_frames >= 1 and self.shape_particles >= 2, "shape_frames >= 1, "
                                                                    "shape_particles >= 2"),
             (self.lost_frames >= 1, "lost_frames must be >= 1"),
-            (len(self.track_region) in (0, 4) and all(np.isfinite(self.track_region))
-             and (not self.track_region or (self.track_region[0] < self.track_region[2]
-                                            and self.track_region[1] < self.track_region[3])),
+            (not self.track_region
+             or (len(self.track_region) == 4 and np.isfinite(self.track_region).all()
+                 and self.track_region[0] < self.track_region[2]
+                 and self.track_region[1] < self.track_region[3]),
              "track_region must be empty or [x_min, z_min, x_max, z_max] with min < max"),
             (self.refine_kappa >= 0.0, "refine_kappa must be >= 0"),
         ]

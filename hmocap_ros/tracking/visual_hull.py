@@ -28,7 +28,7 @@ from scipy import ndimage
 
 from hmocap_ros.render import project_batch
 
-__all__ = ["Hull", "carve", "room_bounds", "visual_hull"]
+__all__ = ["Hull", "carve", "coarse_people", "room_bounds", "visual_hull"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,6 +105,49 @@ def carve(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.
     return (occ, n_seen) if return_seen else occ
 
 
+def _components(occ: np.ndarray, n_seen: np.ndarray | None = None,
+                centres: np.ndarray | None = None):
+    """26-connected components of ``occ``: ``(labels, n, sizes (n,), seen (n,) or None,
+    centroids (n, 3) or None)``; ``seen`` is the mean of ``n_seen`` over each component's
+    voxels, ``centroids`` the mean of the voxel ``centres`` (``occ.shape + (3,)``)."""
+    labels, n = ndimage.label(occ, structure=np.ones((3, 3, 3), dtype=bool))
+    flat = labels.ravel()
+    sizes = np.bincount(flat, minlength=n + 1)[1:]
+    seen = c = None
+    if n_seen is not None:
+        seen = (np.bincount(flat, weights=n_seen.ravel().astype(np.float64), minlength=n + 1)[1:]
+                / np.maximum(sizes, 1))
+    if centres is not None:
+        c = np.stack([np.bincount(flat, weights=centres[..., k].ravel(), minlength=n + 1)[1:]
+                      for k in range(3)], axis=1) / np.maximum(sizes, 1)[:, None]
+    return labels, n, sizes, seen, c
+
+
+def _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel, min_views, max_misses):
+    """The coarse room grid carved: ``(occupancy, views seeing each voxel, voxel centres)``
+    shaped as the grid (the last with a trailing 3)."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    points, shape = _grid(lo, hi, coarse_voxel)
+    occ, n_seen = carve(masks, K, R, t, D, points, min_views, max_misses, return_seen=True)
+    return occ.reshape(shape), n_seen.reshape(shape), points.reshape(shape + (3,))
+
+
+def coarse_people(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
+                  D: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], *,
+                  coarse_voxel: float = 0.08, min_views: int = 2, max_misses: int = 0,
+                  min_fraction: float = 0.3) -> list[tuple[int, float, np.ndarray]]:
+    """The candidates :func:`visual_hull` chooses from: per component of the coarse hull of at
+    least ``min_fraction`` of the largest one's size, ``(voxels, mean views seeing them,
+    centroid (3,))`` (for diagnostics: whom the tracker could start on, and why)."""
+    occ, n_seen, centres = _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel,
+                                             min_views, max_misses)
+    _, n, sizes, seen, c = _components(occ, n_seen, centres)
+    if n == 0:
+        return []
+    return [(int(sizes[k]), float(seen[k]), c[k]) for k in range(n)
+            if sizes[k] >= min_fraction * sizes.max()]
+
+
 def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
                       min_fraction: float = 0.3, centres: np.ndarray | None = None,
                       near: np.ndarray | None = None,
@@ -119,15 +162,10 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
     tracker just lost), else as above. ``region`` ``(x_min, z_min, x_max, z_max)`` with
     ``centres``: only components whose centroid lies in that floor box count (None when there
     is none)."""
-    labels, n = ndimage.label(occ, structure=np.ones((3, 3, 3), dtype=bool))
+    labels, n, sizes, seen, c = _components(
+        occ, n_seen, centres if (near is not None or region is not None) else None)
     if n == 0:
         return None
-    sizes = np.bincount(labels.ravel())[1:]
-    c = None
-    if centres is not None and (near is not None or region is not None):
-        flat = labels.ravel()
-        c = np.stack([np.bincount(flat, weights=centres[..., k].ravel())[1:] for k in range(3)],
-                     axis=1) / np.maximum(sizes, 1)[:, None]
     if region is not None and c is not None:
         x0, z0, x1, z1 = (float(v) for v in region)
         inside = (c[:, 0] >= x0) & (c[:, 0] <= x1) & (c[:, 2] >= z0) & (c[:, 2] <= z1)
@@ -140,9 +178,8 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
         dist[~big] = np.inf
         if dist.min() <= near_radius:
             return labels == (1 + int(np.argmin(dist)))
-    if n_seen is None or n == 1:
+    if seen is None or n == 1:
         return labels == (1 + int(np.argmax(sizes)))
-    seen = np.bincount(labels.ravel(), weights=n_seen.ravel().astype(np.float64))[1:] / np.maximum(sizes, 1)
     best = max(np.flatnonzero(big), key=lambda k: (round(float(seen[k]), 1), int(sizes[k])))
     return labels == (1 + int(best))
 
@@ -162,11 +199,10 @@ def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, 
     """
     if masks.shape[0] < min_views:
         return None
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
-    points, shape = _grid(lo, hi, coarse_voxel)
-    occ, n_seen = carve(masks, K, R, t, D, points, min_views, max_misses, return_seen=True)
-    comp = _person_component(occ.reshape(shape), n_seen.reshape(shape),
-                             centres=points.reshape(shape + (3,)), near=near, region=region)
+    lo = np.asarray(bounds[0], dtype=np.float64)
+    occ, n_seen, centres = _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel,
+                                             min_views, max_misses)
+    comp = _person_component(occ, n_seen, centres=centres, near=near, region=region)
     if comp is None or comp.sum() * coarse_voxel ** 3 < min_volume:
         return None
     idx = np.argwhere(comp)
