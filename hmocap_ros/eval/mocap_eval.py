@@ -42,7 +42,7 @@ import numpy as np
 from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
 
 __all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames",
-           "main_from_args", "plot_errors", "run_method"]
+           "main_from_args", "plot_errors", "run_method", "tracker_overrides"]
 
 log = logging.getLogger(__name__)
 
@@ -406,7 +406,9 @@ def plot_errors(report: dict, path: str | Path, title: str | None = None) -> Non
 # ----------------------------------------------------------------------------- CLI
 
 
-def _overrides(items) -> dict:
+def tracker_overrides(items) -> dict:
+    """TrackerParams fields from ``KEY=VALUE`` strings (``--param``): typed as the field's
+    default; a list field (``track_region``) takes comma-separated numbers."""
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
     known = {f.name: f for f in fields(TrackerParams)}
@@ -457,7 +459,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
     methods = list(METHODS) if ns.compare else (ns.method or ["dd-hpf"])
     methods = list(dict.fromkeys(methods))
     try:
-        overrides = _overrides(ns.param)
+        overrides = tracker_overrides(ns.param)
         report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
                           seed=ns.seed, particles=ns.particles, layers=ns.layers,
                           overrides=overrides, given_shape=ns.given_shape)
