@@ -349,6 +349,30 @@ def test_tracker_follows_a_short_sequence(model, rig):
     assert all(1.0 <= e <= 120 for e in res.ess)
 
 
+def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
+    """research_every: a track turned by 120 degrees stays wrong without it, not with it."""
+    shape = subject_shape()
+    params = clip_poses(model, 60, 4, shape, position=(-0.4, 0.3), heading=-1.0)
+    masks, joints = render_masks(model, rig, params, shape)
+    yaw = model.skeleton.dof_index("root_yaw")
+    errors = {}
+    for every in (0, 1):
+        tracker = small_tracker(model, rig, shape=shape, research_every=every)
+        for f in range(2):
+            tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
+        assert tracker.state == "tracking"
+        tracker.estimate[yaw] += np.deg2rad(120.0)  # a wrong pose the filter cannot leave
+        tracker.particles[:, yaw] += np.deg2rad(120.0)
+        tracker._previous_estimate = None
+        for f in range(2, 4):
+            res = tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
+        errors[every] = 1000 * np.linalg.norm(res.joints - joints[3], axis=1).mean()
+        if every:
+            assert res.timings["research"] > 0
+    assert errors[0] > 150.0, errors
+    assert errors[1] < 60.0, errors
+
+
 def test_tracker_survives_dropped_cameras_empty_frames_and_no_person(model, rig):
     shape = subject_shape()
     params = clip_poses(model, 0, 4, shape)

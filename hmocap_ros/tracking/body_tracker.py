@@ -175,6 +175,13 @@ class TrackerParams:
                                    "above which a frame counts as a failed fit.")
     lost_frames: int = _param(8, "Consecutive failed fits after which the track is lost and "
                                  "restarts from the visual hull.")
+    research_every: int = _param(25, "While tracking, every this many frames a fresh start-up "
+                                    "search (heading search with limb proposals and Powell "
+                                    "from the visual hull, at the estimated shape) is weighed "
+                                    "against the frame's estimate, and the filter is re-seeded "
+                                    "from it when it fits better: a way out of a wrong pose the "
+                                    "per-frame filter cannot leave (costs about a second on "
+                                    "that frame); 0: off.")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
                                           "shape is forgotten.")
 
@@ -205,6 +212,7 @@ class TrackerParams:
             (self.shape_frames >= 1 and self.shape_particles >= 2, "shape_frames >= 1, "
                                                                    "shape_particles >= 2"),
             (self.lost_frames >= 1, "lost_frames must be >= 1"),
+            (self.research_every >= 0, "research_every must be >= 0 (0: off)"),
             (not self.track_region
              or (len(self.track_region) == 4 and np.isfinite(self.track_region).all()
                  and self.track_region[0] < self.track_region[2]
@@ -321,6 +329,7 @@ class BodyTracker:
         self._hull_step = np.zeros(3)
         self._bad_frames = 0
         self._absent_frames = 0
+        self._tracked_frames = 0
         if self.ik is not None:
             self.ik.reset()
         if forget_shape:
@@ -477,6 +486,12 @@ class BodyTracker:
             self.estimate = res.weighted_particles[int(np.argmax(res.weights))].copy()
         else:
             self.estimate = res.estimate.copy()
+        self._tracked_frames += 1
+        every = self.params.research_every
+        if every > 0 and self._tracked_frames % every == 0:
+            t1 = time.perf_counter()
+            self._research(obs, stamp_ns)
+            timings["research"] = time.perf_counter() - t1
         fit_cost = self._fit_cost(obs)
         if not np.isfinite(fit_cost) or fit_cost > self.params.lost_cost:
             self._bad_frames += 1
@@ -596,7 +611,50 @@ class BodyTracker:
         self._previous_estimate[self.skel.translation_dofs] -= self._hull_step
         self._estimator = None
         self._bad_frames = 0
+        self._tracked_frames = 0
         self.state = "tracking"
+
+    def _research(self, obs: Observation, stamp_ns: int) -> bool:
+        """A fresh start-up search on this frame at the estimated shape (``research_every``).
+
+        The start-up's heading search and Powell fits (sec. 2.3.4) run from the visual hull of
+        the person being tracked; when one of their poses has a lower whole-body cost (eq.
+        2.8) than the filter's estimate of this frame, it becomes the estimate and the
+        particles are drawn from its hypothesis. The per-frame filter only explores around
+        its last estimate, so a wrong pose whose parts compensate each other (a pelvis turned
+        with the legs bent to make up for it, legs swapped) is never left otherwise, although
+        the silhouettes prefer the truth (``tools/failure_split.py``). Returns True when the
+        filter was re-seeded.
+        """
+        p = self.params
+        n = self.skel.n_dofs
+        hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
+                           fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
+                           max_misses=p.hull_max_misses,
+                           near=self.estimate[self.skel.translation_dofs])
+        if hull is None or hull.top < p.min_hull_height:
+            return False
+        search = AnthropometryEstimator(
+            self.fitness, EstimationParams(n_particles=p.shape_particles, frames=1,
+                                           estimate_shape=False,
+                                           proposal_fraction=p.proposal_fraction),
+            self.rng, room=self.room, fixed_shape=self.shape,
+            proposer=self.start_proposer if p.proposal_fraction > 0 else None)
+        search.start(obs, hull)
+        poses = np.stack([self.estimate] + [h.estimate[:n] for h in search.hypotheses])
+        costs = self.fitness.costs(poses, obs, self.fitness.rest(self.shape))
+        best = int(np.argmin(costs))
+        if best == 0:
+            return False
+        log.info("frame %d: a fresh search fits better (cost %.3f against %.3f): filter "
+                 "re-seeded", stamp_ns, costs[best], costs[0])
+        particles = search.hypotheses[best - 1].particles[:, :n]
+        idx = self.rng.choice(len(particles), size=len(self.particles),
+                              replace=len(particles) < len(self.particles))
+        self.particles = particles[idx].copy()
+        self.estimate = poses[best].copy()
+        self._previous_estimate = None
+        return True
 
     def _predict(self) -> np.ndarray | None:
         """Apply the velocity prediction to the particles; returns the predicted pose."""
