@@ -12,7 +12,8 @@ hand-detector maps (1 where the hands are seen; the skin detector's own cost, 0.
 frame (median), evaluations per second, and where the time goes (skinning = eq. 2.11/2.12,
 projection (fused into the XOR pass by default), XOR = eq. 2.8/2.15, proposals (their own search;
 the re-ranking of proposals counts as skinning and XOR), detection (DD-HPF: 3D extremities and
-IK solutions), the rest = resampling, kernels, boxes).
+IK solutions), the rest = resampling, kernels, boxes); then the time of one fresh start-up
+search (``research_every``, once every 25 frames by default), which the frames above leave out.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
 """
@@ -74,8 +75,11 @@ def main() -> None:
     for threads in args.threads:
         numba.set_num_threads(threads)
         for method in args.methods:
+            # the fresh search (research_every) runs on the frame after the timed ones
+            # (the start-up and warm-up frames do not count, so it is tracked frame n + 2)
             tracker = BodyTracker(model, rig, TrackerParams(method=method,
-                                                            working_scale=args.working_scale),
+                                                            working_scale=args.working_scale,
+                                                            research_every=args.frames + 2),
                                   np.random.default_rng(0), shape=shape)
             tracker.update(list(masks[0]), 0)  # start-up (hull, Powell): not timed
             tracker.update(list(masks[1 % len(masks)]), 1, list(maps[1 % len(masks)]))  # warm-up
@@ -96,6 +100,10 @@ def main() -> None:
                   f"{evals / spf:8.0f} evaluations/s  | " + "  ".join(
                       f"{k} {stages.get(k, 0.0) / n:.3f}" for k in known) + f"  other {rest:.3f}",
                   flush=True)
+            res = tracker.update(list(masks[n]), n + 1, list(maps[n]))
+            search = res.timings.get("research", float("nan"))
+            print(f"{'':18s}fresh search (research_every): {search:.2f} s on its frame, "
+                  f"{search / 25:.3f} s/frame at the default of one every 25 frames", flush=True)
 
 
 if __name__ == "__main__":

@@ -311,7 +311,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
             times.append(result.timings["total"])
             evals.append(result.timings["evaluations"])
             for key in ("observe", "hull", "init", "filter", "skinning", "projection", "xor",
-                        "detection", "proposals"):
+                        "detection", "proposals", "research"):
                 stage[key] = stage.get(key, 0.0) + result.timings.get(key, 0.0)
         if result.has_pose:
             estimates[k] = result.joints[est_idx]
