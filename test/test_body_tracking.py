@@ -373,6 +373,29 @@ def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
     assert errors[1] < 60.0, errors
 
 
+def test_fresh_search_does_not_jump_to_another_person(model, rig, monkeypatch):
+    """research_every: when the hull holds only somebody else (the tracked person hidden),
+    the fresh search does not move the track to them."""
+    shape = subject_shape()
+    subject = clip_poses(model, 60, 2, shape, position=(-0.4, 0.3), heading=-1.0)
+    bystander = model.rest_pose(None).copy()
+    bystander[model.skeleton.translation_dofs[[0, 2]]] = [1.4, -1.2]
+    masks, _ = render_masks(model, rig, subject, shape)
+    other, _ = render_masks(model, rig, bystander[None], shape)
+    moved = {}
+    for radius in (0.5, 50.0):
+        tracker = small_tracker(model, rig, shape=shape, research_every=1)
+        for f in range(2):
+            tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
+        assert tracker.state == "tracking"
+        monkeypatch.setattr("hmocap_ros.tracking.body_tracker.RESEARCH_RADIUS", radius)
+        res = tracker.update(list(other[0]), STAMP0 + 2 * 40_000_000)
+        pelvis = res.joints[model.joint_names.index("pelvis")]
+        moved[radius] = np.linalg.norm(pelvis[[0, 2]] - subject[1, [0, 2]])
+    assert moved[0.5] < 0.5, moved      # the shipped radius: the track stays
+    assert moved[50.0] > 1.5, moved     # unguarded, the search would take the bystander
+
+
 def test_tracker_survives_dropped_cameras_empty_frames_and_no_person(model, rig):
     shape = subject_shape()
     params = clip_poses(model, 0, 4, shape)

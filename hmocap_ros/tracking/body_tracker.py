@@ -67,6 +67,11 @@ log = logging.getLogger(__name__)
 STATES = ("searching", "initialising", "tracking", "lost")
 
 
+#: ``research_every``: how far (m, on the floor) from the tracked pelvis a fresh search may
+#: look and land; farther is somebody else.
+RESEARCH_RADIUS = 0.5
+
+
 def _param(default, description: str):
     return dataclasses.field(default=default, metadata={"description": description,
                                                         "read_only": False})
@@ -628,11 +633,14 @@ class BodyTracker:
         """
         p = self.params
         n = self.skel.n_dofs
+        pelvis = self.estimate[self.skel.translation_dofs]
         hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
                            fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
-                           max_misses=p.hull_max_misses,
-                           near=self.estimate[self.skel.translation_dofs])
-        if hull is None or hull.top < p.min_hull_height:
+                           max_misses=p.hull_max_misses, near=pelvis)
+        # the person being tracked, not whoever else the hull holds (its "near" falls back
+        # to the best-seen person when nobody is near)
+        if (hull is None or hull.top < p.min_hull_height
+                or np.linalg.norm((hull.centroid - pelvis)[[0, 2]]) > RESEARCH_RADIUS):
             return False
         search = AnthropometryEstimator(
             self.fitness, EstimationParams(n_particles=p.shape_particles, frames=1,
@@ -643,6 +651,9 @@ class BodyTracker:
         search.start(obs, hull)
         poses = np.stack([self.estimate] + [h.estimate[:n] for h in search.hypotheses])
         costs = self.fitness.costs(poses, obs, self.fitness.rest(self.shape))
+        near = np.linalg.norm((poses[:, self.skel.translation_dofs] - pelvis)[:, [0, 2]],
+                              axis=1) <= RESEARCH_RADIUS
+        costs = np.where(near, costs, np.inf)
         best = int(np.argmin(costs))
         if best == 0:
             return False
