@@ -185,8 +185,8 @@ class TrackerParams:
                                     "from the visual hull, at the estimated shape) is weighed "
                                     "against the frame's estimate, and the filter is re-seeded "
                                     "from it when it fits better: a way out of a wrong pose the "
-                                    "per-frame filter cannot leave (costs about a second on "
-                                    "that frame); 0: off.")
+                                    "per-frame filter cannot leave (costs 1.5-2 s on that "
+                                    "frame on 2 cores); 0: off.")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
                                           "shape is forgotten.")
 
