@@ -388,7 +388,7 @@ def test_fresh_search_does_not_jump_to_another_person(model, rig, monkeypatch):
         for f in range(2):
             tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
         assert tracker.state == "tracking"
-        monkeypatch.setattr("hmocap_ros.tracking.body_tracker.RESEARCH_RADIUS", radius)
+        monkeypatch.setattr("hmocap_ros.tracking.body_tracker.SAME_PERSON_RADIUS", radius)
         res = tracker.update(list(other[0]), STAMP0 + 2 * 40_000_000)
         pelvis = res.joints[model.joint_names.index("pelvis")]
         moved[radius] = np.linalg.norm(pelvis[[0, 2]] - subject[1, [0, 2]])

@@ -67,9 +67,9 @@ log = logging.getLogger(__name__)
 STATES = ("searching", "initialising", "tracking", "lost")
 
 
-#: ``research_every``: how far (m, on the floor) from the tracked pelvis a fresh search may
-#: look and land; farther is somebody else.
-RESEARCH_RADIUS = 0.5
+#: How far (m, on the floor) the tracked person's hull (start-up) or a fresh search's pose
+#: (``research_every``) may lie from where the person was; farther is somebody else.
+SAME_PERSON_RADIUS = 0.5
 
 
 def _param(default, description: str):
@@ -541,10 +541,7 @@ class BodyTracker:
         """Visual hull and Powell fit; True when a person was found and the start-up began."""
         p = self.params
         near = self.estimate[self.skel.translation_dofs] if self.estimate is not None else None
-        hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
-                           fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
-                           max_misses=p.hull_max_misses, near=near,
-                           region=p.track_region or None)
+        hull = self._hull(obs, near=near, region=p.track_region or None)
         if hull is None or hull.top < p.min_hull_height:
             return False
         if self._views_seeing_whole(hull, obs) < min(p.min_full_views, obs.n_views):
@@ -582,14 +579,27 @@ class BodyTracker:
                   & (boxes[:, 2] <= obs.width - margin_px) & (boxes[:, 3] <= obs.height - margin_px))
         return int(inside.sum())
 
+    def _hull(self, obs: Observation, near: np.ndarray | None = None, region=None):
+        """The visual hull of the person (sec. 2.3.4) at the tracker's settings."""
+        p = self.params
+        return visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
+                           fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
+                           max_misses=p.hull_max_misses, near=near, region=region)
+
+    def _same_person_hull(self, obs: Observation, point: np.ndarray):
+        """The hull of the person at ``point`` (room, 3), or None when the hull nearest it
+        lies farther than :data:`SAME_PERSON_RADIUS` on the floor (``visual_hull``'s
+        ``near`` falls back to the best-seen person, who may be somebody else)."""
+        hull = self._hull(obs, near=point)
+        if hull is None or np.linalg.norm((hull.centroid - point)[[0, 2]]) > SAME_PERSON_RADIUS:
+            return None
+        return hull
+
     def _follow_hull(self, obs: Observation) -> None:
         """During the start-up: move the hypotheses with the visual hull's centroid (a runner
         crosses a metre during a four-frame start-up, far beyond the start-up's diffusion)."""
-        p = self.params
-        hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
-                           fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
-                           max_misses=p.hull_max_misses, near=self._hull_centroid)
-        if hull is None or np.linalg.norm((hull.centroid - self._hull_centroid)[[0, 2]]) > 0.5:
+        hull = self._same_person_hull(obs, self._hull_centroid)
+        if hull is None:
             self._hull_step = np.zeros(3)
             return
         step = np.zeros(3)
@@ -634,13 +644,8 @@ class BodyTracker:
         p = self.params
         n = self.skel.n_dofs
         pelvis = self.estimate[self.skel.translation_dofs]
-        hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
-                           fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
-                           max_misses=p.hull_max_misses, near=pelvis)
-        # the person being tracked, not whoever else the hull holds (its "near" falls back
-        # to the best-seen person when nobody is near)
-        if (hull is None or hull.top < p.min_hull_height
-                or np.linalg.norm((hull.centroid - pelvis)[[0, 2]]) > RESEARCH_RADIUS):
+        hull = self._same_person_hull(obs, pelvis)  # the person tracked, nobody else
+        if hull is None or hull.top < p.min_hull_height:
             return False
         search = AnthropometryEstimator(
             self.fitness, EstimationParams(n_particles=p.shape_particles, frames=1,
@@ -652,7 +657,7 @@ class BodyTracker:
         poses = np.stack([self.estimate] + [h.estimate[:n] for h in search.hypotheses])
         costs = self.fitness.costs(poses, obs, self.fitness.rest(self.shape))
         near = np.linalg.norm((poses[:, self.skel.translation_dofs] - pelvis)[:, [0, 2]],
-                              axis=1) <= RESEARCH_RADIUS
+                              axis=1) <= SAME_PERSON_RADIUS
         costs = np.where(near, costs, np.inf)
         best = int(np.argmin(costs))
         if best == 0:
