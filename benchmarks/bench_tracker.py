@@ -102,8 +102,10 @@ def main() -> None:
                   flush=True)
             res = tracker.update(list(masks[n]), n + 1, list(maps[n]))
             search = res.timings.get("research", float("nan"))
+            every = TrackerParams().research_every
             print(f"{'':18s}fresh search (research_every): {search:.2f} s on its frame, "
-                  f"{search / 25:.3f} s/frame at the default of one every 25 frames", flush=True)
+                  f"{search / every:.3f} s/frame at the default of one every {every} frames",
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -662,7 +662,7 @@ class BodyTracker:
         best = int(np.argmin(costs))
         if best == 0:
             return False
-        log.info("frame %d: a fresh search fits better (cost %.3f against %.3f): filter "
+        log.info("stamp %d ns: a fresh search fits better (cost %.3f against %.3f): filter "
                  "re-seeded", stamp_ns, costs[best], costs[0])
         particles = search.hypotheses[best - 1].particles[:, :n]
         idx = self.rng.choice(len(particles), size=len(self.particles),
