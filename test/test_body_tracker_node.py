@@ -2,7 +2,9 @@
 joint states with the input stamps and a bounded 3D error; bad input is logged and survived.
 
 The replay runs ``dd-hpf``, which is ``hpf-apo`` plus the skin maps the foreground node
-publishes beside the masks (both synchronised by stamp), so it covers both paths.
+publishes beside the masks (both synchronised by stamp), so it covers both paths; and it runs
+with ``max_people:=2``, so the per-body topics are covered too (the bag has one person: the
+second slot keeps searching).
 
 Small particle budgets keep this fast on a 2-core machine; the figures of the README come
 from ``tools/mocap_table.py`` and ``hmocap eval mocap``, not from here.
@@ -34,10 +36,12 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
               ["--ros-args", "-p", f"cameras:=[{','.join(CAMERAS)}]", "-p", "learn_frames:=8",
                "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
              ("body_tracker", "hmocap_ros.nodes.body_tracker",
-              ["--ros-args", "-p", "method:=dd-hpf", "-p", "queue_depth:=100", *FAST],
+              ["--ros-args", "-p", "method:=dd-hpf", "-p", "queue_depth:=100",
+               "-p", "max_people:=2", *FAST],
               "waiting for the rig")]
     procs = replay_through_nodes(
-        DEMO_BAG, nodes, ["/joint_states", "/skeleton", "/body_shape", "/diagnostics"], out,
+        DEMO_BAG, nodes, ["/joint_states", "/skeleton", "/body_shape", "/diagnostics",
+                          "/humans/bodies/body_0/joint_states"], out,
         loopback_dds_env(), tmp_path / "logs",
         replay_topics=["/camera_rig", *(f"/{c}/image_raw" for c in CAMERAS)], replay_rate=0.2,
         expect={"/joint_states": 15}, settle=5.0)
@@ -52,6 +56,8 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
         skeletons = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
         shapes = list(reader.messages(["/body_shape"]))
         diags = list(reader.messages(["/diagnostics"]))
+        body_0 = {stamp_to_ns(m.msg.header.stamp)
+                  for m in reader.messages(["/humans/bodies/body_0/joint_states"])}
     assert set(joints) <= image_stamps and set(joints) == set(skeletons)
     assert len(joints) >= len(truth) - 2, (len(joints), len(truth))  # a pose for (nearly) every frame
     js = next(iter(joints.values()))
@@ -72,6 +78,13 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
     assert any(float(t.get("time_detection", 0)) > 0 for t in tracking), tracking[-1]
     assert any("hand" in t.get("extremities", "") for t in tracking), tracking[-1]
     assert len(tracking[-1]["ess_per_layer"].split()) == 8 and float(tracking[-1]["seconds_per_frame"]) > 0
+    # two slots: the person is body_0 on both its topics; body_1 finds nobody else
+    assert body_0 == set(joints)
+    assert {sk.body_id for sk in skeletons.values()} == {"body_0"}
+    ours = [[s.name for s in d.msg.status] for d in diags
+            if d.msg.status and d.msg.status[0].name.startswith("body_tracker")]
+    assert ours and all(names == ["body_tracker: body_0", "body_tracker: body_1"] for names in ours)
+    assert {s.message for d in diags for s in d.msg.status if s.name.endswith("body_1")} == {"searching"}
 
 
 BAD_INPUT = r"""

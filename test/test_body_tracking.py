@@ -206,6 +206,10 @@ def test_visual_hull_takes_the_best_seen_person_or_the_one_near_the_last_pose(mo
     in_region = visual_hull(*args, region=(-2.8, -2.3, -1.5, -1.0))
     assert np.linalg.norm(in_region.centroid[[0, 2]] - [-2.3, -1.8]) < 0.3
     assert visual_hull(*args, region=(1.5, 1.5, 2.5, 2.5)) is None  # nobody in it
+    # the person another tracker follows is left out; nobody else: no hull
+    other = visual_hull(*args, exclude=np.array([[0.5, 0.9, 0.3]]))
+    assert np.linalg.norm(other.centroid[[0, 2]] - [-2.3, -1.8]) < 0.3
+    assert visual_hull(*args, exclude=np.array([[0.4, 0.9, 0.2], [-2.3, 0.9, -1.8]])) is None
 
 
 def test_tracker_starts_only_on_a_person_in_its_track_region(model, rig):

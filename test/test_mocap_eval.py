@@ -96,6 +96,28 @@ def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path):
                      *SMALL_BUDGET]) == 0
     again = json.loads(out2.read_text())["methods"]["dd-hpf"]
     assert again["per_frame_mm"] == res["per_frame_mm"]
+    # a second tracker slot finds nobody else in this bag: the subject's track is unchanged
+    out3 = tmp_path / "two.json"
+    assert run_eval([str(DEMO_BAG), "--frames", "3", "--seed", "1", "--max-people", "2",
+                     "--json", str(out3), *SMALL_BUDGET]) == 0
+    two = json.loads(out3.read_text())
+    assert two["max_people"] == 2 and two["methods"]["dd-hpf"]["track_switches"] == 0
+    assert two["methods"]["dd-hpf"]["per_frame_mm"] == res["per_frame_mm"]
+
+
+def test_the_subject_is_scored_on_the_nearest_track():
+    from hmocap_ros.eval.mocap_eval import _subject_track
+    from hmocap_ros.tracking.body_tracker import TrackResult
+
+    def posed(x):
+        return TrackResult(0, "tracking", joints=np.array([[x, 0.9, 0.0], [x, 1.4, 0.0]]))
+
+    truth = np.array([[1.0, 0.9, 0.1], [1.0, 1.4, 0.1]])
+    nobody = TrackResult(0, "searching")
+    assert _subject_track([posed(-1.0), posed(0.9)], truth, 0, 0) == 1
+    assert _subject_track([nobody, posed(-1.0)], truth, 0, 0) == 1  # the only pose
+    assert _subject_track([posed(-1.0), posed(0.9)], np.full((2, 3), np.nan), 0, 0) == 0
+    assert _subject_track([nobody, nobody], truth, 0, 0) == 0
 
 
 def write_tiny_bag(path: Path, n_empty: int, n_subject: int = 3) -> None:

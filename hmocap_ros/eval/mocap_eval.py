@@ -1,7 +1,8 @@
 """``hmocap eval mocap``: replay a multi-view bag through the body tracker and score it.
 
     hmocap eval mocap BAG [--method apf|hpf|hpf-apo|dd-hpf ...] [--compare] [--particles N]
-        [--layers L] [--frames N] [--seed S] [--silhouettes fg|gt] [--json OUT] [--plot OUT.png]
+        [--layers L] [--frames N] [--seed S] [--silhouettes fg|gt] [--max-people N]
+        [--json OUT] [--plot OUT.png]
 
 No DDS: the bag is read with :class:`~hmocap_ros.io.bag_reader.BagReader` and every frame set
 goes through the same code as the live nodes, in order: foreground segmentation
@@ -19,6 +20,11 @@ Silhouettes: ``fg`` (default) segments the images; the background model learns f
 before the first ground-truth skeleton (the empty room). A bag without such frames cannot
 teach a background model: the evaluation then falls back to ``gt`` (the bag's exact
 silhouettes) and says so in its output and in the JSON (``silhouettes_fallback``).
+
+Several people (``--max-people N``): N trackers run side by side, each on a person of its own
+(:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); each frame is scored on the
+track whose pelvis stands nearest the subject's, as multi-person benchmarks match estimates to
+people, and the report counts the changes of that track (``track_switches``).
 
 Output (``--json``): per method the overall mean and standard deviation of the per-frame mean
 joint error (mm; thesis table 2.3), per-joint mean and std, per-frame errors, frames with and
@@ -284,41 +290,68 @@ def _anthropometry(model, estimate, truth) -> dict | None:
     return out
 
 
+def _subject_track(results: list, truth: np.ndarray | None, root: int, true_root: int) -> int:
+    """Index of the result that follows the subject: of those with a pose, the one whose root
+    joint stands nearest the true root on the floor (the usual matching of multi-person
+    benchmarks); 0 without truth or pose."""
+    posed = [k for k, r in enumerate(results) if r.has_pose]
+    if truth is None or not np.isfinite(truth).all() or len(posed) < 2:
+        return posed[0] if posed else 0
+    gaps = [np.linalg.norm((results[k].joints[root] - truth[true_root])[[0, 2]]) for k in posed]
+    return posed[int(np.argmin(gaps))]
+
+
 def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int = 0,
                layers: int = 0, overrides: dict | None = None, given_shape: bool = False,
-               progress=None) -> EvalResult:
-    """Track every frame set of ``frames`` with one method and score the frames with truth."""
+               max_people: int = 1, progress=None) -> EvalResult:
+    """Track every frame set of ``frames`` with one method and score the frames with truth.
+
+    max_people: trackers run side by side (:class:`~hmocap_ros.tracking.people_tracker.
+    PeopleTracker`); each scored frame takes the track nearest the subject
+    (:func:`_subject_track`), and a change of track between scored frames counts as a switch.
+    Time and evaluations per frame are those of all trackers together.
+    """
     from hmocap_ros.body import load_body_model
-    from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+    from hmocap_ros.tracking.body_tracker import TrackerParams
+    from hmocap_ros.tracking.people_tracker import PeopleTracker
 
     model = load_body_model("tracking")
     params = TrackerParams(method=method, n_particles=particles, n_layers=layers,
                            **(overrides or {}))
     shape = frames.body_shape if given_shape else None
-    tracker = BodyTracker(model, frames.rig, params, np.random.default_rng(seed), shape=shape)
+    people = PeopleTracker(model, frames.rig, params, np.random.default_rng(seed), shape=shape,
+                           max_people=max_people)
     est_idx, true_idx = match_joints(model.joint_names, frames.joint_names)
     names = [model.joint_names[i] for i in est_idx]
+    root, true_root = int(est_idx[0]), int(true_idx[0])
     has_truth = frames.has_truth
     estimates = np.full((len(frames.stamps), len(est_idx), 3), np.nan)
-    states, costs = [], []
+    states, costs, tracks = [], [], []
     times, stage, evals = [], {}, []
     for k, stamp in enumerate(frames.stamps):
         maps = frames.maps[k] if (frames.maps is not None and method in DETECTOR_METHODS) else None
-        result = tracker.update(frames.mask_list(k), int(stamp), maps)
+        results = people.update(frames.mask_list(k), int(stamp), maps)
+        slot = _subject_track(results, frames.truth[k], root, true_root)
+        result = results[slot]
         if has_truth[k]:
             states.append(result.state)
             costs.append(None if not np.isfinite(result.fit_cost) else float(result.fit_cost))
-            times.append(result.timings["total"])
-            evals.append(result.timings["evaluations"])
+            times.append(sum(r.timings["total"] for r in results))
+            evals.append(sum(r.timings["evaluations"] for r in results))
             for key in ("observe", "hull", "init", "filter", "skinning", "projection", "xor",
                         "detection", "proposals", "research"):
-                stage[key] = stage.get(key, 0.0) + result.timings.get(key, 0.0)
+                stage[key] = stage.get(key, 0.0) + sum(r.timings.get(key, 0.0) for r in results)
+            if result.has_pose:
+                tracks.append(slot)
         if result.has_pose:
             estimates[k] = result.joints[est_idx]
         if progress is not None:
             progress(k, len(frames.stamps), result)
     errors = joint_errors(estimates[has_truth], frames.truth[has_truth][:, true_idx])
     summary = summarize_errors(errors, names)
+    summary["max_people"] = int(max_people)
+    summary["track_switches"] = int(np.count_nonzero(np.diff(tracks))) if tracks else 0
+    subject = int(np.bincount(tracks).argmax()) if tracks else 0
     n = max(len(times), 1)
     spf = float(np.sum(times) / n)
     seg = frames.segmentation_s + (frames.detector_s if method in DETECTOR_METHODS else 0.0)
@@ -328,15 +361,16 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
         fps_with_segmentation=1.0 / (spf + seg) if spf + seg > 0 else float("inf"),
         evaluations_per_frame=float(np.mean(evals)) if evals else 0.0,
         stage_seconds={k: v / n for k, v in stage.items()}, states=states, fit_costs=costs,
-        anthropometry=_anthropometry(model, tracker.shape, frames.body_shape),
+        anthropometry=_anthropometry(model, people.trackers[subject].shape, frames.body_shape),
         params={f.name: getattr(params, f.name) for f in fields(params)})
 
 
 def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
              max_frames: int | None = None, seed: int = 0, particles: int = 0, layers: int = 0,
              overrides: dict | None = None, given_shape: bool = False,
-             fg_params: dict | None = None, out=None) -> dict:
-    """Evaluate ``methods`` on one bag; returns the JSON-ready report."""
+             fg_params: dict | None = None, max_people: int = 1, out=None) -> dict:
+    """Evaluate ``methods`` on one bag; returns the JSON-ready report (``max_people``: see
+    :func:`run_method`)."""
     out = sys.stderr if out is None else out
     t0 = time.perf_counter()
     frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,
@@ -353,16 +387,18 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
         "skin_detection_seconds_per_frame": frames.detector_s,
         "seed": seed,
         "given_shape": bool(given_shape),
+        "max_people": int(max_people),
         "methods": {},
     }
     for method in methods:
         res = run_method(frames, method, seed=seed, particles=particles, layers=layers,
-                         overrides=overrides, given_shape=given_shape)
+                         overrides=overrides, given_shape=given_shape, max_people=max_people)
         s = res.summary
         report["methods"][method] = {
             "mean_mm": s["mean_mm"], "std_mm": s["std_mm"], "median_mm": s["median_mm"],
             "frames": s["frames"], "frames_with_pose": s["frames_with_pose"],
             "per_joint": s["per_joint"], "per_frame_mm": s["per_frame_mm"],
+            "track_switches": s["track_switches"],
             "seconds_per_frame": res.seconds_per_frame, "fps": res.fps,
             "fps_with_segmentation": res.fps_with_segmentation,
             "evaluations_per_frame": res.evaluations_per_frame,
@@ -372,7 +408,8 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
         }
         print(f"{Path(bag).name} {method:8s} mean {s['mean_mm']:.1f} mm (std {s['std_mm']:.1f}) "
               f"over {s['frames_with_pose']}/{s['frames']} frames, "
-              f"{res.seconds_per_frame:.2f} s/frame", file=out)
+              f"{res.seconds_per_frame:.2f} s/frame"
+              + (f", {s['track_switches']} track switches" if max_people > 1 else ""), file=out)
     report["wall_seconds"] = time.perf_counter() - t0
     return report
 
@@ -446,6 +483,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="track with the bag's true body shape (no anthropometry estimation)")
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
                         help="override a TrackerParams field (repeatable)")
+    parser.add_argument("--max-people", type=int, default=1,
+                        help="people followed at once (one tracker each); the subject is scored "
+                             "on the track nearest it (default 1)")
     parser.add_argument("--threads", type=int, default=None, help="numba threads")
     parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
@@ -462,7 +502,8 @@ def main_from_args(ns: argparse.Namespace) -> int:
         overrides = tracker_overrides(ns.param)
         report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
                           seed=ns.seed, particles=ns.particles, layers=ns.layers,
-                          overrides=overrides, given_shape=ns.given_shape)
+                          overrides=overrides, given_shape=ns.given_shape,
+                          max_people=ns.max_people)
     except (ValueError, OSError, RuntimeError) as err:
         print(f"hmocap eval mocap: {err}", file=sys.stderr)
         return 2

@@ -16,16 +16,26 @@ Subscriptions:
   for hands), so a foreground node that publishes none costs no latency.
 Publications (all with the stamp of the frame set):
   ``joint_states`` (sensor_msgs/JointState): the pose parameters (root translation in metres,
-  angles in radians) by DoF name.
-  ``skeleton`` (hmocap_interfaces/Skeleton): 3D joints in the room frame.
-  ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove.
-  ``body_shape`` (hmocap_interfaces/BodyShape, latched): the estimated anthropometry.
-  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): state, seconds per frame, ESS and
-  milliseconds per layer, time per stage, views used and dropped, and with ``dd-hpf`` the
+  angles in radians) by DoF name, of the first body (``body_id``).
+  ``skeleton`` (hmocap_interfaces/Skeleton): 3D joints in the room frame, one message per
+  tracked body (``body_id`` says whose).
+  ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove,
+  one namespace per body.
+  ``body_shape`` (hmocap_interfaces/BodyShape, latched): the first body's anthropometry.
+  ``humans/bodies/<id>/joint_states`` and ``humans/bodies/<id>/body_shape`` (REP-155 style),
+  per body, when ``max_people`` > 1.
+  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): per body state, seconds per frame, ESS
+  and milliseconds per layer, time per stage, views used and dropped, and with ``dd-hpf`` the
   extremities detected.
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``, ``queue_depth``,
-``seed``, ``body_id`` and every
+``seed``, ``body_id``, ``max_people`` and every
 field of :class:`~hmocap_ros.tracking.TrackerParams` (``body_tracker --help``).
+
+Several people (``max_people``): one tracker per person
+(:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); the first body is the one a
+single tracker would follow (the person the cameras see best when the track starts), the
+others are ``body_id`` numbered on (``body_0``, ``body_1``, ...). Each followed person costs
+a filter run per frame.
 
 A dropped camera is tracked on the remaining views; a frame without a person publishes
 nothing but diagnostics; a fit that collapses re-initialises from the visual hull.
@@ -52,7 +62,8 @@ from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters
                                      sensor_qos)
 from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
 from hmocap_ros.stamp_sync import StampSynchronizer
-from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+from hmocap_ros.tracking.body_tracker import TrackerParams
+from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
 from hmocap_ros.tracking.extremity_detection import END_EFFECTORS
 
 NODE_NAME = "body_tracker"
@@ -69,7 +80,11 @@ class BodyTrackerNodeConfig:
                                 "ones are dropped, so a live tracker works on recent frames; raise it "
                                 "when replaying a bag slowly and every frame must be tracked).")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
-    body_id: str = param("body_0", "Body id in the published messages (REP-155 style).")
+    body_id: str = param("body_0", "Body id of the first tracked body in the published messages "
+                                   "(REP-155 style); further bodies are numbered on (body_1, ...).")
+    max_people: int = param(1, "People followed at once, one tracker each: a bystander the cameras "
+                               "see better does not take the user's track, and each person gets "
+                               "a body id; every followed person costs a filter run per frame.")
 
 
 class BodyTrackerNode(Node):
@@ -79,17 +94,30 @@ class BodyTrackerNode(Node):
         self.params = declare_parameters(self, TrackerParams)
         self.model = load_body_model("tracking")
         self.rng = np.random.default_rng(self.config.seed)
-        self.tracker: BodyTracker | None = None
+        if self.config.max_people < 1:
+            self.get_logger().fatal(f"max_people must be >= 1, got {self.config.max_people}")
+            raise SystemExit(2)
+        self.ids = body_ids(self.config.body_id, self.config.max_people)
+        self.tracker: PeopleTracker | None = None
         self.sync: StampSynchronizer | None = None
         self.rig: Rig | None = None
         self.frame_id = "room"
-        self.last_shape = None
-        self.last_state = "searching"
+        self.last_shape = [None] * len(self.ids)
+        self.last_state = ["searching"] * len(self.ids)
         self.frames = 0
-        self.pub_joints = self.create_publisher(JointState, "joint_states", RESULT_QOS)
         self.pub_skeleton = self.create_publisher(Skeleton, "skeleton", RESULT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "skeleton_markers", RESULT_QOS)
-        self.pub_shape = self.create_publisher(BodyShapeMsg, "body_shape", LATCHED_QOS)
+        # per body: (joint_states, body_shape); the first body's on the plain topics too
+        self.pub_body = [[(self.create_publisher(JointState, "joint_states", RESULT_QOS),
+                           self.create_publisher(BodyShapeMsg, "body_shape", LATCHED_QOS))]]
+        self.pub_body += [[] for _ in self.ids[1:]]
+        if len(self.ids) > 1:
+            for k, body in enumerate(self.ids):
+                self.pub_body[k].append((
+                    self.create_publisher(JointState, f"humans/bodies/{body}/joint_states",
+                                          RESULT_QOS),
+                    self.create_publisher(BodyShapeMsg, f"humans/bodies/{body}/body_shape",
+                                          LATCHED_QOS)))
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
         if self.config.rig_file:
             try:
@@ -115,7 +143,8 @@ class BodyTrackerNode(Node):
         first = self.rig is None
         self.rig = rig
         self.frame_id = rig.frame_id
-        self.tracker = BodyTracker(self.model, rig, self.params, self.rng)
+        self.tracker = PeopleTracker(self.model, rig, self.params, self.rng,
+                                     max_people=len(self.ids), ids=self.ids)
         self.use_maps = self.params.method == "dd-hpf"
         self.maps = {name: {} for name in rig.names}  # camera -> stamp -> skin map (recent)
         self.sync = StampSynchronizer(
@@ -196,76 +225,86 @@ class BodyTrackerNode(Node):
         maps = [self._map_for(n, stamp_ns) for n in self.rig.names] if self.use_maps else None
         t0 = time.perf_counter()
         try:
-            result = self.tracker.update(masks, stamp_ns, maps)
+            results = self.tracker.update(masks, stamp_ns, maps)
         except Exception as err:  # a tracker bug must not take the room's node down
             log.error(f"tracking failed on frame {stamp_ns}: {err!r}; restarting the track")
             self.tracker.reset(forget_shape=False)
             return
         seconds = time.perf_counter() - t0
         self.frames += 1
-        if result.state != self.last_state:
-            self._log_transition(result, seconds)
-            self.last_state = result.state
-        if result.has_pose:
-            self._publish_pose(stamp_ns, result)
-        self._publish_diagnostics(stamp_ns, result, seconds)
+        for k, result in enumerate(results):
+            if result.state != self.last_state[k]:
+                self._log_transition(k, result, seconds)
+                self.last_state[k] = result.state
+            if result.has_pose:
+                self._publish_pose(k, stamp_ns, result)
+        self._publish_diagnostics(stamp_ns, results, seconds)
 
-    def _log_transition(self, result, seconds: float) -> None:
+    def _log_transition(self, k: int, result, seconds: float) -> None:
         log = self.get_logger()
         views = len(result.views)
+        who = f"{self.ids[k]}: " if len(self.ids) > 1 else ""
         if result.state == "initialising":
-            log.info(f"a person appeared ({views} views): estimating the body shape "
+            log.info(f"{who}a person appeared ({views} views): estimating the body shape "
                      f"({self.params.shape_frames} frames, start-up took {seconds:.1f} s)")
         elif result.state == "tracking":
             height = result.shape.height(self.model) if result.shape is not None else float("nan")
-            log.info(f"tracking ({self.params.method}); body height {height:.2f} m, "
+            log.info(f"{who}tracking ({self.params.method}); body height {height:.2f} m, "
                      f"fit cost {result.fit_cost:.2f} per view")
         elif result.state == "lost":
-            log.warning("the fit collapsed: restarting from the visual hull")
+            log.warning(f"{who}the fit collapsed: restarting from the visual hull")
         elif result.state == "searching":
-            log.info("no person in view")
+            log.info(f"{who}no person in view" if k == 0 or not who else
+                     f"{who}nobody else in view")
 
     def _header(self, msg, stamp_ns: int):
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
         msg.header.frame_id = self.frame_id
         return msg
 
-    def _publish_pose(self, stamp_ns: int, result) -> None:
+    def _publish_pose(self, k: int, stamp_ns: int, result) -> None:
         skel = self.model.skeleton
+        body = self.ids[k]
         js = self._header(JointState(), stamp_ns)
         js.name = list(skel.dof_names)
         js.position = [float(x) for x in result.params]
-        self.pub_joints.publish(js)
+        for pub_joints, _ in self.pub_body[k]:
+            pub_joints.publish(js)
 
         sk = self._header(Skeleton(), stamp_ns)
-        sk.body_id = self.config.body_id
+        sk.body_id = body
         sk.joint_names = list(result.joint_names)
         sk.positions = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in result.joints]
         sk.parents = [int(i) for i in self.model.parents]
         sk.fit_error = float(result.fit_cost)
         self.pub_skeleton.publish(sk)
-        self.pub_markers.publish(self._markers(stamp_ns, result.joints))
+        self.pub_markers.publish(self._markers(k, stamp_ns, result.joints))
 
-        if result.shape is not None and result.shape is not self.last_shape:
-            self.last_shape = result.shape
+        if result.shape is not None and result.shape is not self.last_shape[k]:
+            self.last_shape[k] = result.shape
             shape = result.shape
             msg = self._header(BodyShapeMsg(), stamp_ns)
-            msg.body_id = self.config.body_id
+            msg.body_id = body
             msg.entity_names = list(shape.entity_names)
             msg.bone_scale = [float(x) for x in np.ravel(shape.bone_scale)]
             msg.radial_scale = [float(x) for x in np.ravel(shape.radial_scale)]
             msg.global_scale = float(shape.global_scale)
             msg.height = float(shape.height(self.model))
-            self.pub_shape.publish(msg)
+            for _, pub_shape in self.pub_body[k]:
+                pub_shape.publish(msg)
 
-    def _markers(self, stamp_ns: int, joints: np.ndarray) -> MarkerArray:
+    def _markers(self, k: int, stamp_ns: int, joints: np.ndarray) -> MarkerArray:
+        body = self.ids[k]
         spheres = self._header(Marker(), stamp_ns)
-        spheres.ns, spheres.id, spheres.type, spheres.action = self.config.body_id, 0, Marker.SPHERE_LIST, Marker.ADD
+        spheres.ns, spheres.id, spheres.type, spheres.action = body, 0, Marker.SPHERE_LIST, Marker.ADD
         spheres.scale.x = spheres.scale.y = spheres.scale.z = 0.06
-        spheres.color.r, spheres.color.g, spheres.color.a = 1.0, 0.3, 1.0
+        # the first body orange as before, the others in other hues
+        spheres.color.r, spheres.color.g, spheres.color.b = ((1.0, 0.3, 0.0), (0.2, 0.9, 0.2),
+                                                             (1.0, 0.8, 0.1), (0.3, 0.5, 1.0))[k % 4]
+        spheres.color.a = 1.0
         spheres.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in joints]
         bones = self._header(Marker(), stamp_ns)
-        bones.ns, bones.id, bones.type, bones.action = self.config.body_id, 1, Marker.LINE_LIST, Marker.ADD
+        bones.ns, bones.id, bones.type, bones.action = body, 1, Marker.LINE_LIST, Marker.ADD
         bones.scale.x = 0.02
         bones.color.g, bones.color.b, bones.color.a = 0.8, 1.0, 1.0
         for child, parent in enumerate(self.model.parents):
@@ -275,7 +314,13 @@ class BodyTrackerNode(Node):
             m.lifetime.nanosec = 500_000_000  # disappear when tracking stops
         return MarkerArray(markers=[spheres, bones])
 
-    def _publish_diagnostics(self, stamp_ns: int, result, seconds: float) -> None:
+    def _publish_diagnostics(self, stamp_ns: int, results, seconds: float) -> None:
+        diag = self._header(DiagnosticArray(), stamp_ns)
+        diag.status = [self._status(body, result, seconds)
+                       for body, result in zip(self.ids, results)]
+        self.pub_diag.publish(diag)
+
+    def _status(self, body: str, result, seconds: float) -> DiagnosticStatus:
         values = [KeyValue(key="state", value=result.state),
                   KeyValue(key="seconds_per_frame", value=f"{seconds:.3f}"),
                   KeyValue(key="fit_cost", value=f"{result.fit_cost:.4f}"),
@@ -290,10 +335,8 @@ class BodyTrackerNode(Node):
                 n for n, ok in zip(END_EFFECTORS, result.extremities.found) if ok)))
         level = DiagnosticStatus.OK if result.state in ("tracking", "initialising", "searching") else \
             DiagnosticStatus.WARN
-        diag = self._header(DiagnosticArray(), stamp_ns)
-        diag.status = [DiagnosticStatus(level=level, name=f"{NODE_NAME}: {self.config.body_id}",
-                                        message=result.state, values=values)]
-        self.pub_diag.publish(diag)
+        return DiagnosticStatus(level=level, name=f"{NODE_NAME}: {body}", message=result.state,
+                                values=values)
 
 
 def main(args=None) -> int:

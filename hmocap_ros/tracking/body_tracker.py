@@ -344,6 +344,14 @@ class BodyTracker:
     def shape_known(self) -> bool:
         return self.shape is not None
 
+    @property
+    def position(self) -> np.ndarray | None:
+        """Where the followed person's pelvis is (room, metres), or None when not following
+        anybody (searching or lost)."""
+        if self.state not in ("initialising", "tracking") or self.estimate is None:
+            return None
+        return self.estimate[self.skel.translation_dofs].copy()
+
     def warm_up(self) -> float:
         """Compile every numba kernel of the weighting (serial and parallel variants) on a
         dummy frame; returns the seconds it took. A fresh install has no numba cache: without
@@ -403,12 +411,15 @@ class BodyTracker:
     # ------------------------------------------------------------------ update
 
     def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int,
-               detector_maps: Sequence[np.ndarray | None] | None = None) -> TrackResult:
+               detector_maps: Sequence[np.ndarray | None] | None = None,
+               exclude: np.ndarray | None = None) -> TrackResult:
         """Process one frame set: one foreground mask per rig camera (None where missing).
 
         detector_maps: per camera the extremity detector's probability map (uint8, 255 = 1,
         any resolution; ``segmentation.skin``) or None; used by ``dd-hpf`` only, which
-        without them runs as ``hpf-apo``.
+        without them runs as ``hpf-apo``. exclude: (K, 3) room points where people followed
+        by other trackers stand (:class:`~.people_tracker.PeopleTracker`): a start never
+        takes a person within :data:`SAME_PERSON_RADIUS` of one of them.
         """
         t_start = time.perf_counter()
         self.fitness.times.reset()
@@ -433,7 +444,7 @@ class BodyTracker:
         self._absent_frames = 0
         if self.state in ("searching", "lost"):
             t0 = time.perf_counter()
-            started = self._start(masks, obs, stamp_ns)
+            started = self._start(masks, obs, stamp_ns, exclude)
             timings["hull"] = time.perf_counter() - t0
             if not started:
                 self.state = "searching"
@@ -537,11 +548,12 @@ class BodyTracker:
         if self.state != "searching" or forget:
             self.reset(forget_shape=forget)
 
-    def _start(self, masks, obs: Observation, stamp_ns: int) -> bool:
+    def _start(self, masks, obs: Observation, stamp_ns: int,
+               exclude: np.ndarray | None = None) -> bool:
         """Visual hull and Powell fit; True when a person was found and the start-up began."""
         p = self.params
         near = self.estimate[self.skel.translation_dofs] if self.estimate is not None else None
-        hull = self._hull(obs, near=near, region=p.track_region or None)
+        hull = self._hull(obs, near=near, region=p.track_region or None, exclude=exclude)
         if hull is None or hull.top < p.min_hull_height:
             return False
         if self._views_seeing_whole(hull, obs) < min(p.min_full_views, obs.n_views):
@@ -579,12 +591,14 @@ class BodyTracker:
                   & (boxes[:, 2] <= obs.width - margin_px) & (boxes[:, 3] <= obs.height - margin_px))
         return int(inside.sum())
 
-    def _hull(self, obs: Observation, near: np.ndarray | None = None, region=None):
+    def _hull(self, obs: Observation, near: np.ndarray | None = None, region=None,
+              exclude: np.ndarray | None = None):
         """The visual hull of the person (sec. 2.3.4) at the tracker's settings."""
         p = self.params
         return visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
                            fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
-                           max_misses=p.hull_max_misses, near=near, region=region)
+                           max_misses=p.hull_max_misses, near=near, region=region,
+                           exclude=exclude, exclude_radius=SAME_PERSON_RADIUS)
 
     def _same_person_hull(self, obs: Observation, point: np.ndarray):
         """The hull of the person at ``point`` (room, 3), or None when the hull nearest it

@@ -8,7 +8,8 @@ foreground in every view that sees it (at most ``max_misses`` misses allowed) an
 the largest one's size, the one the rig sees best (the highest mean number of views seeing its
 voxels; then the largest). With a second person in the room, the tracker thus takes the one in
 full view of the cameras, not whoever is nearest a camera or half out of its field. A
-``region`` of the floor (x/z box) restricts the choice to people whose centroid stands in it.
+``region`` of the floor (x/z box) restricts the choice to people whose centroid stands in it;
+``exclude`` (where the people other trackers follow stand) leaves those people out.
 The grid is coarse over the whole room, then fine inside that component's box.
 
 Outputs (:class:`Hull`): centroid, top height (the feet stand on the floor, y = 0), volume,
@@ -152,7 +153,9 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
                       min_fraction: float = 0.3, centres: np.ndarray | None = None,
                       near: np.ndarray | None = None,
                       near_radius: float = 1.0,
-                      region: Sequence[float] | None = None) -> np.ndarray | None:
+                      region: Sequence[float] | None = None,
+                      exclude: np.ndarray | None = None,
+                      exclude_radius: float = 0.5) -> np.ndarray | None:
     """The component to track: of the connected components at least ``min_fraction`` of the
     largest one's size, the one the views see best (highest mean number of views seeing its
     voxels), then the largest. With two people in the room, the rig tracks the one it
@@ -161,17 +164,24 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
     whose centroid lies nearest that point, if within ``near_radius`` metres (the person the
     tracker just lost), else as above. ``region`` ``(x_min, z_min, x_max, z_max)`` with
     ``centres``: only components whose centroid lies in that floor box count (None when there
-    is none)."""
-    labels, n, sizes, seen, c = _components(
-        occ, n_seen, centres if (near is not None or region is not None) else None)
+    is none). ``exclude`` (K, 3) with ``centres``: components whose centroid lies within
+    ``exclude_radius`` metres of one of these points on the floor are no candidates (people
+    other trackers already follow; None when nobody else is there)."""
+    located = near is not None or region is not None or exclude is not None
+    labels, n, sizes, seen, c = _components(occ, n_seen, centres if located else None)
     if n == 0:
         return None
+    allowed = np.ones(n, dtype=bool)
     if region is not None and c is not None:
         x0, z0, x1, z1 = (float(v) for v in region)
-        inside = (c[:, 0] >= x0) & (c[:, 0] <= x1) & (c[:, 2] >= z0) & (c[:, 2] <= z1)
-        if not inside.any():
-            return None
-        sizes = np.where(inside, sizes, 0)
+        allowed &= (c[:, 0] >= x0) & (c[:, 0] <= x1) & (c[:, 2] >= z0) & (c[:, 2] <= z1)
+    if exclude is not None and len(exclude) and c is not None:
+        taken = np.asarray(exclude, dtype=np.float64).reshape(-1, 3)[:, [0, 2]]
+        gap = np.linalg.norm(c[:, None, [0, 2]] - taken[None], axis=2).min(axis=1)
+        allowed &= gap > exclude_radius
+    if not allowed.any():
+        return None
+    sizes = np.where(allowed, sizes, 0)
     big = sizes >= min_fraction * sizes.max()
     if near is not None and c is not None:
         dist = np.linalg.norm(c[:, [0, 2]] - np.asarray(near)[[0, 2]], axis=1)
@@ -188,21 +198,25 @@ def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, 
                 bounds: tuple[np.ndarray, np.ndarray], *, coarse_voxel: float = 0.08,
                 fine_voxel: float = 0.03, min_views: int = 2, max_misses: int = 0,
                 min_volume: float = 0.01, near: np.ndarray | None = None,
-                region: Sequence[float] | None = None) -> Hull | None:
+                region: Sequence[float] | None = None, exclude: np.ndarray | None = None,
+                exclude_radius: float = 0.5) -> Hull | None:
     """Carve the person's visual hull; None when nothing of at least ``min_volume`` m^3 is found.
 
     masks: (M, H, W) foreground (non-zero) at the resolution of the cameras ``K, R, t, D``
     (e.g. an :class:`~hmocap_ros.tracking.body_fitness.Observation`). bounds: the room box
     (:func:`room_bounds`). near: where the person was last seen (restarts prefer the person
     there, see :func:`_person_component`). region: ``(x_min, z_min, x_max, z_max)``, the
-    floor box a person's centroid must stand in (None: anywhere in the room).
+    floor box a person's centroid must stand in (None: anywhere in the room). exclude:
+    (K, 3) points where people other trackers follow stand; nobody within
+    ``exclude_radius`` metres of one on the floor is chosen.
     """
     if masks.shape[0] < min_views:
         return None
     lo = np.asarray(bounds[0], dtype=np.float64)
     occ, n_seen, centres = _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel,
                                              min_views, max_misses)
-    comp = _person_component(occ, n_seen, centres=centres, near=near, region=region)
+    comp = _person_component(occ, n_seen, centres=centres, near=near, region=region,
+                             exclude=exclude, exclude_radius=exclude_radius)
     if comp is None or comp.sum() * coarse_voxel ** 3 < min_volume:
         return None
     idx = np.argwhere(comp)

@@ -1,0 +1,98 @@
+"""Several people in one room: one :class:`~.body_tracker.BodyTracker` per person.
+
+A smart room often holds more than its user. One tracker follows one body and starts on the
+person the cameras see best (:func:`~.visual_hull.visual_hull`), so with a bystander in
+better view it follows the bystander. :class:`PeopleTracker` runs up to ``max_people``
+trackers on the same frame sets, each following a person of its own:
+
+- slot 0 is the single-person tracker of before, unchanged (same random draws, so with
+  ``max_people = 1`` or nobody else in the room its output is bit for bit the same);
+- every other slot starts only on a person standing farther than
+  :data:`~.body_tracker.SAME_PERSON_RADIUS` (on the floor) from the people the other slots
+  follow (``exclude``), so two slots never start on the same person;
+- if two slots nevertheless end up on one person (a track that lost its person and drifted
+  onto another), the one with the worse fit (higher ``fit_cost``) is reset and searches again;
+- each slot draws from its own generator (slot 0 from the one passed in, the others spawned
+  from it), so runs repeat bit for bit.
+
+Each track has a body id (``body_ids``, one per slot). The cost grows with the number of
+people followed (one filter run each); a slot that follows nobody only carves the coarse
+visual hull of the frame to look for a new person.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.tracking.body_tracker import (SAME_PERSON_RADIUS, BodyTracker, TrackerParams,
+                                              TrackResult)
+
+__all__ = ["PeopleTracker", "body_ids"]
+
+
+def body_ids(first: str, n: int) -> tuple[str, ...]:
+    """Ids of ``n`` slots: ``first``, then its stem numbered (``body_0`` -> ``body_1``...)."""
+    stem = first.rsplit("_", 1)[0] if first.rsplit("_", 1)[-1].isdigit() else first
+    return (first,) + tuple(f"{stem}_{k}" for k in range(1, n))
+
+
+class PeopleTracker:
+    """Up to ``max_people`` body trackers on one rig (see the module docstring).
+
+    model, rig, params, shape: as :class:`BodyTracker` (``shape`` is given to slot 0 only: a
+    known shape is that of the room's user). rng: slot 0's generator; the other slots' are
+    spawned from it. ids: the body id of each slot (default ``body_0``, ``body_1``, ...).
+    """
+
+    def __init__(self, model, rig: Sequence, params: TrackerParams | None = None,
+                 rng: np.random.Generator | None = None, shape: BodyShape | None = None,
+                 max_people: int = 1, ids: Sequence[str] | None = None):
+        if max_people < 1:
+            raise ValueError("max_people must be >= 1")
+        rng = rng if rng is not None else np.random.default_rng()
+        rngs = [rng] + list(rng.spawn(max_people - 1))
+        self.trackers = tuple(BodyTracker(model, rig, params, g, shape=shape if k == 0 else None)
+                              for k, g in enumerate(rngs))
+        self.ids = tuple(ids) if ids is not None else body_ids("body_0", max_people)
+        if len(self.ids) != max_people or len(set(self.ids)) != max_people:
+            raise ValueError(f"need {max_people} distinct body ids, got {self.ids}")
+
+    @property
+    def max_people(self) -> int:
+        return len(self.trackers)
+
+    def warm_up(self) -> float:
+        """Compile the weighting kernels (once: the slots share them); seconds taken."""
+        return self.trackers[0].warm_up()
+
+    def reset(self, forget_shape: bool = True) -> None:
+        for tracker in self.trackers:
+            tracker.reset(forget_shape)
+
+    def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int,
+               detector_maps: Sequence[np.ndarray | None] | None = None) -> list[TrackResult]:
+        """One frame set through every slot, in slot order; one result per slot."""
+        results = []
+        for k, tracker in enumerate(self.trackers):
+            others = [t.position for j, t in enumerate(self.trackers) if j != k]
+            others = np.array([p for p in others if p is not None]).reshape(-1, 3)
+            results.append(tracker.update(masks, stamp_ns, detector_maps,
+                                          exclude=others if len(others) else None))
+        self._drop_duplicates(results)
+        return results
+
+    def _drop_duplicates(self, results: list[TrackResult]) -> None:
+        """Two slots on one person: reset the worse fit (its result keeps this frame's pose)."""
+        for a in range(len(self.trackers)):
+            for b in range(a + 1, len(self.trackers)):
+                pa, pb = self.trackers[a].position, self.trackers[b].position
+                if pa is None or pb is None:
+                    continue
+                if np.linalg.norm((pa - pb)[[0, 2]]) > SAME_PERSON_RADIUS:
+                    continue
+                ca, cb = (r.fit_cost if np.isfinite(r.fit_cost) else np.inf
+                          for r in (results[a], results[b]))
+                worse = a if ca > cb else b
+                self.trackers[worse].reset(forget_shape=True)
