@@ -39,19 +39,32 @@ def test_body_ids():
     assert body_ids("alice", 2) == ("alice", "alice_1")
 
 
-def test_two_people_get_a_track_each(model, rig, scene):
+def test_two_people_get_a_track_each_and_never_share_one(model, rig, scene):
     masks, joints, bystander, _ = scene
     people = PeopleTracker(model, rig, TrackerParams(**SMALL), np.random.default_rng(0),
                            max_people=2)
-    for results in _run(people, masks, range(len(masks))):
+    for results in _run(people, masks, range(3)):
         assert len(results) == 2
-    pelvis = [r.joints[0] for r in results]
     assert all(r.state == "tracking" for r in results)
     # one slot on each person, whoever the rig saw best first
+    pelvis = [r.joints[0] for r in results]
     near_bystander = [np.linalg.norm((p - bystander)[[0, 2]]) < 0.2 for p in pelvis]
     assert sorted(near_bystander) == [False, True], pelvis
     subject = results[near_bystander.index(False)]
-    assert np.linalg.norm(subject.joints - joints[-1], axis=1).mean() < 0.08
+    assert np.linalg.norm(subject.joints - joints[2], axis=1).mean() < 0.08
+    # the second slot drifts onto the first one's person, a little off: it fits worse, so it
+    # is the one reset, and it starts again on the person nobody follows
+    a, b = people.trackers
+    b.estimate = a.estimate.copy()
+    b.estimate[0] += 0.05
+    b.particles = a.particles.copy()
+    b.particles[:, 0] += 0.05
+    b._previous_estimate = None
+    people.update(list(masks[3]), STAMP0 + 3 * 40_000_000)
+    assert a.state == "tracking" and b.state == "searching"
+    results = people.update(list(masks[4]), STAMP0 + 4 * 40_000_000)
+    assert b.state != "searching"
+    assert np.linalg.norm((results[0].joints[0] - results[1].joints[0])[[0, 2]]) > 1.0
 
 
 def test_one_slot_is_the_single_person_tracker_bit_for_bit(model, rig, scene):
@@ -59,7 +72,7 @@ def test_one_slot_is_the_single_person_tracker_bit_for_bit(model, rig, scene):
     params = TrackerParams(**SMALL)
     single = BodyTracker(model, rig, params, np.random.default_rng(3))
     people = PeopleTracker(model, rig, params, np.random.default_rng(3), max_people=2)
-    for f in range(3):
+    for f in range(2):
         a = single.update(list(masks[f]), STAMP0 + f)
         b = people.update(list(masks[f]), STAMP0 + f)[0]
         assert a.state == b.state
@@ -76,22 +89,3 @@ def test_a_second_slot_waits_while_only_one_person_is_there(model, rig, scene):
     assert people.ids == ("user", "guest")
     with pytest.raises(ValueError, match="distinct"):
         PeopleTracker(model, rig, TrackerParams(**SMALL), max_people=2, ids=("a", "a"))
-
-
-def test_two_slots_on_one_person_keep_the_better_fit(model, rig, scene):
-    masks = scene[0]
-    people = PeopleTracker(model, rig, TrackerParams(**SMALL), np.random.default_rng(0),
-                           max_people=2)
-    _run(people, masks, range(3))
-    a, b = people.trackers
-    # slot 1 drifts onto slot 0's person, a little off: it fits worse and is the one reset
-    b.estimate = a.estimate.copy()
-    b.estimate[0] += 0.05
-    b.particles = a.particles.copy()
-    b.particles[:, 0] += 0.05
-    b._previous_estimate = None
-    people.update(list(masks[3]), STAMP0 + 3 * 40_000_000)
-    assert a.state == "tracking" and b.state == "searching"
-    results = people.update(list(masks[4]), STAMP0 + 4 * 40_000_000)
-    assert b.state != "searching"  # back on the person nobody follows
-    assert np.linalg.norm((results[0].joints[0] - results[1].joints[0])[[0, 2]]) > 1.0
