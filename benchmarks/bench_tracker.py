@@ -13,7 +13,9 @@ frame (median), evaluations per second, and where the time goes (skinning = eq. 
 projection (fused into the XOR pass by default), XOR = eq. 2.8/2.15, proposals (their own search;
 the re-ranking of proposals counts as skinning and XOR), detection (DD-HPF: 3D extremities and
 IK solutions), the rest = resampling, kernels, boxes); then the time of one fresh start-up
-search (``research_every``, once every 25 frames by default), which the frames above leave out.
+search (``research_every``, once every 25 frames by default), which the frames above leave out;
+and what a second tracker slot costs while nobody else is in the room (``max_people`` 2: it
+carves the coarse visual hull of each frame to look for a new person).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
 """
@@ -34,6 +36,7 @@ from hmocap_ros.rig import load_rig
 from hmocap_ros.sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.body_layers import METHODS
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+from hmocap_ros.tracking.people_tracker import PeopleTracker
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -106,6 +109,14 @@ def main() -> None:
             print(f"{'':18s}fresh search (research_every): {search:.2f} s on its frame, "
                   f"{search / every:.3f} s/frame at the default of one every {every} frames",
                   flush=True)
+        people = PeopleTracker(model, rig, TrackerParams(method="hpf-apo",
+                                                         working_scale=args.working_scale),
+                               np.random.default_rng(0), shape=shape, max_people=2)
+        people.update(list(masks[0]), 0)
+        idle = [people.update(list(masks[f]), f)[1].timings["total"]
+                for f in range(1, args.frames + 1)]
+        print(f"threads={threads} a second slot (max_people 2) looking for somebody else: "
+              f"{1000 * float(np.median(idle)):.0f} ms/frame", flush=True)
 
 
 if __name__ == "__main__":
