@@ -474,7 +474,7 @@ class BodyTracker:
                 t1 = time.perf_counter()
                 spent = self.fitness.times.weighting_seconds()
                 rest = self.fitness.rest(self.shape)
-                self.proposer.apply(self.particles, self.estimate, rest, obs, self.fitness.faces,
+                self.proposer.apply(self.particles, reference, rest, obs, self.fitness.faces,
                                     self.params.proposal_fraction, self.rng,
                                     cost_fn=lambda x: self.fitness.costs(x, obs, rest))
                 # their own search only: the re-ranking's skinning and XOR count under those
