@@ -474,6 +474,8 @@ class BodyTracker:
                 t1 = time.perf_counter()
                 spent = self.fitness.times.weighting_seconds()
                 rest = self.fitness.rest(self.shape)
+                # scored where the body is predicted to be (pelvis moved by its velocity), not
+                # where the last frame left it: a runner's hips are 12 cm further on
                 self.proposer.apply(self.particles, reference, rest, obs, self.fitness.faces,
                                     self.params.proposal_fraction, self.rng,
                                     cost_fn=lambda x: self.fitness.costs(x, obs, rest))
