@@ -12,6 +12,7 @@ per-frame error plots and the JSON reports::
 
     .venv/bin/python tools/mocap_table.py                       # docs/tracking_results.md
     .venv/bin/python tools/mocap_table.py --seconds 1 --clips 13_26   # quick look
+    .venv/bin/python tools/mocap_table.py --reuse               # resume an interrupted run
 
 The tracker follows up to ``--max-people`` people (default 2: the subject and the bystander
 of the distractor scenes each get a tracker, :class:`~hmocap_ros.tracking.people_tracker.
@@ -77,6 +78,20 @@ def _cell(res: dict) -> str:
     return f"{res['mean_mm']:.1f} ({res['std_mm']:.1f})"
 
 
+def _reusable(path: Path, ns) -> dict | None:
+    """The report at ``path`` if it was made with this run's seed, max-people and methods."""
+    if not path.exists():
+        return None
+    try:
+        report = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if report.get("seed") != ns.seed or report.get("max_people") != ns.max_people \
+            or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]):
+        return None
+    return report
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -89,6 +104,9 @@ def main(argv=None) -> int:
     p.add_argument("--no-distractors", action="store_true", help="skip the distractor bags")
     p.add_argument("--max-people", type=int, default=2,
                    help="people followed at once; the subject is scored on its track")
+    p.add_argument("--reuse", action="store_true",
+                   help="reuse a bag's JSON report from an earlier (interrupted) run when it has "
+                        "the same seed, max-people and methods, instead of tracking it again")
     p.add_argument("--out", default=str(ROOT / "docs" / "tracking_results.md"))
     p.add_argument("--figures", default=str(ROOT / "docs" / "figures"))
     ns = p.parse_args(argv)
@@ -106,10 +124,15 @@ def main(argv=None) -> int:
         for distractors in conditions:
             seed = bag_seed(i, distractors)
             bag = _bag(work, clip, start, seconds, seed, distractors)
-            report = evaluate(bag, ns.methods, silhouettes="fg", seed=ns.seed,
-                              max_people=ns.max_people)
             stem = bag.stem
-            (work / f"{stem}.json").write_text(json.dumps(report, indent=1, default=_json_default))
+            report = _reusable(work / f"{stem}.json", ns) if ns.reuse else None
+            if report is None:
+                report = evaluate(bag, ns.methods, silhouettes="fg", seed=ns.seed,
+                                  max_people=ns.max_people)
+                (work / f"{stem}.json").write_text(
+                    json.dumps(report, indent=1, default=_json_default))
+            else:
+                print(f"reused {stem}.json", flush=True)
             plot_errors(report, figures / f"tracking_{stem}.png",
                         title=f"{label}{' with distractors' if distractors else ''}")
             rows.append((label, seconds, distractors, report))
