@@ -155,7 +155,8 @@ def main(argv=None) -> int:
               "foreground from the images (`--silhouettes fg`), body shape estimated at start; "
               f"up to {ns.max_people} people followed, the subject scored on its track "
               f"(track switches: {sum(r['methods'][m]['track_switches'] for *_, r in rows for m in ns.methods)}).",
-              "Evaluations per frame: " + ", ".join(f"{m} {evals[m]:.0f}" for m in ns.methods)
+              "Evaluations per frame (summed over the people followed, fresh searches "
+              "included): " + ", ".join(f"{m} {evals[m]:.0f}" for m in ns.methods)
               + "; seconds per frame: " + ", ".join(f"{m} {speed[m]:.2f}" for m in ns.methods) + "."]
     # anthropometry (sec. 2.3): per-entity size error of the shape each run estimated at start
     anth = [r["methods"][m]["anthropometry"] for *_, r in rows for m in ns.methods
