@@ -368,11 +368,25 @@ def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
         tracker.estimate[yaw] += np.deg2rad(120.0)  # a wrong pose the filter cannot leave
         tracker.particles[:, yaw] += np.deg2rad(120.0)
         tracker._previous_estimate = None
+        steps = []  # (step before, step after) of every re-seed
+        research = tracker._research
+
+        def spy(obs, stamp_ns, research=research, tracker=tracker):
+            before = tracker.estimate - tracker._previous_estimate
+            reseeded = research(obs, stamp_ns)
+            if reseeded:
+                steps.append((before, tracker.estimate - tracker._previous_estimate))
+            return reseeded
+
+        tracker._research = spy
         for f in range(2, 4):
             res = tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
         errors[every] = 1000 * np.linalg.norm(res.joints - joints[3], axis=1).mean()
         if every:
             assert res.timings["research"] > 0
+            # a re-seed keeps the frame's step, so the next frame's velocity prediction has it
+            assert steps and all(np.allclose(a, b) for a, b in steps)
+            assert any(np.abs(a).max() > 0 for a, _ in steps)
     assert errors[0] > 150.0, errors
     assert errors[1] < 60.0, errors
 

@@ -151,10 +151,11 @@ def main(argv=None) -> int:
              for m in ns.methods}
     evals = {m: sum(r["methods"][m]["evaluations_per_frame"] for *_, r in rows) / max(len(rows), 1)
              for m in ns.methods}
+    switches = sum(r["methods"][m]["track_switches"] for *_, r in rows for m in ns.methods)
     lines += ["", "Mean (std) over the frames of the per-frame mean 3D joint error (mm, 19 joints); "
               "foreground from the images (`--silhouettes fg`), body shape estimated at start; "
               f"up to {ns.max_people} people followed, the subject scored on its track "
-              f"(track switches: {sum(r['methods'][m]['track_switches'] for *_, r in rows for m in ns.methods)}).",
+              f"(track switches: {switches}).",
               "Evaluations per frame (summed over the people followed, fresh searches "
               "included): " + ", ".join(f"{m} {evals[m]:.0f}" for m in ns.methods)
               + "; seconds per frame: " + ", ".join(f"{m} {speed[m]:.2f}" for m in ns.methods) + "."]

@@ -686,10 +686,9 @@ class BodyTracker:
         self.particles = particles[idx].copy()
         # the person keeps moving: the frame's step carries over to the new estimate, so the
         # velocity prediction of the next frame still has it (a runner moves 12 cm a frame)
-        step = (self.estimate - self._previous_estimate if self._previous_estimate is not None
-                else np.zeros(n))
+        if self._previous_estimate is not None:
+            self._previous_estimate = poses[best] - (self.estimate - self._previous_estimate)
         self.estimate = poses[best].copy()
-        self._previous_estimate = self.estimate - step
         return True
 
     def _predict(self) -> np.ndarray | None:
