@@ -110,7 +110,8 @@ def main(argv=None) -> int:
                    help="people followed at once; the subject is scored on its track")
     p.add_argument("--reuse", action="store_true",
                    help="reuse a bag's JSON report from an earlier (interrupted) run when it has "
-                        "the same seed, max-people and methods, instead of tracking it again")
+                        "the same seed, max-people, methods and --param overrides, instead of "
+                        "tracking it again")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", default=[],
                    help="override a TrackerParams field for every method (repeatable), as in "
                         "hmocap eval mocap")
