@@ -196,3 +196,34 @@ def test_eval_segments_a_bag_with_empty_frames_and_rejects_bad_bags(tmp_path):
     with BagWriter(empty) as w:
         w.write("/chatter", default_factory().make("std_msgs/msg/String", data="hi"), STAMP0)
     assert run_eval([str(empty)]) == 2
+
+
+def _mocap_table_module():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "tools" / "mocap_table.py"
+    spec = importlib.util.spec_from_file_location("mocap_table", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_path):
+    """--reuse: a report made with ``--param KEY=VALUE`` is reused by a run with the same
+    override or, once VALUE is KEY's default, by a run without it; not by other settings."""
+    import argparse
+
+    from hmocap_ros.tracking.body_tracker import TrackerParams
+
+    table = _mocap_table_module()
+    default = TrackerParams().velocity_gain
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps({"seed": 0, "max_people": 2, "silhouettes": "fg",
+                                "methods": {"hpf": {}}, "overrides": {"velocity_gain": default}}))
+    ns = argparse.Namespace(seed=0, max_people=2, methods=["hpf"])
+    assert table._reusable(path, ns, {}) is not None
+    assert table._reusable(path, ns, {"velocity_gain": default}) is not None
+    assert table._reusable(path, ns, {"velocity_gain": default / 2}) is None
+    assert table._reusable(path, argparse.Namespace(seed=1, max_people=2, methods=["hpf"]),
+                           {}) is None
+    assert table._reusable(tmp_path / "missing.json", ns, {}) is None

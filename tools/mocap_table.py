@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 from hmocap_ros.eval.mocap_eval import (METHODS, _json_default, evaluate, plot_errors,  # noqa: E402
                                         tracker_overrides)
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
+from hmocap_ros.tracking.body_tracker import TrackerParams  # noqa: E402
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"
 #: (label, clip, start s, seconds): the shipped clips; the walk and the run are used whole.
@@ -80,9 +81,16 @@ def _cell(res: dict) -> str:
     return f"{res['mean_mm']:.1f} ({res['std_mm']:.1f})"
 
 
+def _non_default(overrides: dict) -> dict:
+    """``overrides`` less those equal to the current TrackerParams default, so that a report
+    made with ``--param KEY=VALUE`` is reused once VALUE has become KEY's default."""
+    defaults = TrackerParams()
+    return {k: v for k, v in overrides.items() if getattr(defaults, k, object()) != v}
+
+
 def _reusable(path: Path, ns, overrides: dict) -> dict | None:
     """The report at ``path`` if it was made with this run's seed, max-people, methods and
-    tracker overrides (``--param``)."""
+    tracker settings (``--param`` overrides other than the current defaults)."""
     if not path.exists():
         return None
     try:
@@ -91,7 +99,7 @@ def _reusable(path: Path, ns, overrides: dict) -> dict | None:
         return None
     if report.get("seed") != ns.seed or report.get("max_people") != ns.max_people \
             or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]) \
-            or report.get("overrides", {}) != overrides:
+            or _non_default(report.get("overrides", {})) != _non_default(overrides):
         return None
     return report
 
@@ -110,7 +118,8 @@ def main(argv=None) -> int:
                    help="people followed at once; the subject is scored on its track")
     p.add_argument("--reuse", action="store_true",
                    help="reuse a bag's JSON report from an earlier (interrupted) run when it has "
-                        "the same seed, max-people, methods and --param overrides, instead of "
+                        "the same seed, max-people, methods and tracker settings (--param "
+                        "overrides other than the defaults), instead of "
                         "tracking it again")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", default=[],
                    help="override a TrackerParams field for every method (repeatable), as in "

@@ -28,10 +28,10 @@ for fewer than ``forget_shape_frames`` frames, then estimated anew for the next 
 
 Inter-frame prediction: the thesis' kernel is a zero-mean Gaussian around the last estimate.
 Here, before the filter runs, the particles of ``velocity_dofs`` (default the pelvis position)
-are shifted by ``velocity_gain`` times the estimate's last frame-to-frame change: a damped
-constant-velocity prior. A walking or running person moves 5-12 cm per frame, several times
-the Gaussian's std; limbs reverse too quickly for it to help them (see docs/tracking.md for
-the comparison on the tuning clips).
+are shifted by ``velocity_gain`` times the estimate's last frame-to-frame change: a
+constant-velocity prior (gain 1.0; 0.8, a damped one, until stop 12). A walking or running
+person moves 5-12 cm per frame, several times the Gaussian's std; limbs reverse too quickly
+for it to help them (see docs/tracking.md for the comparisons on the tuning clips).
 """
 from __future__ import annotations
 
@@ -109,10 +109,10 @@ class TrackerParams:
     reseed_fraction: float = _param(0.1, "Fraction of the particles whose limb DoFs being "
                                           "diffused are drawn uniformly within the joint "
                                           "limits (lets a lost limb be found again).")
-    velocity_gain: float = _param(0.8, "Fraction of the estimate's last frame-to-frame "
+    velocity_gain: float = _param(1.0, "Fraction of the estimate's last frame-to-frame "
                                        "change of velocity_dofs added to the particles before "
-                                       "filtering (a damped constant-velocity prediction; 0: "
-                                       "zero-velocity Gaussian as in the thesis).")
+                                       "filtering (1: constant-velocity prediction, below 1 "
+                                       "damped; 0: zero-velocity Gaussian as in the thesis).")
     velocity_dofs: str = _param("root_position", "DoFs the velocity prediction moves: "
                                                  "'root_position' (pelvis), 'root' (pelvis "
                                                  "and its rotation) or 'all'.")
