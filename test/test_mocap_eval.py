@@ -209,21 +209,32 @@ def _mocap_table_module():
 
 
 def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_path):
-    """--reuse: a report made with ``--param KEY=VALUE`` is reused by a run with the same
-    override or, once VALUE is KEY's default, by a run without it; not by other settings."""
+    """--reuse compares the settings a report was made with (stored per method) with those the
+    run would use: a report made with ``--param KEY=VALUE`` is reused once VALUE is KEY's
+    default; one made before a default changed is not."""
     import argparse
 
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
     table = _mocap_table_module()
     default = TrackerParams().velocity_gain
-    path = tmp_path / "r.json"
-    path.write_text(json.dumps({"seed": 0, "max_people": 2, "silhouettes": "fg",
-                                "methods": {"hpf": {}}, "overrides": {"velocity_gain": default}}))
     ns = argparse.Namespace(seed=0, max_people=2, methods=["hpf"])
-    assert table._reusable(path, ns, {}) is not None
-    assert table._reusable(path, ns, {"velocity_gain": default}) is not None
-    assert table._reusable(path, ns, {"velocity_gain": default / 2}) is None
-    assert table._reusable(path, argparse.Namespace(seed=1, max_people=2, methods=["hpf"]),
-                           {}) is None
+
+    def report(gain, overrides):
+        path = tmp_path / f"r_{gain}.json"
+        params = table._tracker_params("hpf", {"velocity_gain": gain})
+        path.write_text(json.dumps({"seed": 0, "max_people": 2, "silhouettes": "fg",
+                                    "methods": {"hpf": {"params": params}},
+                                    "overrides": overrides}))
+        return path
+
+    made_with_param = report(default, {"velocity_gain": default})
+    assert table._reusable(made_with_param, ns, {}) is not None
+    assert table._reusable(made_with_param, ns, {"velocity_gain": default}) is not None
+    assert table._reusable(made_with_param, ns, {"velocity_gain": default / 2}) is None
+    assert table._reusable(made_with_param, argparse.Namespace(
+        seed=1, max_people=2, methods=["hpf"]), {}) is None
+    made_at_an_old_default = report(default / 2, {})
+    assert table._reusable(made_at_an_old_default, ns, {}) is None
+    assert table._reusable(made_at_an_old_default, ns, {"velocity_gain": default / 2}) is not None
     assert table._reusable(tmp_path / "missing.json", ns, {}) is None

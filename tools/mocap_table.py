@@ -31,6 +31,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -81,16 +82,19 @@ def _cell(res: dict) -> str:
     return f"{res['mean_mm']:.1f} ({res['std_mm']:.1f})"
 
 
-def _non_default(overrides: dict) -> dict:
-    """``overrides`` less those equal to the current TrackerParams default, so that a report
-    made with ``--param KEY=VALUE`` is reused once VALUE has become KEY's default."""
-    defaults = TrackerParams()
-    return {k: v for k, v in overrides.items() if getattr(defaults, k, object()) != v}
+def _tracker_params(method: str, overrides: dict) -> dict:
+    """The TrackerParams a run of ``method`` with ``overrides`` uses, as its JSON report
+    stores them (``methods.<m>.params``)."""
+    params = TrackerParams(method=method, n_particles=0, n_layers=0, **overrides)
+    return json.loads(json.dumps({f.name: getattr(params, f.name) for f in fields(params)},
+                                 default=_json_default))
 
 
 def _reusable(path: Path, ns, overrides: dict) -> dict | None:
-    """The report at ``path`` if it was made with this run's seed, max-people, methods and
-    tracker settings (``--param`` overrides other than the current defaults)."""
+    """The report at ``path`` if it was made with this run's seed, max-people and methods and
+    with the tracker settings this run would use (the defaults as they are now, with
+    ``--param``): a report made before a default changed is not reused, one made with
+    ``--param KEY=VALUE`` is once VALUE is KEY's default."""
     if not path.exists():
         return None
     try:
@@ -98,8 +102,10 @@ def _reusable(path: Path, ns, overrides: dict) -> dict | None:
     except (OSError, ValueError):
         return None
     if report.get("seed") != ns.seed or report.get("max_people") != ns.max_people \
-            or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]) \
-            or _non_default(report.get("overrides", {})) != _non_default(overrides):
+            or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]):
+        return None
+    if any(report["methods"][m].get("params") != _tracker_params(m, overrides)
+           for m in ns.methods):
         return None
     return report
 
@@ -118,8 +124,8 @@ def main(argv=None) -> int:
                    help="people followed at once; the subject is scored on its track")
     p.add_argument("--reuse", action="store_true",
                    help="reuse a bag's JSON report from an earlier (interrupted) run when it has "
-                        "the same seed, max-people, methods and tracker settings (--param "
-                        "overrides other than the defaults), instead of "
+                        "the same seed, max-people, methods and tracker settings (the current "
+                        "defaults with --param), instead of "
                         "tracking it again")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", default=[],
                    help="override a TrackerParams field for every method (repeatable), as in "
