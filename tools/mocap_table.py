@@ -31,7 +31,6 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -39,10 +38,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.eval.mocap_eval import (METHODS, _json_default, evaluate, plot_errors,  # noqa: E402
+from hmocap_ros.eval.mocap_eval import (METHODS, _json_default, evaluate,  # noqa: E402
+                                        method_params, params_record, plot_errors,
                                         tracker_overrides)
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
-from hmocap_ros.tracking.body_tracker import TrackerParams  # noqa: E402
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"
 #: (label, clip, start s, seconds): the shipped clips; the walk and the run are used whole.
@@ -83,10 +82,8 @@ def _cell(res: dict) -> str:
 
 
 def _tracker_params(method: str, overrides: dict) -> dict:
-    """The TrackerParams a run of ``method`` with ``overrides`` uses, as its JSON report
-    stores them (``methods.<m>.params``)."""
-    params = TrackerParams(method=method, n_particles=0, n_layers=0, **overrides)
-    return json.loads(json.dumps({f.name: getattr(params, f.name) for f in fields(params)},
+    """The settings a run of ``method`` with ``overrides`` uses, as its JSON report stores them."""
+    return json.loads(json.dumps(params_record(method_params(method, overrides=overrides)),
                                  default=_json_default))
 
 
@@ -125,8 +122,7 @@ def main(argv=None) -> int:
     p.add_argument("--reuse", action="store_true",
                    help="reuse a bag's JSON report from an earlier (interrupted) run when it has "
                         "the same seed, max-people, methods and tracker settings (the current "
-                        "defaults with --param), instead of "
-                        "tracking it again")
+                        "defaults with --param), instead of tracking it again")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", default=[],
                    help="override a TrackerParams field for every method (repeatable), as in "
                         "hmocap eval mocap")

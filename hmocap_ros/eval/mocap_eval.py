@@ -301,6 +301,21 @@ def _subject_track(results: list, truth: np.ndarray | None, root: int, true_root
     return posed[int(np.argmin(gaps))]
 
 
+def method_params(method: str, particles: int = 0, layers: int = 0,
+                  overrides: dict | None = None):
+    """The TrackerParams of one method's run (``particles``/``layers`` 0: the method's own
+    budget; ``overrides``: ``--param`` fields)."""
+    from hmocap_ros.tracking.body_tracker import TrackerParams
+
+    return TrackerParams(method=method, n_particles=particles, n_layers=layers,
+                         **(overrides or {}))
+
+
+def params_record(params) -> dict:
+    """``params`` as a report stores them (``methods.<m>.params``): field name -> value."""
+    return {f.name: getattr(params, f.name) for f in fields(params)}
+
+
 def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int = 0,
                layers: int = 0, overrides: dict | None = None, given_shape: bool = False,
                max_people: int = 1, progress=None) -> EvalResult:
@@ -312,12 +327,10 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     Time and evaluations per frame are those of all trackers together.
     """
     from hmocap_ros.body import load_body_model
-    from hmocap_ros.tracking.body_tracker import TrackerParams
     from hmocap_ros.tracking.people_tracker import PeopleTracker
 
     model = load_body_model("tracking")
-    params = TrackerParams(method=method, n_particles=particles, n_layers=layers,
-                           **(overrides or {}))
+    params = method_params(method, particles, layers, overrides)
     shape = frames.body_shape if given_shape else None
     people = PeopleTracker(model, frames.rig, params, np.random.default_rng(seed), shape=shape,
                            max_people=max_people)
@@ -362,7 +375,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
         evaluations_per_frame=float(np.mean(evals)) if evals else 0.0,
         stage_seconds={k: v / n for k, v in stage.items()}, states=states, fit_costs=costs,
         anthropometry=_anthropometry(model, people.trackers[subject].shape, frames.body_shape),
-        params={f.name: getattr(params, f.name) for f in fields(params)})
+        params=params_record(params))
 
 
 def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
