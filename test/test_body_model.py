@@ -54,7 +54,7 @@ def hands():
     return load_body_model("hands")
 
 
-@pytest.fixture(params=["tracking", "hands"])
+@pytest.fixture(params=["tracking", "tracking_coarse", "hands"])
 def model(request):
     return load_body_model(request.param)
 
@@ -65,7 +65,7 @@ def rng_for(seed: int) -> np.random.Generator:
 
 # --------------------------------------------------------------------------- assets
 def test_asset_files_small_and_complete():
-    for name in ("body_tracking.npz", "body_hands.npz"):
+    for name in ("body_tracking.npz", "body_tracking_coarse.npz", "body_hands.npz"):
         path = DATA / name
         assert path.stat().st_size < 1.5e6
         with np.load(path, allow_pickle=False) as z:
@@ -84,6 +84,40 @@ def test_triangle_counts_and_provenance(tracking, hands):
         assert m.meta["wheel"]["version"] == "0.6.2"
         assert "CC0" in m.meta["license"]
         assert m.meta["decimated"]["watertight"]
+
+
+def test_coarse_tracking_mesh_is_the_same_body(tracking):
+    """The tracker's default mesh: 1,000 triangles on the joints, end sites and DoFs of the
+    2,400-triangle body, and at the working resolution (160x120) the same silhouette up to a
+    sliver along its outline."""
+    from hmocap_ros.render import project_batch, render_silhouettes
+    from hmocap_ros.rig import camera_arrays, load_rig
+
+    coarse = tracking.with_mesh("tracking_coarse")
+    assert coarse.name == "tracking_coarse" and len(coarse.faces) == 1000
+    assert coarse.joint_names == tracking.joint_names
+    np.testing.assert_array_equal(coarse.joints_rest, tracking.joints_rest)
+    np.testing.assert_array_equal(coarse.end_sites_rest, tracking.end_sites_rest)
+    assert coarse.skeleton.dof_names == tracking.skeleton.dof_names
+    assert tracking.with_mesh("tracking") is tracking
+    with pytest.raises(ValueError, match="another skeleton"):
+        tracking.with_mesh("hands")
+    with pytest.raises(ValueError, match="unknown body model"):
+        tracking.with_mesh("nope")
+
+    params = sample_pose(tracking.skeleton, rng_for(3), 6, scale=0.7,
+                         root_translation=(0.2, 0.9, -0.1))
+    cams = [c.scaled(0.25) for c in load_rig(ROOT / "config" / "rig_example.yaml")]
+    K, R, t, D = camera_arrays(cams)
+    masks = []
+    for m in (tracking, coarse):
+        uv, _ = project_batch(m.pose(params)[0], K, R, t, D)
+        masks.append(render_silhouettes(uv, m.faces, cams[0].height, cams[0].width,
+                                        front_only=True).astype(bool))
+    fine_px = masks[0].sum(axis=(2, 3))
+    differ = (masks[0] ^ masks[1]).sum(axis=(2, 3))
+    assert fine_px.min() > 150  # the person is in every view
+    assert np.all(differ <= 0.08 * fine_px), differ / fine_px
 
 
 def test_rest_mesh_watertight_single_component(model):

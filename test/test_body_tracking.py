@@ -326,6 +326,17 @@ def test_tracker_params_are_described():
         assert f.metadata.get("description"), f.name
     with pytest.raises(ValueError):
         TrackerParams(method="kalman")
+    with pytest.raises(ValueError, match="mesh"):
+        TrackerParams(mesh="hands")
+
+
+def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):
+    """``mesh`` swaps the rendered triangles, not the skeleton: the same DoFs and joints."""
+    for mesh, n_faces in (("tracking_coarse", 1000), ("tracking", len(model.faces))):
+        tracker = BodyTracker(model, rig, TrackerParams(mesh=mesh), np.random.default_rng(0))
+        assert len(tracker.fitness.faces) == n_faces
+        assert tracker.model.skeleton.dof_names == model.skeleton.dof_names
+        np.testing.assert_array_equal(tracker.model.joints_rest, model.joints_rest)
 
 
 def small_tracker(model, rig, shape=None, **kw):

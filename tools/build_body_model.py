@@ -2,7 +2,8 @@
 """Build the shipped body-model assets from the CC0 MakeHuman (MPFB2) data.
 
 Reproducible asset build for ``hmocap_ros/data/body_tracking.npz``,
-``hmocap_ros/data/body_hands.npz`` and ``hmocap_ros/data/BODY_MODEL_SOURCES.md``.
+``hmocap_ros/data/body_tracking_coarse.npz``, ``hmocap_ros/data/body_hands.npz`` and
+``hmocap_ros/data/BODY_MODEL_SOURCES.md``.
 
 The MakeHuman hm08 base mesh, its vertex groups, the ``cmu_mb`` and ``default``
 rigs and their skinning weights are CC0-1.0 and ship inside the PyPI wheel
@@ -19,7 +20,7 @@ Steps:
    2-manifold), quads split into triangles;
 2. joints = centres of the MakeHuman joint cubes (``joint-*`` groups);
 3. skinning weights of the rig bones summed into the model joints
-   (cmu_mb rig for ``tracking``, default rig with finger bones for ``hands``);
+   (cmu_mb rig for ``tracking`` and ``tracking_coarse``, default rig with finger bones for ``hands``);
 4. quadric edge-collapse decimation (fast-simplification); the collapse map
    gives, for every full-resolution vertex, the decimated vertex it merged
    into, and a decimated vertex's weights are the mean of its cluster's weights;
@@ -232,6 +233,10 @@ class AssetSpec:
 
 ASSETS = (
     AssetSpec("tracking", BODY_JOINTS, BODY_END_SITES, "cmu_mb", 2400, 1.0,
+              (5.0, 4.0, 6.0, 3.0, 7.0, 8.0)),
+    # the same body and joints at 1,000 triangles, about one per silhouette pixel at the
+    # tracker's 160x120 (TrackerParams.mesh = "tracking_coarse": twice as fast)
+    AssetSpec("tracking_coarse", BODY_JOINTS, BODY_END_SITES, "cmu_mb", 1000, 1.0,
               (5.0, 4.0, 6.0, 3.0, 7.0, 8.0)),
     AssetSpec("hands", HAND_JOINTS, HAND_END_SITES, "default", 12000, 3.0,
               (5.0, 4.0, 3.0, 6.0, 7.0, 8.0)),
@@ -497,7 +502,7 @@ def build_asset(spec: AssetSpec, sources: dict, obj, groups: dict, provenance: d
 
 SOURCES_MD = """# Body model assets: sources and licence
 
-`body_tracking.npz` and `body_hands.npz` are derived from the MakeHuman hm08 base mesh and
+`body_tracking.npz`, `body_tracking_coarse.npz` and `body_hands.npz` are derived from the MakeHuman hm08 base mesh and
 the MakeHuman/MPFB2 rigs and skinning weights, released under **CC0-1.0** (public domain
 dedication). No attribution is required; we give it anyway.
 

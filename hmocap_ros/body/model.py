@@ -1,7 +1,9 @@
 """The skinned body model shipped with the package (MakeHuman hm08, CC0; see data/).
 
 ``load_body_model("tracking")`` gives the 2,400-triangle body with 19 joints used by the
-tracker and the multi-view simulator; ``load_body_model("hands")`` the 12,000-triangle
+tracker and the multi-view simulator; ``load_body_model("tracking_coarse")`` the same body
+and joints decimated to 1,000 triangles, which the tracker can render its particles with
+(``TrackerParams.mesh``: twice as fast); ``load_body_model("hands")`` the 12,000-triangle
 body with 5 three-segment fingers per hand (49 joints) for depth gesture rendering.
 Both share the frame of ``skeleton.py`` (metres, +Y up, facing +Z, +X = person's left,
 feet on y = 0, A-pose rest) and identical body joints.
@@ -27,8 +29,9 @@ from .kinematics import (SparseWeights, end_site_positions, forward_kinematics, 
 from .skeleton import Skeleton, build_skeleton, pose_to_local_rotations, rest_pose
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
-MODEL_FILES = {"tracking": "body_tracking.npz", "hands": "body_hands.npz"}
-DEFAULT_DOFS = {"tracking": "tracking", "hands": "full"}
+MODEL_FILES = {"tracking": "body_tracking.npz", "tracking_coarse": "body_tracking_coarse.npz",
+               "hands": "body_hands.npz"}
+DEFAULT_DOFS = {"tracking": "tracking", "tracking_coarse": "tracking", "hands": "full"}
 REQUIRED_KEYS = ("vertices", "faces", "joint_names", "parents", "joints_rest", "weights",
                  "end_site_names", "end_site_parents", "end_sites_rest", "meta")
 
@@ -98,6 +101,27 @@ class BodyModel:
     def with_dofs(self, dof_set: str) -> "BodyModel":
         """The same mesh with another DoF set ("tracking" or "full")."""
         return load_body_model(self.name, dof_set)
+
+    def with_mesh(self, name: str) -> "BodyModel":
+        """The shipped mesh ``name`` on this model's skeleton and DoF set.
+
+        The joints, end sites and DoFs must be the same (as for "tracking" and
+        "tracking_coarse", both built from one rig), so poses and shapes mean the same thing
+        on both; raises ValueError otherwise.
+        """
+        if name == self.name:
+            return self
+        other = load_body_model(name, self.skeleton.dof_set)
+        same = (other.joint_names == self.joint_names
+                and other.end_site_names == self.end_site_names
+                and np.array_equal(other.parents, self.parents)
+                and np.allclose(other.joints_rest, self.joints_rest, atol=1e-9)
+                and np.allclose(other.end_sites_rest, self.end_sites_rest, atol=1e-9)
+                and other.skeleton.dof_names == self.skeleton.dof_names)
+        if not same:
+            raise ValueError(f"body mesh {name!r} has another skeleton than {self.name!r}; "
+                             "a tracker can only swap meshes built on the same joints")
+        return other
 
     def forward(self, params: np.ndarray, shape: BodyShape | None = None,
                 backend: str = "auto") -> PoseResult:

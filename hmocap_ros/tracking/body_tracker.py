@@ -32,6 +32,12 @@ are shifted by ``velocity_gain`` times the estimate's last frame-to-frame change
 constant-velocity prior (gain 1.0; 0.8, a damped one, until stop 12). A walking or running
 person moves 5-12 cm per frame, several times the Gaussian's std; limbs reverse too quickly
 for it to help them (see docs/tracking.md for the comparisons on the tuning clips).
+
+Mesh: the particles are rendered with ``mesh``: the 2,400-triangle ``tracking`` body by
+default, or ``tracking_coarse``, the same joints, skinning and DoFs on 1,000 triangles. At
+the working resolution a person covers a few hundred pixels per view, so most triangles of
+the finer mesh are smaller than a pixel; the coarse one halves the time per frame and cost
+2.8 mm on the tuning clips (docs/tracking.md, stop 14), so it is an option, not the default.
 """
 from __future__ import annotations
 
@@ -65,6 +71,8 @@ __all__ = ["STATES", "BodyTracker", "TrackResult", "TrackerParams"]
 log = logging.getLogger(__name__)
 
 STATES = ("searching", "initialising", "tracking", "lost")
+#: Shipped meshes a tracker can render its particles with (``TrackerParams.mesh``).
+TRACKER_MESHES = ("tracking_coarse", "tracking")
 
 
 #: How far (m, on the floor) the tracked person's hull (start-up) or a fresh search's pose
@@ -94,6 +102,11 @@ class TrackerParams:
                               "methods have one layer per body part.")
     working_scale: float = _param(0.25, "Image scale at which silhouettes are compared "
                                         "(0.25: 640x480 -> 160x120).")
+    mesh: str = _param("tracking", "Body mesh the particles are rendered with (same joints "
+                                   "and DoFs): 'tracking' (2,400 triangles) or "
+                                   "'tracking_coarse' (1,000, about one per silhouette pixel "
+                                   "at 160x120: about twice as fast per frame, and 2.8 mm "
+                                   "worse on the tuning clips).")
     sigma_scale: float = _param(1.0, "Factor on the per-DoF inter-frame motion std sigma0 "
                                      "(motion statistics, see body_layers).")
     survival_rate: float = _param(0.5, "Particle survival rate that sets each layer's annealing "
@@ -197,6 +210,7 @@ class TrackerParams:
             (self.method in METHODS, f"method must be one of {METHODS}"),
             (self.n_particles >= 0 and self.n_layers >= 0, "n_particles, n_layers must be >= 0"),
             (0.0 < self.working_scale <= 1.0, "working_scale must lie in (0, 1]"),
+            (self.mesh in TRACKER_MESHES, f"mesh must be one of {TRACKER_MESHES}"),
             (0.0 < self.shape_working_scale <= 1.0, "shape_working_scale must lie in (0, 1]"),
             (self.sigma_scale > 0.0, "sigma_scale must be > 0"),
             (0.0 < self.survival_rate <= 1.0, "survival_rate must lie in (0, 1]"),
@@ -278,12 +292,13 @@ class BodyTracker:
 
     def __init__(self, model, rig: Sequence, params: TrackerParams | None = None,
                  rng: np.random.Generator | None = None, shape: BodyShape | None = None):
-        self.model = model
-        self.skel = model.skeleton
         self.cameras = tuple(rig)
         if not self.cameras:
             raise ValueError("the rig has no cameras")
         self.params = params or TrackerParams()
+        # particles are rendered with params.mesh; joints, DoFs and shapes are the model's
+        self.model = model = model.with_mesh(self.params.mesh)
+        self.skel = model.skeleton
         self.rng = rng if rng is not None else np.random.default_rng()
         self.given_shape = shape
         p = self.params
