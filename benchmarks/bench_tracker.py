@@ -18,6 +18,10 @@ and what a second tracker slot costs while nobody else is in the room (``max_peo
 carves the coarse visual hull of each frame to look for a new person).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
+        [--mesh tracking_coarse]
+
+The scene is always rendered with the 2,400-triangle ``tracking`` body; ``--mesh`` picks what
+the tracker renders its particles with (``TrackerParams.mesh``).
 """
 from __future__ import annotations
 
@@ -35,7 +39,7 @@ from hmocap_ros.render import project_batch, render_silhouettes
 from hmocap_ros.rig import load_rig
 from hmocap_ros.sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.body_layers import METHODS
-from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
+from hmocap_ros.tracking.body_tracker import TRACKER_MESHES, BodyTracker, TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,6 +70,8 @@ def main() -> None:
     ap.add_argument("--threads", type=int, nargs="*", default=[1, 2])
     ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
     ap.add_argument("--working-scale", type=float, default=0.25)
+    ap.add_argument("--mesh", default=TrackerParams().mesh, choices=TRACKER_MESHES,
+                    help="mesh the tracker renders its particles with (default %(default)s)")
     args = ap.parse_args()
     model = load_body_model("tracking")
     rig = load_rig(ROOT / "config" / "rig_example.yaml")
@@ -74,7 +80,8 @@ def main() -> None:
           f"{platform.machine()}, cpus {numba.config.NUMBA_NUM_THREADS}")
     print(f"4 views {rig[0].width}x{rig[0].height}, working scale {args.working_scale} "
           f"({int(rig[0].width * args.working_scale)}x{int(rig[0].height * args.working_scale)}), "
-          f"mesh {model.n_vertices} vertices / {len(model.faces)} triangles, {args.frames} frames")
+          f"scene mesh {model.n_vertices} vertices / {len(model.faces)} triangles, tracker mesh "
+          f"{args.mesh} ({len(model.with_mesh(args.mesh).faces)} triangles), {args.frames} frames")
     for threads in args.threads:
         numba.set_num_threads(threads)
         for method in args.methods:
@@ -82,6 +89,7 @@ def main() -> None:
             # (the start-up and warm-up frames do not count, so it is tracked frame n + 2)
             tracker = BodyTracker(model, rig, TrackerParams(method=method,
                                                             working_scale=args.working_scale,
+                                                            mesh=args.mesh,
                                                             research_every=args.frames + 2),
                                   np.random.default_rng(0), shape=shape)
             tracker.update(list(masks[0]), 0)  # start-up (hull, Powell): not timed
@@ -110,7 +118,8 @@ def main() -> None:
                   f"{search / every:.3f} s/frame at the default of one every {every} frames",
                   flush=True)
         people = PeopleTracker(model, rig, TrackerParams(method="hpf-apo",
-                                                         working_scale=args.working_scale),
+                                                         working_scale=args.working_scale,
+                                                         mesh=args.mesh),
                                np.random.default_rng(0), shape=shape, max_people=2)
         people.update(list(masks[0]), 0)
         idle = [people.update(list(masks[f]), f)[1].timings["total"]
