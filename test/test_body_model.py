@@ -78,18 +78,20 @@ def test_asset_files_small_and_complete():
 
 
 def test_triangle_counts_and_provenance(tracking, hands):
+    coarse = load_body_model("tracking_coarse")
     assert 2000 <= len(tracking.faces) <= 2400
+    assert len(coarse.faces) == 1000
     assert 8000 <= len(hands.faces) <= 15000
-    for m in (tracking, hands):
+    for m in (tracking, coarse, hands):
         assert m.meta["wheel"]["version"] == "0.6.2"
         assert "CC0" in m.meta["license"]
         assert m.meta["decimated"]["watertight"]
 
 
 def test_coarse_tracking_mesh_is_the_same_body(tracking):
-    """The tracker's default mesh: 1,000 triangles on the joints, end sites and DoFs of the
-    2,400-triangle body, and at the working resolution (160x120) the same silhouette up to a
-    sliver along its outline."""
+    """The tracker's optional coarse mesh: 1,000 triangles on the joints, end sites,
+    landmarks and DoFs of the 2,400-triangle body, and at the working resolution (160x120)
+    the same silhouette up to a sliver along its outline."""
     from hmocap_ros.render import project_batch, render_silhouettes
     from hmocap_ros.rig import camera_arrays, load_rig
 
@@ -98,6 +100,8 @@ def test_coarse_tracking_mesh_is_the_same_body(tracking):
     assert coarse.joint_names == tracking.joint_names
     np.testing.assert_array_equal(coarse.joints_rest, tracking.joints_rest)
     np.testing.assert_array_equal(coarse.end_sites_rest, tracking.end_sites_rest)
+    np.testing.assert_array_equal(coarse.end_site_parents, tracking.end_site_parents)
+    assert coarse.landmarks.keys() == tracking.landmarks.keys()
     assert coarse.skeleton.dof_names == tracking.skeleton.dof_names
     assert tracking.with_mesh("tracking") is tracking
     with pytest.raises(ValueError, match="another skeleton"):

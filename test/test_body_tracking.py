@@ -331,12 +331,18 @@ def test_tracker_params_are_described():
 
 
 def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):
-    """``mesh`` swaps the rendered triangles, not the skeleton: the same DoFs and joints."""
-    for mesh, n_faces in (("tracking_coarse", 1000), ("tracking", len(model.faces))):
-        tracker = BodyTracker(model, rig, TrackerParams(mesh=mesh), np.random.default_rng(0))
-        assert len(tracker.fitness.faces) == n_faces
-        assert tracker.model.skeleton.dof_names == model.skeleton.dof_names
-        np.testing.assert_array_equal(tracker.model.joints_rest, model.joints_rest)
+    """``mesh`` swaps the rendered triangles of a shipped tracking body, not its skeleton; a
+    model of one's own is rendered as it is."""
+    tracker = BodyTracker(model, rig, TrackerParams(mesh="tracking_coarse"),
+                          np.random.default_rng(0))
+    coarse = tracker.model
+    assert coarse.name == "tracking_coarse" and coarse.n_vertices < model.n_vertices
+    assert tracker.fitness.faces.max() < coarse.n_vertices == tracker.shape_fitness.model.n_vertices
+    assert tracker.skel.dof_names == model.skeleton.dof_names
+    assert BodyTracker(model, rig, TrackerParams(), np.random.default_rng(0)).model is model
+    own = dataclasses.replace(model, name="custom")
+    assert BodyTracker(own, rig, TrackerParams(mesh="tracking_coarse"),
+                       np.random.default_rng(0)).model is own
 
 
 def small_tracker(model, rig, shape=None, **kw):
@@ -345,11 +351,12 @@ def small_tracker(model, rig, shape=None, **kw):
     return BodyTracker(model, rig, params, np.random.default_rng(0), shape=shape)
 
 
-def test_tracker_follows_a_short_sequence(model, rig):
+@pytest.mark.parametrize("mesh", ["tracking", "tracking_coarse"])
+def test_tracker_follows_a_short_sequence(model, rig, mesh):
     shape = subject_shape()
     params = clip_poses(model, 60, 8, shape, position=(-0.4, 0.3), heading=-1.0)
-    masks, joints = render_masks(model, rig, params, shape)
-    tracker = small_tracker(model, rig, shape=shape)
+    masks, joints = render_masks(model, rig, params, shape)  # the 2,400-triangle body
+    tracker = small_tracker(model, rig, shape=shape, mesh=mesh)
     errors, states = [], []
     for f in range(len(masks)):
         res = tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)

@@ -235,7 +235,7 @@ ASSETS = (
     AssetSpec("tracking", BODY_JOINTS, BODY_END_SITES, "cmu_mb", 2400, 1.0,
               (5.0, 4.0, 6.0, 3.0, 7.0, 8.0)),
     # the same body and joints at 1,000 triangles, about one per silhouette pixel at the
-    # tracker's 160x120 (TrackerParams.mesh = "tracking_coarse": twice as fast)
+    # tracker's 160x120 (TrackerParams.mesh = "tracking_coarse": about twice as fast)
     AssetSpec("tracking_coarse", BODY_JOINTS, BODY_END_SITES, "cmu_mb", 1000, 1.0,
               (5.0, 4.0, 6.0, 3.0, 7.0, 8.0)),
     AssetSpec("hands", HAND_JOINTS, HAND_END_SITES, "default", 12000, 3.0,

@@ -3,9 +3,9 @@
 ``load_body_model("tracking")`` gives the 2,400-triangle body with 19 joints used by the
 tracker and the multi-view simulator; ``load_body_model("tracking_coarse")`` the same body
 and joints decimated to 1,000 triangles, which the tracker can render its particles with
-(``TrackerParams.mesh``: twice as fast); ``load_body_model("hands")`` the 12,000-triangle
+(``TrackerParams.mesh``: about twice as fast); ``load_body_model("hands")`` the 12,000-triangle
 body with 5 three-segment fingers per hand (49 joints) for depth gesture rendering.
-Both share the frame of ``skeleton.py`` (metres, +Y up, facing +Z, +X = person's left,
+All three share the frame of ``skeleton.py`` (metres, +Y up, facing +Z, +X = person's left,
 feet on y = 0, A-pose rest) and identical body joints.
 
     model = load_body_model("tracking")
@@ -105,19 +105,26 @@ class BodyModel:
     def with_mesh(self, name: str) -> "BodyModel":
         """The shipped mesh ``name`` on this model's skeleton and DoF set.
 
-        The joints, end sites and DoFs must be the same (as for "tracking" and
-        "tracking_coarse", both built from one rig), so poses and shapes mean the same thing
-        on both; raises ValueError otherwise.
+        The joints, end sites, landmarks and DoFs must be identical (as for "tracking" and
+        "tracking_coarse", both built from one rig), so a pose vector means the same on both;
+        raises ValueError otherwise. A BodyShape's factors scale each mesh's own surface, so
+        surface sizes differ a little between meshes (the neutral "tracking_coarse" torso is
+        17 mm thinner front to back): measure a shape on the mesh it was estimated with.
         """
         if name == self.name:
             return self
         other = load_body_model(name, self.skeleton.dof_set)
+        a, b = self.skeleton, other.skeleton
         same = (other.joint_names == self.joint_names
                 and other.end_site_names == self.end_site_names
                 and np.array_equal(other.parents, self.parents)
-                and np.allclose(other.joints_rest, self.joints_rest, atol=1e-9)
-                and np.allclose(other.end_sites_rest, self.end_sites_rest, atol=1e-9)
-                and other.skeleton.dof_names == self.skeleton.dof_names)
+                and np.array_equal(other.joints_rest, self.joints_rest)
+                and np.array_equal(other.end_site_parents, self.end_site_parents)
+                and np.array_equal(other.end_sites_rest, self.end_sites_rest)
+                and other.landmarks.keys() == self.landmarks.keys()
+                and all(np.array_equal(other.landmarks[k], v) for k, v in self.landmarks.items())
+                and b.dof_names == a.dof_names
+                and np.array_equal(b.lower, a.lower) and np.array_equal(b.upper, a.upper))
         if not same:
             raise ValueError(f"body mesh {name!r} has another skeleton than {self.name!r}; "
                              "a tracker can only swap meshes built on the same joints")
@@ -200,7 +207,8 @@ def read_body_model(path: str | Path, name: str = "custom", dof_set: str = "trac
 
 
 def load_body_model(name: str = "tracking", dof_set: str | None = None) -> BodyModel:
-    """Shipped model "tracking" (default DoFs: tracking set) or "hands" (full set).
+    """Shipped model "tracking" or "tracking_coarse" (default DoFs: tracking set) or "hands"
+    (full set).
 
     Cached: repeated calls return the same (immutable) object.
     """

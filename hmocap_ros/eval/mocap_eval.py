@@ -270,16 +270,20 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
 # ----------------------------------------------------------------------------- runs
 
 
-def _anthropometry(model, estimate, truth) -> dict | None:
+def _anthropometry(model, estimate, truth, truth_model=None) -> dict | None:
+    """Entity sizes (sec. 2.3.2) of the estimated shape on ``model`` (the tracker's mesh: a
+    shape's factors scale each mesh's own surface), and of the true shape on ``truth_model``
+    (the simulator's; default ``model``)."""
     from hmocap_ros.body import ENTITY_NAMES, entity_sizes
 
     if estimate is None:
         return None
+    truth_model = model if truth_model is None else truth_model
     est = entity_sizes(model, estimate)
     out = {"estimated_m": dict(zip(ENTITY_NAMES, map(float, est))),
            "global_scale": float(estimate.global_scale)}
     if truth is not None:
-        true = entity_sizes(model, truth)
+        true = entity_sizes(truth_model, truth)
         neutral = entity_sizes(model, None)
         out["true_m"] = dict(zip(ENTITY_NAMES, map(float, true)))
         out["neutral_m"] = dict(zip(ENTITY_NAMES, map(float, neutral)))
@@ -374,7 +378,8 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
         fps_with_segmentation=1.0 / (spf + seg) if spf + seg > 0 else float("inf"),
         evaluations_per_frame=float(np.mean(evals)) if evals else 0.0,
         stage_seconds={k: v / n for k, v in stage.items()}, states=states, fit_costs=costs,
-        anthropometry=_anthropometry(model, people.trackers[subject].shape, frames.body_shape),
+        anthropometry=_anthropometry(people.trackers[subject].model,
+                                     people.trackers[subject].shape, frames.body_shape, model),
         params=params_record(params))
 
 

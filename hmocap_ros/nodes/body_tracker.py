@@ -248,7 +248,8 @@ class BodyTrackerNode(Node):
             log.info(f"{who}a person appeared ({views} views): estimating the body shape "
                      f"({self.params.shape_frames} frames, start-up took {seconds:.1f} s)")
         elif result.state == "tracking":
-            height = result.shape.height(self.model) if result.shape is not None else float("nan")
+            mesh = self.tracker.trackers[k].model  # a shape's factors scale the tracker's mesh
+            height = result.shape.height(mesh) if result.shape is not None else float("nan")
             log.info(f"{who}tracking ({self.params.method}); body height {height:.2f} m, "
                      f"fit cost {result.fit_cost:.2f} per view")
         elif result.state == "lost":
@@ -289,7 +290,7 @@ class BodyTrackerNode(Node):
             msg.bone_scale = [float(x) for x in np.ravel(shape.bone_scale)]
             msg.radial_scale = [float(x) for x in np.ravel(shape.radial_scale)]
             msg.global_scale = float(shape.global_scale)
-            msg.height = float(shape.height(self.model))
+            msg.height = float(shape.height(self.tracker.trackers[k].model))
             for _, pub_shape in self.pub_body[k]:
                 pub_shape.publish(msg)
 

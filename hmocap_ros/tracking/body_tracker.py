@@ -36,8 +36,9 @@ for it to help them (see docs/tracking.md for the comparisons on the tuning clip
 Mesh: the particles are rendered with ``mesh``: the 2,400-triangle ``tracking`` body by
 default, or ``tracking_coarse``, the same joints, skinning and DoFs on 1,000 triangles. At
 the working resolution a person covers a few hundred pixels per view, so most triangles of
-the finer mesh are smaller than a pixel; the coarse one halves the time per frame and cost
-2.8 mm on the tuning clips (docs/tracking.md, stop 14), so it is an option, not the default.
+the finer mesh are smaller than a pixel; the coarse one takes about half the time per frame
+and cost 2.8 mm on the tuning clips (docs/tracking.md, stop 14), so it is an option, not the
+default.
 """
 from __future__ import annotations
 
@@ -284,7 +285,8 @@ class TrackResult:
 class BodyTracker:
     """Layered-filter body tracker for one rig (see the module docstring).
 
-    model: ``load_body_model("tracking")``. rig: the calibrated cameras (a Rig or list of
+    model: ``load_body_model("tracking")`` (rendered with ``params.mesh``; another model, e.g.
+    from ``read_body_model``, is rendered as it is). rig: the calibrated cameras (a Rig or list of
     PinholeCamera at the masks' resolution). params: :class:`TrackerParams`. rng: the only
     source of randomness (seed it for repeatable runs). shape: a known body shape (skips the
     anthropometry estimation).
@@ -296,8 +298,11 @@ class BodyTracker:
         if not self.cameras:
             raise ValueError("the rig has no cameras")
         self.params = params or TrackerParams()
-        # particles are rendered with params.mesh; joints, DoFs and shapes are the model's
-        self.model = model = model.with_mesh(self.params.mesh)
+        # a shipped tracking body is swapped for params.mesh (same joints and DoFs; a shape's
+        # factors then scale that mesh's surface); any other model is rendered as it is
+        if model.name in TRACKER_MESHES:
+            model = model.with_mesh(self.params.mesh)
+        self.model = model
         self.skel = model.skeleton
         self.rng = rng if rng is not None else np.random.default_rng()
         self.given_shape = shape
