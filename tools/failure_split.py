@@ -16,7 +16,10 @@ Reading it:
   shape (a *cost* failure: no search fixes it, another cue is needed);
 - a group whose substitution alone brings the cost down to the truth's is the one that is off;
   when only a pair does (e.g. torso and legs), the error is a coupled one that a layer
-  searching one group at a time cannot leave.
+  searching one group at a time cannot leave;
+- ``views``: the cameras that see the whole true skeleton (every joint inside the image, 3 %
+  margin, as the simulator places its subjects); the summary splits the error by it, to tell
+  a failure of the search from a subject leaving the views.
 
 ::
 
@@ -43,6 +46,7 @@ from hmocap_ros.io import topics  # noqa: E402
 from hmocap_ros.io.bag_reader import BagReader  # noqa: E402
 from hmocap_ros.io.conversions import joint_state_to_dict  # noqa: E402
 from hmocap_ros.io.msg_factory import stamp_to_ns  # noqa: E402
+from hmocap_ros.sim.mocap_dataset import views_seeing  # noqa: E402
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams  # noqa: E402
 
 #: substitutions weighed besides the estimate and the truth: name -> DoF groups from the truth
@@ -83,7 +87,7 @@ def main() -> int:
     dofs = {name: np.concatenate([skel.group_dofs(g) for g in groups])
             for name, groups in GROUPS.items()}
     names = ["estimate", *GROUPS, "truth"]
-    print("frame  error_mm  " + "  ".join(f"{n:>10s}" for n in names))
+    print("frame  views  error_mm  " + "  ".join(f"{n:>10s}" for n in names))
     rows = []
     for k, stamp in enumerate(frames.stamps):
         masks = frames.mask_list(k)
@@ -102,8 +106,9 @@ def main() -> int:
         cost = tracker.fitness.costs(np.stack(poses), obs, tracker.fitness.rest(tracker.shape))
         err = float(joint_errors(result.joints[est_idx][None],
                                  frames.truth[k][true_idx][None]).mean())
-        rows.append((err, cost))
-        print(f"{k:5d}  {err:8.1f}  " + "  ".join(f"{c:10.3f}" for c in cost))
+        views = int(views_seeing(frames.rig, frames.truth[k][None], 0.03)[0].sum())
+        rows.append((err, cost, views))
+        print(f"{k:5d}  {views:5d}  {err:8.1f}  " + "  ".join(f"{c:10.3f}" for c in cost))
     if not rows:
         print("no tracked frame with ground truth")
         return 1
@@ -114,6 +119,10 @@ def main() -> int:
           + ", ".join(f"{n} {c:.3f}" for n, c in zip(names, cost.mean(axis=0))))
     print(f"truth cheaper than the estimate (search failure) in {search.sum()}/{len(rows)} "
           f"frames; as cheap or dearer (cost failure) in {(~search).sum()}")
+    views = np.array([r[2] for r in rows])
+    print("error by the views seeing the whole true skeleton: " + ", ".join(
+        f"{v} views {err[views == v].mean():.1f} mm ({(views == v).sum()} frames)"
+        for v in sorted(set(views.tolist()), reverse=True)))
     return 0
 
 

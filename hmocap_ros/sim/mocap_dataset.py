@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["MocapSimConfig", "SimResult", "make_rig", "generate", "add_arguments",
-           "main_from_args", "DEFAULT_BVH", "BASE_STAMP_NS"]
+           "main_from_args", "views_seeing", "DEFAULT_BVH", "BASE_STAMP_NS"]
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 DEFAULT_BVH = DATA_DIR / "bvh" / "13_26.bvh"
@@ -298,7 +298,7 @@ def _shaped_skeleton(model, shape) -> _RestSkeleton:
                          model.end_site_parents)
 
 
-def _views_seeing(rig, points: np.ndarray, margin: float) -> np.ndarray:
+def views_seeing(rig, points: np.ndarray, margin: float) -> np.ndarray:
     """(F, M) whether all points (F, P, 3) of a frame are inside camera m's image (with a
     margin, as a fraction of the image size)."""
     from hmocap_ros.camera_model import project_points
@@ -348,7 +348,7 @@ def _place(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int
                                              skeleton.joints_rest, skeleton.parents)
         ends = end_site_positions(transforms, skeleton.end_sites_rest,
                                   skeleton.end_site_parents, skeleton.joints_rest)
-        seeing = _views_seeing(rig, np.concatenate([pos, ends], axis=1), 0.03)
+        seeing = views_seeing(rig, np.concatenate([pos, ends], axis=1), 0.03)
         clear = room.clearance(placed.root_translation[:, [0, 2]]) >= 0.45
         score = (float(np.mean(seeing.all(axis=1) & clear)),
                  float(np.mean(seeing & clear[:, None])))
