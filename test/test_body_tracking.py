@@ -345,6 +345,42 @@ def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):
                        np.random.default_rng(0)).model is own
 
 
+def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig):
+    """backwards_frames: the check fires when the pelvis travelled faster than backwards_step
+    per frame and the root yaw faces more than 90 degrees away, never when off, slow or
+    facing forward, and not again during the cool-down after a search."""
+    skel = model.skeleton
+    yaw, t = skel.dof_index("root_yaw"), skel.translation_dofs
+
+    def run(frames, heading, step, **kw):
+        tracker = BodyTracker(model, rig, TrackerParams(**kw), np.random.default_rng(0))
+        tracker.estimate = rest_pose(skel).copy()
+        tracker.estimate[yaw] = heading
+        fired = []
+        for k in range(frames):  # travel along +Z by `step` per frame
+            tracker.estimate[t] = [0.0, 0.9, k * step]
+            fired.append(tracker._facing_away_from_travel())
+        return fired
+
+    # facing -Z (heading pi) while travelling +Z at 10 cm a frame: fires once 4 steps are seen
+    assert run(8, np.pi, 0.10, backwards_frames=4) == [False] * 4 + [True] * 4
+    assert not any(run(8, 0.0, 0.10, backwards_frames=4))  # facing the travel
+    assert not any(run(8, 0.5 * np.pi - 0.1, 0.10, backwards_frames=4))  # 84 degrees off
+    assert not any(run(8, np.pi, 0.03, backwards_frames=4))  # slower than backwards_step
+    assert not any(run(8, np.pi, 0.10))  # off by default
+    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=2), np.random.default_rng(0))
+    tracker.estimate = rest_pose(skel).copy()
+    tracker.estimate[yaw] = np.pi
+    tracker._research_cooldown = 3
+    fired = []
+    for k in range(6):
+        tracker.estimate[t] = [0.0, 0.9, k * 0.1]
+        fired.append(tracker._facing_away_from_travel())
+    assert fired == [False, False, False, True, True, True]
+    with pytest.raises(ValueError, match="backwards"):
+        TrackerParams(backwards_frames=-1)
+
+
 def small_tracker(model, rig, shape=None, **kw):
     params = TrackerParams(n_particles=120, working_scale=0.5, shape_working_scale=0.5,
                            shape_particles=80, shape_frames=2, min_foreground=30, **kw)

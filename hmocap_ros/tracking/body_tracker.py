@@ -201,6 +201,16 @@ class TrackerParams:
                                     "from it when it fits better: a way out of a wrong pose the "
                                     "per-frame filter cannot leave (costs 1.5-2 s on that "
                                     "frame on 2 cores); 0: off.")
+    backwards_frames: int = _param(0, "Frames over which the tracked pelvis' travel is "
+                                      "measured: when it moved more than backwards_step per "
+                                      "frame over them and the body faces away from the "
+                                      "travel (by more than 90 degrees), a fresh search (as "
+                                      "research_every) runs at once, so that a runner started "
+                                      "back to front is put right within a few frames rather "
+                                      "than at the next periodic search; 0: off.")
+    backwards_step: float = _param(0.05, "Mean pelvis travel per frame (m) above which "
+                                         "backwards_frames checks the facing (0.05 m: 1.25 m/s "
+                                         "at 25 frames/s).")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
                                           "shape is forgotten.")
 
@@ -233,6 +243,8 @@ class TrackerParams:
                                                                    "shape_particles >= 2"),
             (self.lost_frames >= 1, "lost_frames must be >= 1"),
             (self.research_every >= 0, "research_every must be >= 0 (0: off)"),
+            (self.backwards_frames >= 0 and self.backwards_step > 0.0,
+             "need backwards_frames >= 0 (0: off) and backwards_step > 0"),
             (not self.track_region
              or (len(self.track_region) == 4 and np.isfinite(self.track_region).all()
                  and self.track_region[0] < self.track_region[2]
@@ -355,6 +367,8 @@ class BodyTracker:
         self._bad_frames = 0
         self._absent_frames = 0
         self._tracked_frames = 0
+        self._pelvis_track: list = []  # the estimate's pelvis (x, z) of the last frames
+        self._research_cooldown = 0
         if self.ik is not None:
             self.ik.reset()
         if forget_shape:
@@ -526,9 +540,15 @@ class BodyTracker:
             self.estimate = res.estimate.copy()
         self._tracked_frames += 1
         every = self.params.research_every
-        if every > 0 and self._tracked_frames % every == 0:
+        backwards = self._facing_away_from_travel()
+        if (every > 0 and self._tracked_frames % every == 0) or backwards:
             t1 = time.perf_counter()
+            if backwards:
+                log.info("stamp %d ns: the body faces away from its travel: fresh search",
+                         stamp_ns)
             self._research(obs, stamp_ns)
+            self._pelvis_track.clear()
+            self._research_cooldown = max(every, self.params.backwards_frames)
             timings["research"] = time.perf_counter() - t1
         fit_cost = self._fit_cost(obs)
         if not np.isfinite(fit_cost) or fit_cost > self.params.lost_cost:
@@ -663,7 +683,32 @@ class BodyTracker:
         self._estimator = None
         self._bad_frames = 0
         self._tracked_frames = 0
+        self._pelvis_track.clear()
+        self._research_cooldown = 0
         self.state = "tracking"
+
+    def _facing_away_from_travel(self) -> bool:
+        """``backwards_frames``: True when over the last ``backwards_frames`` frames the
+        estimate's pelvis moved more than ``backwards_step`` per frame on the floor and its
+        facing direction (the root yaw: +Z turned towards +X) points more than 90 degrees
+        away from that travel. People walk and run facing forward, and the silhouettes of a
+        body seen from the front and from the back differ little, so a start-up can take one
+        for the other (docs/tracking.md, the 02_03 seed-28 runner)."""
+        n = self.params.backwards_frames
+        if n <= 0:
+            return False
+        self._pelvis_track.append(self.estimate[self.skel.translation_dofs][[0, 2]].copy())
+        del self._pelvis_track[:-(n + 1)]
+        if self._research_cooldown > 0:
+            self._research_cooldown -= 1
+            return False
+        if len(self._pelvis_track) <= n:
+            return False
+        travel = self._pelvis_track[-1] - self._pelvis_track[0]
+        if np.linalg.norm(travel) <= n * self.params.backwards_step:
+            return False
+        yaw = self.estimate[self.skel.dof_index("root_yaw")]
+        return float(np.sin(yaw) * travel[0] + np.cos(yaw) * travel[1]) < 0.0
 
     def _research(self, obs: Observation, stamp_ns: int) -> bool:
         """A fresh start-up search on this frame at the estimated shape (``research_every``).
