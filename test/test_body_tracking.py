@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -27,6 +28,7 @@ from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
 from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, body_sigma0, clip_body_pose,
                                              make_schedule)
 from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
+from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.kernels import rejection_kernel
 from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d)
@@ -280,6 +282,31 @@ def test_anthropometry_estimation_reduces_entity_size_error(model, rig):
     assert est.shape().height(model) == pytest.approx(shape.height(model), abs=0.03)
 
 
+def test_heading_search_keeps_required_headings(model, rig):
+    """search_headings / start(also=...): a required heading (the travel direction) is posed,
+    kept and Powell-fitted in addition to the searched ones, whatever its cost."""
+    shape = subject_shape()
+    params = clip_poses(model, 0, 1, shape)
+    masks, _ = render_masks(model, rig, params, shape)
+    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
+    obs = fitness.observe(list(masks[0]))
+    hull = visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, room_bounds(rig))
+    est = AnthropometryEstimator(fitness, EstimationParams(n_particles=20, frames=1,
+                                                           estimate_shape=False),
+                                 np.random.default_rng(0), room=room_bounds(rig),
+                                 fixed_shape=shape,
+                                 proposer=LimbProposer(model, ("l_arm", "r_arm")))
+    pelvis_y = float(fitness.rest(shape).joints[0][1])
+    plain = est.search_headings(obs, hull, pelvis_y, 1.0)
+    est.rng = np.random.default_rng(0)
+    more = est.search_headings(obs, hull, pelvis_y, 1.0, required=(0.3,))
+    assert len(plain) == 2 and len(more) == 3
+    assert [h for h, _ in more[:2]] == [h for h, _ in plain[:2]]  # the search is unchanged
+    assert more[2][0] == 0.3 and more[2][1][model.skeleton.dof_index("root_yaw")] == 0.3
+    est.start(obs, hull, headings=(1.0,), also=(0.3,))
+    assert [h.heading for h in est.hypotheses] == [1.0, 0.3]
+
+
 # ----------------------------------------------------------------------------- schedules
 
 
@@ -359,7 +386,7 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
         fired = []
         for k in range(frames):  # travel along +Z by `step` per frame
             tracker.estimate[t] = [0.0, 0.9, k * step]
-            fired.append(tracker._facing_away_from_travel())
+            fired.append(tracker._facing_away_from_travel(tracker._travel()))
         return fired
 
     # facing -Z (heading pi) while travelling +Z at 10 cm a frame: fires once 4 steps are seen
@@ -375,10 +402,69 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
     fired = []
     for k in range(6):
         tracker.estimate[t] = [0.0, 0.9, k * 0.1]
-        fired.append(tracker._facing_away_from_travel())
+        fired.append(tracker._facing_away_from_travel(tracker._travel()))
     assert fired == [False, False, False, True, True, True]
     with pytest.raises(ValueError, match="backwards"):
         TrackerParams(backwards_frames=-1)
+
+
+def test_travel_is_measured_over_backwards_frames(model, rig):
+    """_travel: the pelvis' (x, z) travel over backwards_frames frames once that many are
+    seen and it is faster than backwards_step; its heading (travel_heading) is the root yaw
+    facing it, the convention of initial_pose (+Z turned towards +X)."""
+    skel = model.skeleton
+    t = skel.translation_dofs
+    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=3, travel_heading=True),
+                          np.random.default_rng(0))
+    tracker.estimate = rest_pose(skel).copy()
+    travels = []
+    for k in range(6):  # 6 cm a frame along (-x, +z)/sqrt(2)
+        tracker.estimate[t] = [-0.06 * k / np.sqrt(2), 0.9, 0.06 * k / np.sqrt(2)]
+        travels.append(tracker._travel())
+    assert all(v is None for v in travels[:3])
+    np.testing.assert_allclose(travels[3], [-0.18 / np.sqrt(2), 0.18 / np.sqrt(2)], atol=1e-12)
+    heading = np.arctan2(travels[5][0], travels[5][1])
+    assert heading == pytest.approx(-0.25 * np.pi)
+    # a body turned to that heading has its feet pointing along the travel
+    pose = rest_pose(skel).copy()
+    pose[skel.dof_index("root_yaw")] = heading
+    verts, joints = model.pose(pose)
+    feet = [model.joint_index(n) for n in ("l_ankle", "r_ankle")]
+    toes = (np.mean(np.asarray(verts)[np.isin(model.vertex_part, feet)], axis=0)
+            - np.mean(np.asarray(joints)[feet], axis=0))[[0, 2]]
+    assert np.dot(toes, travels[5]) / np.linalg.norm(toes) / np.linalg.norm(travels[5]) > 0.95
+    tracker.estimate = pose
+    assert not tracker._facing_away_from_travel(travels[5])
+    tracker.estimate[skel.dof_index("root_yaw")] = heading + np.pi
+    assert tracker._facing_away_from_travel(travels[5])
+    tracker.estimate[t] = [0.0, 0.9, 0.0]
+    tracker._pelvis_track.clear()
+    for k in range(5):  # 4 cm a frame: slower than backwards_step
+        tracker.estimate[t] = [0.0, 0.9, 0.04 * k]
+        assert tracker._travel() is None
+    with pytest.raises(ValueError, match="travel_heading"):
+        TrackerParams(travel_heading=True)
+
+
+def test_start_up_hull_travel_seeds_the_pelvis_track(model, rig):
+    """At the end of the start-up the hull centroids it followed stand for the pelvis' track
+    (shifted to end at the estimate), so a runner's travel is measured on the first tracked
+    frames."""
+    skel = model.skeleton
+    t = skel.translation_dofs
+    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=4, travel_heading=True),
+                          np.random.default_rng(0), shape=subject_shape())
+    pose = rest_pose(skel).copy()
+    pose[t] = [1.0, 0.9, 2.0]
+    hyp = SimpleNamespace(estimate=pose)
+    tracker._estimator = SimpleNamespace(best=lambda: hyp,
+                                         pose_particles=lambda: np.tile(pose, (5, 1)))
+    tracker._hull_track = [np.array([0.1, 0.2 + 0.1 * k]) for k in range(4)]
+    tracker._finish_start()
+    np.testing.assert_allclose(tracker._pelvis_track, [[1.0, 1.7], [1.0, 1.8], [1.0, 1.9],
+                                                       [1.0, 2.0]], atol=1e-12)
+    tracker.estimate[t] = [1.0, 0.9, 2.1]  # the first tracked frame: 10 cm on
+    np.testing.assert_allclose(tracker._travel(), [0.0, 0.4], atol=1e-12)
 
 
 def small_tracker(model, rig, shape=None, **kw):
@@ -425,9 +511,9 @@ def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
         steps = []  # (step before, step after) of every re-seed
         research = tracker._research
 
-        def spy(obs, stamp_ns, research=research, tracker=tracker):
+        def spy(obs, stamp_ns, research=research, tracker=tracker, **kw):
             before = tracker.estimate - tracker._previous_estimate
-            reseeded = research(obs, stamp_ns)
+            reseeded = research(obs, stamp_ns, **kw)
             if reseeded:
                 steps.append((before, tracker.estimate - tracker._previous_estimate))
             return reseeded

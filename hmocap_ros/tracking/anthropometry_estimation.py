@@ -496,8 +496,13 @@ class AnthropometryEstimator:
 
     # ------------------------------------------------------------------ public
 
-    def start(self, obs: Observation, hull: Hull, headings: tuple | None = None) -> None:
-        """Powell fits for each heading hypothesis and their initial particle sets."""
+    def start(self, obs: Observation, hull: Hull, headings: tuple | None = None,
+              also: tuple = ()) -> None:
+        """Powell fits for each heading hypothesis and their initial particle sets.
+
+        headings: the hypotheses' headings (None: :meth:`search_headings`); also: headings
+        searched and kept as hypotheses in addition to the search's (e.g. the direction a
+        person travels, ``BodyTracker``'s ``travel_heading``)."""
         p = self.params
         if self.fixed_shape is None:
             model_height = float(np.asarray(self.model.vertices)[:, 1].max())
@@ -507,9 +512,10 @@ class AnthropometryEstimator:
             scale0 = float(self.fixed_shape.global_scale)
             pelvis_y = float(self.fitness.rest(self.fixed_shape).joints[0][1])
         if headings is None:
-            starts = self.search_headings(obs, hull, pelvis_y, scale0)
+            starts = self.search_headings(obs, hull, pelvis_y, scale0, required=also)
         else:
-            starts = [(h, initial_pose(self.model, hull, h, pelvis_y)) for h in headings]
+            starts = [(h, initial_pose(self.model, hull, h, pelvis_y))
+                      for h in tuple(headings) + tuple(also)]
         self.hypotheses = []
         for h, pose0 in starts:
             params, scale, _ = powell_fit(
@@ -530,7 +536,8 @@ class AnthropometryEstimator:
 
     def search_headings(self, obs: Observation, hull: Hull, pelvis_y: float, scale0: float,
                         n_headings: int = 8, keep: int = 2,
-                        min_separation: float = np.deg2rad(60.0)) -> list:
+                        min_separation: float = np.deg2rad(60.0),
+                        required: tuple = ()) -> list:
         """The ``keep`` most likely ``(heading, pose (D,))`` of a person standing in the hull.
 
         Without a limb proposer: the hull's two headings (its chest axis normals). With one:
@@ -538,17 +545,20 @@ class AnthropometryEstimator:
         hull centroid with every limb set to the best of its silhouette-driven candidates
         (one batch of weightings per limb, eq. 2.8); the cheapest headings at least
         ``min_separation`` apart are kept. The chest-axis guess alone fails when the arms are
-        held out at chest height, and is ambiguous front/back anyway.
+        held out at chest height, and is ambiguous front/back anyway. ``required`` headings
+        are posed the same way and kept in addition, whatever their cost.
         """
+        required = tuple(float(h) for h in required)
         if self.proposer is None:
             return [(h, initial_pose(self.model, hull, h, pelvis_y))
-                    for h in (hull.heading, hull.heading + np.pi)]
+                    for h in (hull.heading, hull.heading + np.pi) + required]
         shape = (self.fixed_shape if self.fixed_shape is not None
                  else BodyShape(np.ones(len(ENTITY_NAMES)), np.ones(len(ENTITY_NAMES)), scale0))
         rest = self.fitness.rest(shape)
         cands = np.concatenate([hull.heading + np.array([0.0, np.pi]),
                                 hull.heading + np.pi / n_headings
-                                + np.arange(n_headings) * 2 * np.pi / n_headings])
+                                + np.arange(n_headings) * 2 * np.pi / n_headings,
+                                np.asarray(required, dtype=float)])
         costs, poses = [], []
         for h in cands:
             pose = initial_pose(self.model, hull, h, pelvis_y)
@@ -565,13 +575,14 @@ class AnthropometryEstimator:
             costs.append(float(self.fitness.costs(pose[None], obs, shape)[0]))
             poses.append(pose)
         chosen: list = []
-        for i in np.argsort(costs):
+        searched = len(cands) - len(required)
+        for i in np.argsort(costs[:searched]):
             d = np.abs((cands[i] - np.array([h for h, _ in chosen]) + np.pi) % (2 * np.pi) - np.pi)
             if not chosen or d.min() >= min_separation:
                 chosen.append((float(cands[i]), poses[i]))
             if len(chosen) == keep:
                 break
-        return chosen
+        return chosen + [(float(cands[i]), poses[i]) for i in range(searched, len(cands))]
 
     @property
     def done(self) -> bool:

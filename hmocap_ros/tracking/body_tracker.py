@@ -207,10 +207,19 @@ class TrackerParams:
                                       "travel (by more than 90 degrees), a fresh search (as "
                                       "research_every) runs at once, so that a runner started "
                                       "back to front is put right within a few frames rather "
-                                      "than at the next periodic search; 0: off.")
+                                      "than at the next periodic search (the start-up's visual "
+                                      "hull travel counts as the pelvis'); 0: off.")
     backwards_step: float = _param(0.05, "Mean pelvis travel per frame (m) above which "
                                          "backwards_frames checks the facing (0.05 m: 1.25 m/s "
                                          "at 25 frames/s).")
+    travel_heading: bool = _param(False, "With backwards_frames > 0: while the tracked pelvis "
+                                         "travels faster than backwards_step, a fresh search "
+                                         "also fits a pose facing the travel direction (people "
+                                         "walk and run facing forward), and one such search "
+                                         "runs as soon as the travel is first measured after a "
+                                         "start (the start-up's hull travel counts), so a "
+                                         "runner's start-up heading is checked on its second "
+                                         "tracked frame.")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
                                           "shape is forgotten.")
 
@@ -245,6 +254,8 @@ class TrackerParams:
             (self.research_every >= 0, "research_every must be >= 0 (0: off)"),
             (self.backwards_frames >= 0 and self.backwards_step > 0.0,
              "need backwards_frames >= 0 (0: off) and backwards_step > 0"),
+            (not self.travel_heading or self.backwards_frames > 0,
+             "travel_heading measures the travel over backwards_frames: set it > 0"),
             (not self.track_region
              or (len(self.track_region) == 4 and np.isfinite(self.track_region).all()
                  and self.track_region[0] < self.track_region[2]
@@ -364,11 +375,13 @@ class BodyTracker:
         self._estimator: AnthropometryEstimator | None = None
         self._hull_centroid = np.zeros(3)
         self._hull_step = np.zeros(3)
+        self._hull_track: list = []  # the hull centroid's (x, z) during the start-up
         self._bad_frames = 0
         self._absent_frames = 0
         self._tracked_frames = 0
         self._pelvis_track: list = []  # the estimate's pelvis (x, z) of the last frames
         self._research_cooldown = 0
+        self._travel_checked = False  # travel_heading: the start-up heading checked once
         if self.ik is not None:
             self.ik.reset()
         if forget_shape:
@@ -540,13 +553,23 @@ class BodyTracker:
             self.estimate = res.estimate.copy()
         self._tracked_frames += 1
         every = self.params.research_every
-        backwards = self._facing_away_from_travel()
-        if (every > 0 and self._tracked_frames % every == 0) or backwards:
+        travel = self._travel()
+        backwards = self._facing_away_from_travel(travel)
+        first_travel = (self.params.travel_heading and travel is not None
+                        and not self._travel_checked and self._research_cooldown == 0)
+        if (every > 0 and self._tracked_frames % every == 0) or backwards or first_travel:
             t1 = time.perf_counter()
             if backwards:
                 log.info("stamp %d ns: the body faces away from its travel: fresh search",
                          stamp_ns)
-            self._research(obs, stamp_ns)
+            elif first_travel:
+                log.info("stamp %d ns: the body travels: fresh search with its travel heading",
+                         stamp_ns)
+            heading = None
+            if self.params.travel_heading and travel is not None:
+                heading = float(np.arctan2(travel[0], travel[1]))
+                self._travel_checked = True
+            self._research(obs, stamp_ns, travel_heading=heading)
             self._pelvis_track.clear()
             self._research_cooldown = max(every, self.params.backwards_frames)
             timings["research"] = time.perf_counter() - t1
@@ -602,6 +625,7 @@ class BodyTracker:
             return False
         self._hull_centroid = hull.centroid.copy()
         self._hull_step = np.zeros(3)
+        self._hull_track = [hull.centroid[[0, 2]].copy()]
         shape_obs = (obs if self.shape_fitness is self.fitness
                      else self.shape_fitness.observe(masks, stamp_ns))
         est_params = EstimationParams(
@@ -657,11 +681,13 @@ class BodyTracker:
         hull = self._same_person_hull(obs, self._hull_centroid)
         if hull is None:
             self._hull_step = np.zeros(3)
+            self._hull_track = []  # a gap: no travel measured across it
             return
         step = np.zeros(3)
         step[[0, 2]] = (hull.centroid - self._hull_centroid)[[0, 2]]
         self._hull_centroid = hull.centroid.copy()
         self._hull_step = step
+        self._hull_track.append(hull.centroid[[0, 2]].copy())
         t = self.skel.translation_dofs
         for hyp in self._estimator.hypotheses:
             hyp.particles[:, t] += step
@@ -683,34 +709,49 @@ class BodyTracker:
         self._estimator = None
         self._bad_frames = 0
         self._tracked_frames = 0
-        self._pelvis_track.clear()
+        # the start-up's hull travel stands for the pelvis' (moved to end at the estimate),
+        # so that backwards_frames / travel_heading can judge the start-up's heading on the
+        # first tracked frames rather than backwards_frames frames later
+        pelvis = self.estimate[self.skel.translation_dofs][[0, 2]]
+        self._pelvis_track = ([c - self._hull_track[-1] + pelvis for c in self._hull_track]
+                              if self._hull_track else [])
         self._research_cooldown = 0
+        self._travel_checked = False
         self.state = "tracking"
 
-    def _facing_away_from_travel(self) -> bool:
-        """``backwards_frames``: True when over the last ``backwards_frames`` frames the
-        estimate's pelvis moved more than ``backwards_step`` per frame on the floor and its
-        facing direction (the root yaw: +Z turned towards +X) points more than 90 degrees
-        away from that travel. People walk and run facing forward, and the silhouettes of a
-        body seen from the front and from the back differ little, so a start-up can take one
-        for the other (docs/tracking.md, the 02_03 seed-28 runner)."""
+    def _travel(self) -> np.ndarray | None:
+        """The estimate's pelvis travel (x, z) over the last ``backwards_frames`` frames, or
+        None while it is off, not yet measured, or slower than ``backwards_step`` per frame.
+        Records this frame's pelvis."""
         n = self.params.backwards_frames
         if n <= 0:
-            return False
+            return None
         self._pelvis_track.append(self.estimate[self.skel.translation_dofs][[0, 2]].copy())
         del self._pelvis_track[:-(n + 1)]
+        if len(self._pelvis_track) <= n:
+            return None
+        travel = self._pelvis_track[-1] - self._pelvis_track[0]
+        if np.linalg.norm(travel) <= n * self.params.backwards_step:
+            return None
+        return travel
+
+    def _facing_away_from_travel(self, travel: np.ndarray | None) -> bool:
+        """``backwards_frames``: True when the pelvis travels (:meth:`_travel`) and the
+        estimate's facing direction (the root yaw: +Z turned towards +X) points more than 90
+        degrees away from that travel, outside the cool-down after a search. People walk and
+        run facing forward, and the silhouettes of a body seen from the front and from the
+        back differ little, so a start-up can take one for the other (docs/tracking.md, the
+        02_03 seed-28 runner)."""
         if self._research_cooldown > 0:
             self._research_cooldown -= 1
             return False
-        if len(self._pelvis_track) <= n:
-            return False
-        travel = self._pelvis_track[-1] - self._pelvis_track[0]
-        if np.linalg.norm(travel) <= n * self.params.backwards_step:
+        if travel is None:
             return False
         yaw = self.estimate[self.skel.dof_index("root_yaw")]
         return float(np.sin(yaw) * travel[0] + np.cos(yaw) * travel[1]) < 0.0
 
-    def _research(self, obs: Observation, stamp_ns: int) -> bool:
+    def _research(self, obs: Observation, stamp_ns: int,
+                  travel_heading: float | None = None) -> bool:
         """A fresh start-up search on this frame at the estimated shape (``research_every``).
 
         The start-up's heading search and Powell fits (sec. 2.3.4) run from the visual hull of
@@ -720,7 +761,8 @@ class BodyTracker:
         its last estimate, so a wrong pose whose parts compensate each other (a pelvis turned
         with the legs bent to make up for it, legs swapped) is never left otherwise, although
         the silhouettes prefer the truth (``tools/failure_split.py``). Returns True when the
-        filter was re-seeded.
+        filter was re-seeded. travel_heading: a heading (root yaw) searched and fitted in
+        addition to the search's own (``travel_heading``).
         """
         p = self.params
         n = self.skel.n_dofs
@@ -734,7 +776,7 @@ class BodyTracker:
                                            proposal_fraction=p.proposal_fraction),
             self.rng, room=self.room, fixed_shape=self.shape,
             proposer=self.start_proposer if p.proposal_fraction > 0 else None)
-        search.start(obs, hull)
+        search.start(obs, hull, also=() if travel_heading is None else (travel_heading,))
         poses = np.stack([self.estimate] + [h.estimate[:n] for h in search.hypotheses])
         costs = self.fitness.costs(poses, obs, self.fitness.rest(self.shape))
         near = np.linalg.norm((poses[:, self.skel.translation_dofs] - pelvis)[:, [0, 2]],
