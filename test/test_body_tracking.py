@@ -394,7 +394,7 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
     assert not any(run(8, 0.0, 0.10, backwards_frames=4))  # facing the travel
     assert not any(run(8, 0.5 * np.pi - 0.1, 0.10, backwards_frames=4))  # 84 degrees off
     assert not any(run(8, np.pi, 0.03, backwards_frames=4))  # slower than backwards_step
-    assert not any(run(8, np.pi, 0.10))  # off by default
+    assert not any(run(8, np.pi, 0.10, backwards_frames=0))  # off
     tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=2), np.random.default_rng(0))
     tracker.estimate = rest_pose(skel).copy()
     tracker.estimate[yaw] = np.pi
@@ -442,8 +442,12 @@ def test_travel_is_measured_over_backwards_frames(model, rig):
     for k in range(5):  # 4 cm a frame: slower than backwards_step
         tracker.estimate[t] = [0.0, 0.9, 0.04 * k]
         assert tracker._travel() is None
-    with pytest.raises(ValueError, match="travel_heading"):
-        TrackerParams(travel_heading=True)
+    # backwards_frames 0 turns both off (travel_heading has no travel to go by)
+    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=0), np.random.default_rng(0))
+    tracker.estimate = rest_pose(skel).copy()
+    for k in range(8):
+        tracker.estimate[t] = [0.0, 0.9, 0.1 * k]
+        assert tracker._travel() is None
 
 
 def test_start_up_hull_travel_seeds_the_pelvis_track(model, rig):

@@ -201,7 +201,7 @@ class TrackerParams:
                                     "from it when it fits better: a way out of a wrong pose the "
                                     "per-frame filter cannot leave (costs 1.5-2 s on that "
                                     "frame on 2 cores); 0: off.")
-    backwards_frames: int = _param(0, "Frames over which the tracked pelvis' travel is "
+    backwards_frames: int = _param(5, "Frames over which the tracked pelvis' travel is "
                                       "measured: when it moved more than backwards_step per "
                                       "frame over them and the body faces away from the "
                                       "travel (by more than 90 degrees), a fresh search (as "
@@ -212,14 +212,14 @@ class TrackerParams:
     backwards_step: float = _param(0.05, "Mean pelvis travel per frame (m) above which "
                                          "backwards_frames checks the facing (0.05 m: 1.25 m/s "
                                          "at 25 frames/s).")
-    travel_heading: bool = _param(False, "With backwards_frames > 0: while the tracked pelvis "
-                                         "travels faster than backwards_step, a fresh search "
-                                         "also fits a pose facing the travel direction (people "
-                                         "walk and run facing forward), and one such search "
-                                         "runs as soon as the travel is first measured after a "
-                                         "start (the start-up's hull travel counts), so a "
-                                         "runner's start-up heading is checked on its second "
-                                         "tracked frame.")
+    travel_heading: bool = _param(True, "With backwards_frames > 0 (inert at 0): while the "
+                                        "tracked pelvis travels faster than backwards_step, a "
+                                        "fresh search also fits a pose facing the travel "
+                                        "direction (people walk and run facing forward), and "
+                                        "one such search runs as soon as the travel is first "
+                                        "measured after a start (the start-up's hull travel "
+                                        "counts), so a runner's start-up heading is checked on "
+                                        "its second tracked frame.")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
                                           "shape is forgotten.")
 
@@ -254,8 +254,6 @@ class TrackerParams:
             (self.research_every >= 0, "research_every must be >= 0 (0: off)"),
             (self.backwards_frames >= 0 and self.backwards_step > 0.0,
              "need backwards_frames >= 0 (0: off) and backwards_step > 0"),
-            (not self.travel_heading or self.backwards_frames > 0,
-             "travel_heading measures the travel over backwards_frames: set it > 0"),
             (not self.track_region
              or (len(self.track_region) == 4 and np.isfinite(self.track_region).all()
                  and self.track_region[0] < self.track_region[2]
