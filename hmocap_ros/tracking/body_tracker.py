@@ -212,6 +212,13 @@ class TrackerParams:
     backwards_step: float = _param(0.05, "Mean pelvis travel per frame (m) above which "
                                          "backwards_frames checks the facing (0.05 m: 1.25 m/s "
                                          "at 25 frames/s).")
+    facing_limit: float = _param(90.0, "Degrees between the body's facing direction (root yaw) "
+                                       "and its travel (backwards_frames) above which the "
+                                       "fresh search of backwards_frames runs: 90 catches a "
+                                       "body tracked back to front; a smaller angle also a "
+                                       "pelvis turned away from the way it runs, with the "
+                                       "legs twisted to make up for it (people walk and run "
+                                       "facing within about 10 degrees of their travel).")
     travel_heading: bool = _param(True, "With backwards_frames > 0 (inert at 0): while the "
                                         "tracked pelvis travels faster than backwards_step, a "
                                         "fresh search also fits a pose facing the travel "
@@ -260,6 +267,7 @@ class TrackerParams:
             (self.lost_frames >= 1, "lost_frames must be >= 1"),
             (self.research_every >= 0, "research_every must be >= 0 (0: off)"),
             (self.powell_rounds >= 1, "powell_rounds must be at least 1"),
+            (0.0 < self.facing_limit <= 180.0, "facing_limit must lie in (0, 180] degrees"),
             (self.backwards_frames >= 0 and self.backwards_step > 0.0,
              "need backwards_frames >= 0 (0: off) and backwards_step > 0"),
             (not self.track_region
@@ -566,8 +574,8 @@ class BodyTracker:
         if (every > 0 and self._tracked_frames % every == 0) or backwards or first_travel:
             t1 = time.perf_counter()
             if backwards:
-                log.info("stamp %d ns: the body faces away from its travel: fresh search",
-                         stamp_ns)
+                log.info("stamp %d ns: the body faces more than %g degrees away from its "
+                         "travel: fresh search", stamp_ns, self.params.facing_limit)
             elif first_travel:
                 log.info("stamp %d ns: the body travels: fresh search with its travel heading",
                          stamp_ns)
@@ -743,18 +751,23 @@ class BodyTracker:
 
     def _facing_away_from_travel(self, travel: np.ndarray | None) -> bool:
         """``backwards_frames``: True when the pelvis travels (:meth:`_travel`) and the
-        estimate's facing direction (the root yaw: +Z turned towards +X) points more than 90
-        degrees away from that travel, outside the cool-down after a search. People walk and
-        run facing forward, and the silhouettes of a body seen from the front and from the
-        back differ little, so a start-up can take one for the other (docs/tracking.md, the
-        02_03 seed-28 runner)."""
+        estimate's facing direction (the root yaw: +Z turned towards +X) points more than
+        ``facing_limit`` degrees (90: back to front) away from that travel, outside the
+        cool-down after a search. People walk and run facing forward, and the silhouettes
+        of a body seen from the front and from the back differ little, so a start-up can take
+        one for the other (docs/tracking.md, the 02_03 seed-28 runner); a smaller limit also
+        catches a pelvis turned 30 degrees off with the legs twisted to make up for it (the
+        02_03 seed-27 runner)."""
         if self._research_cooldown > 0:
             self._research_cooldown -= 1
             return False
         if travel is None:
             return False
         yaw = self.estimate[self.skel.dof_index("root_yaw")]
-        return float(np.sin(yaw) * travel[0] + np.cos(yaw) * travel[1]) < 0.0
+        along = float(np.sin(yaw) * travel[0] + np.cos(yaw) * travel[1])
+        if self.params.facing_limit == 90.0:
+            return along < 0.0  # exactly (cos 90 degrees is 6e-17 in floating point)
+        return along < np.cos(np.deg2rad(self.params.facing_limit)) * float(np.linalg.norm(travel))
 
     def _research(self, obs: Observation, stamp_ns: int,
                   travel_heading: float | None = None) -> bool:
