@@ -307,35 +307,6 @@ def test_heading_search_keeps_required_headings(model, rig):
     assert [h.heading for h in est.hypotheses] == [1.0, 0.3]
 
 
-def test_second_powell_pass_refits_the_root_once_the_limbs_are_fitted(model, rig):
-    """powell_fit(rounds=2): from the true root turned 20 degrees and tilted 8, limbs at rest,
-    the second pass (root again, then each limb) ends nearer the true pose than one pass, and
-    rounds=1 is the single pass (the default, bit for bit)."""
-    from hmocap_ros.tracking.anthropometry_estimation import powell_fit
-
-    shape = subject_shape()
-    skel = model.skeleton
-    params = clip_poses(model, 40, 1, shape)
-    masks, joints = render_masks(model, rig, params, shape)
-    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
-    obs = fitness.observe(list(masks[0]))
-    start = np.zeros_like(params[0])
-    root = list(skel.translation_dofs) + [skel.dof_index(n) for n in
-                                          ("root_yaw", "root_pitch", "root_roll")]
-    start[root] = params[0][root]
-    start[skel.dof_index("root_yaw")] += np.deg2rad(20.0)
-    start[skel.dof_index("root_pitch")] += np.deg2rad(8.0)
-    errors, costs = {}, {}
-    for rounds in (1, 2):
-        fit, _, costs[rounds] = powell_fit(fitness, obs, start, 1.0, shape, fit_scale=False,
-                                           maxfev=120, limb_maxfev=30,
-                                           rng=np.random.default_rng(0), rounds=rounds)
-        _, j = model.pose(fit[None], shape)
-        errors[rounds] = 1000 * np.linalg.norm(j[0] - joints[0], axis=1).mean()
-    assert costs[2] < costs[1]
-    assert errors[2] < errors[1] - 5.0, errors
-
-
 # ----------------------------------------------------------------------------- schedules
 
 
@@ -432,6 +403,13 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
     assert not any(run(8, np.deg2rad(25.0), 0.10, backwards_frames=4, facing_limit=30.0))
     with pytest.raises(ValueError, match="facing_limit"):
         TrackerParams(facing_limit=0.0)
+    cool = {kw: BodyTracker(model, rig, TrackerParams(**dict(kw)), np.random.default_rng(0))
+            ._cooldown_after_search() for kw in ((), (("facing_cooldown", 10),),
+                                                 (("facing_cooldown", 2),),
+                                                 (("research_every", 0),))}
+    assert list(cool.values()) == [25, 10, 5, 5]  # research_every 25, backwards_frames 5
+    with pytest.raises(ValueError, match="facing_cooldown"):
+        TrackerParams(facing_cooldown=-1)
     tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=2), np.random.default_rng(0))
     tracker.estimate = rest_pose(skel).copy()
     tracker.estimate[yaw] = np.pi

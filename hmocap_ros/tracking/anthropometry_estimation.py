@@ -186,7 +186,6 @@ class EstimationParams:
     prior_on_proportions: bool = True
     powell_maxfev: int = 120
     limb_maxfev: int = 30
-    powell_rounds: int = 1
     scale_limits: tuple = (0.8, 1.2)
     shape_limits: tuple = (0.7, 1.4)
     proposal_fraction: float = 0.0
@@ -273,8 +272,7 @@ def powell_fit(fitness: SilhouetteFitness, obs: Observation, params0: np.ndarray
                fit_scale: bool = True, maxfev: int = 400, limb_maxfev: int = 120,
                scale_limits: tuple = (0.8, 1.2),
                limb_grid: bool = True, proposer=None,
-               rng: np.random.Generator | None = None,
-               rounds: int = 1) -> tuple[np.ndarray, float, float]:
+               rng: np.random.Generator | None = None) -> tuple[np.ndarray, float, float]:
     """Powell refinement of (global scale,) root, then each limb (sec. 2.3.3 "To initialize").
 
     Each limb's Powell step starts from the best point of a coarse grid over its DoFs
@@ -283,11 +281,6 @@ def powell_fit(fitness: SilhouetteFitness, obs: Observation, params0: np.ndarray
     ``proposer`` (a :class:`~.limb_proposals.LimbProposer`) adds its silhouette-driven
     candidates of each limb to the grid: a grid at 40 degree steps misses an arm held
     straight out, which the proposals find.
-    ``rounds`` > 1: that many passes in all; each further pass refines the root again, now
-    with the limbs fitted, and then each limb from where it is (Powell alone: no grid, no
-    proposals, no random draws). The first root fit is made with the limbs of ``params0``;
-    when they are wrong, the root turns and tilts to make up for them and the limbs then fit
-    the tilted root, a coupled error that one pass does not leave.
     Returns ``(params (D,), global scale, eq. 2.8 cost)``. ``base_shape`` is the shape whose
     global scale is refined (neutral by default).
     """
@@ -307,38 +300,18 @@ def powell_fit(fitness: SilhouetteFitness, obs: Observation, params0: np.ndarray
     # Root and global scale, in units where one step moves things comparably.
     unit = np.array([0.1, 0.1, 0.1, 0.3, 0.2, 0.2])
 
-    def fit_root(scale_in: float) -> float:
-        """Powell over the root (and the global scale) from ``params``; returns the scale."""
-        start = params[root].copy()
+    def f_root(z: np.ndarray) -> float:
+        p = params.copy()
+        p[root] = params0[root] + z[:6] * unit
+        s = scale0 * (1.0 + 0.1 * z[6]) if fit_scale else scale0
+        return cost_of(p, s)
 
-        def f_root(z: np.ndarray) -> float:
-            p = params.copy()
-            p[root] = start + z[:6] * unit
-            s = scale_in * (1.0 + 0.1 * z[6]) if fit_scale else scale_in
-            return cost_of(p, s)
-
-        z0 = np.zeros(7 if fit_scale else 6)
-        res = minimize(f_root if fit_scale else (lambda z: f_root(np.append(z, 0.0))), z0,
-                       method="Powell", options={"maxfev": maxfev, "xtol": 1e-2, "ftol": 1e-4})
-        z = np.append(res.x, 0.0) if not fit_scale else res.x
-        params[root] = start + z[:6] * unit
-        return (float(np.clip(scale_in * (1.0 + 0.1 * z[6]), lo_s, hi_s)) if fit_scale
-                else scale_in)
-
-    def fit_limb(idx: list, scale: float) -> None:
-        """Powell over one limb's DoFs from ``params``."""
-        start = params[idx].copy()
-
-        def f_limb(z: np.ndarray) -> float:
-            p = params.copy()
-            p[idx] = start + 0.3 * z
-            return cost_of(p, scale)
-
-        r = minimize(f_limb, np.zeros(len(idx)), method="Powell",
-                     options={"maxfev": limb_maxfev, "xtol": 1e-2, "ftol": 1e-4})
-        params[idx] = start + 0.3 * r.x
-
-    scale = fit_root(scale0)
+    z0 = np.zeros(7 if fit_scale else 6)
+    res = minimize(f_root if fit_scale else (lambda z: f_root(np.append(z, 0.0))), z0,
+                   method="Powell", options={"maxfev": maxfev, "xtol": 1e-2, "ftol": 1e-4})
+    z = np.append(res.x, 0.0) if not fit_scale else res.x
+    params[root] = params0[root] + z[:6] * unit
+    scale = float(np.clip(scale0 * (1.0 + 0.1 * z[6]), lo_s, hi_s)) if fit_scale else scale0
     rng = rng if rng is not None else np.random.default_rng(0)
     for names in LIMB_STEPS:
         idx = [skel.dof_index(n) for n in names]
@@ -355,11 +328,16 @@ def powell_fit(fitness: SilhouetteFitness, obs: Observation, params0: np.ndarray
             params[idx] = _best_on_grid(fitness, obs, params, idx, shaped(scale), rng,
                                         extra=extra, grid=extra is None,
                                         samples=24 if extra is None else 12)
-        fit_limb(idx, scale)
-    for _ in range(rounds - 1):
-        scale = fit_root(scale)
-        for names in LIMB_STEPS:
-            fit_limb([skel.dof_index(n) for n in names], scale)
+        start = params[idx].copy()
+
+        def f_limb(z: np.ndarray, idx=idx, start=start) -> float:
+            p = params.copy()
+            p[idx] = start + 0.3 * z
+            return cost_of(p, scale)
+
+        r = minimize(f_limb, np.zeros(len(idx)), method="Powell",
+                     options={"maxfev": limb_maxfev, "xtol": 1e-2, "ftol": 1e-4})
+        params[idx] = start + 0.3 * r.x
     params = clip_body_pose(skel, params[None].copy())[0]
     return params, scale, cost_of(params, scale)
 
@@ -544,7 +522,7 @@ class AnthropometryEstimator:
                 self.fitness, obs, pose0, scale0, self.fixed_shape,
                 fit_scale=self.fixed_shape is None and p.powell_scale, maxfev=p.powell_maxfev,
                 limb_maxfev=p.limb_maxfev, scale_limits=p.scale_limits,
-                proposer=self.proposer, rng=self.rng, rounds=p.powell_rounds)
+                proposer=self.proposer, rng=self.rng)
             shape_state = self.base_shape_state.copy()
             if self.fixed_shape is None:
                 shape_state[SHAPE_KEYS.index("global")] = scale

@@ -219,6 +219,10 @@ class TrackerParams:
                                        "pelvis turned away from the way it runs, with the "
                                        "legs twisted to make up for it (people walk and run "
                                        "facing within about 10 degrees of their travel).")
+    facing_cooldown: int = _param(0, "Frames after a fresh search during which the "
+                                     "backwards_frames check does not run (a search that did "
+                                     "not put the facing right is not repeated at once); 0: "
+                                     "research_every (at least backwards_frames).")
     travel_heading: bool = _param(True, "With backwards_frames > 0 (inert at 0): while the "
                                         "tracked pelvis travels faster than backwards_step, a "
                                         "fresh search also fits a pose facing the travel "
@@ -227,13 +231,6 @@ class TrackerParams:
                                         "measured after a start (the start-up's hull travel "
                                         "counts), so a runner's start-up heading is checked on "
                                         "its second tracked frame.")
-    powell_rounds: int = _param(1, "Passes of the start-up's Powell fit (root, then each limb) "
-                                   "per heading hypothesis, at a start and in every fresh "
-                                   "search: each pass after the first refits the root with "
-                                   "the limbs fitted, then each limb (a root turned or tilted "
-                                   "to make up for wrong limbs is refitted once they are "
-                                   "right); about 0.25 s more per hypothesis and pass on 2 "
-                                   "cores.")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
                                           "shape is forgotten.")
 
@@ -266,8 +263,8 @@ class TrackerParams:
                                                                    "shape_particles >= 2"),
             (self.lost_frames >= 1, "lost_frames must be >= 1"),
             (self.research_every >= 0, "research_every must be >= 0 (0: off)"),
-            (self.powell_rounds >= 1, "powell_rounds must be at least 1"),
             (0.0 < self.facing_limit <= 180.0, "facing_limit must lie in (0, 180] degrees"),
+            (self.facing_cooldown >= 0, "facing_cooldown must be >= 0 (0: research_every)"),
             (self.backwards_frames >= 0 and self.backwards_step > 0.0,
              "need backwards_frames >= 0 (0: off) and backwards_step > 0"),
             (not self.track_region
@@ -585,7 +582,7 @@ class BodyTracker:
                 self._travel_checked = True
             self._research(obs, stamp_ns, travel_heading=heading)
             self._pelvis_track.clear()
-            self._research_cooldown = max(every, self.params.backwards_frames)
+            self._research_cooldown = self._cooldown_after_search()
             timings["research"] = time.perf_counter() - t1
         fit_cost = self._fit_cost(obs)
         if not np.isfinite(fit_cost) or fit_cost > self.params.lost_cost:
@@ -647,7 +644,7 @@ class BodyTracker:
             frames=p.shape_frames if (p.estimate_shape and self.shape is None) else 1,
             estimate_shape=p.estimate_shape, rejection_tau=p.rejection_tau,
             rejection_trials=p.rejection_trials, survival_rate=p.survival_rate,
-            proposal_fraction=p.proposal_fraction, powell_rounds=p.powell_rounds)
+            proposal_fraction=p.proposal_fraction)
         self._estimator = AnthropometryEstimator(self.shape_fitness, est_params, self.rng,
                                                  room=self.room, fixed_shape=self.shape,
                                                  proposer=self.start_proposer if p.proposal_fraction > 0 else None)
@@ -749,6 +746,13 @@ class BodyTracker:
             return None
         return travel
 
+    def _cooldown_after_search(self) -> int:
+        """Frames the ``backwards_frames`` check waits after a fresh search
+        (``facing_cooldown``, 0: ``research_every``), at least ``backwards_frames``: the
+        pelvis track is cleared by the search and needs that many frames again."""
+        p = self.params
+        return max(p.facing_cooldown or p.research_every, p.backwards_frames)
+
     def _facing_away_from_travel(self, travel: np.ndarray | None) -> bool:
         """``backwards_frames``: True when the pelvis travels (:meth:`_travel`) and the
         estimate's facing direction (the root yaw: +Z turned towards +X) points more than
@@ -792,8 +796,7 @@ class BodyTracker:
         search = AnthropometryEstimator(
             self.fitness, EstimationParams(n_particles=p.shape_particles, frames=1,
                                            estimate_shape=False,
-                                           proposal_fraction=p.proposal_fraction,
-                                           powell_rounds=p.powell_rounds),
+                                           proposal_fraction=p.proposal_fraction),
             self.rng, room=self.room, fixed_shape=self.shape,
             proposer=self.start_proposer if p.proposal_fraction > 0 else None)
         search.start(obs, hull, also=() if travel_heading is None else (travel_heading,))
