@@ -410,6 +410,19 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
     assert list(cool.values()) == [25, 10, 5, 5]  # research_every 25, backwards_frames 5
     with pytest.raises(ValueError, match="facing_cooldown"):
         TrackerParams(facing_cooldown=-1)
+    # travel_research_every: due while travelling, that many tracked frames after the last search
+    tracker = BodyTracker(model, rig, TrackerParams(travel_research_every=10),
+                          np.random.default_rng(0))
+    travel = np.array([0.0, 0.5])
+    due = []
+    for frames in (5, 9, 10, 14):
+        tracker._tracked_frames, tracker._last_search = frames, 4
+        due.append((tracker._travel_search_due(travel), tracker._travel_search_due(None)))
+    assert due == [(False, False), (False, False), (False, False), (True, False)]
+    tracker.params = TrackerParams()  # 0: off
+    assert not tracker._travel_search_due(travel)
+    with pytest.raises(ValueError, match="travel_research_every"):
+        TrackerParams(travel_research_every=-1)
     tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=2), np.random.default_rng(0))
     tracker.estimate = rest_pose(skel).copy()
     tracker.estimate[yaw] = np.pi

@@ -223,6 +223,13 @@ class TrackerParams:
                                      "backwards_frames check does not run (a search that did "
                                      "not put the facing right is not repeated at once); 0: "
                                      "research_every (at least backwards_frames).")
+    travel_research_every: int = _param(0, "While the tracked pelvis travels faster than "
+                                           "backwards_step (backwards_frames > 0), a fresh "
+                                           "search (as research_every, with the travel "
+                                           "heading) runs every this many tracked frames "
+                                           "after the last one: a runner's legs change fast "
+                                           "and the per-frame filter loses them more often "
+                                           "(about 3 s per search on 2 cores); 0: off.")
     travel_heading: bool = _param(True, "With backwards_frames > 0 (inert at 0): while the "
                                         "tracked pelvis travels faster than backwards_step, a "
                                         "fresh search also fits a pose facing the travel "
@@ -265,6 +272,7 @@ class TrackerParams:
             (self.research_every >= 0, "research_every must be >= 0 (0: off)"),
             (0.0 < self.facing_limit <= 180.0, "facing_limit must lie in (0, 180] degrees"),
             (self.facing_cooldown >= 0, "facing_cooldown must be >= 0 (0: research_every)"),
+            (self.travel_research_every >= 0, "travel_research_every must be >= 0 (0: off)"),
             (self.backwards_frames >= 0 and self.backwards_step > 0.0,
              "need backwards_frames >= 0 (0: off) and backwards_step > 0"),
             (not self.track_region
@@ -393,6 +401,7 @@ class BodyTracker:
         self._pelvis_track: list = []  # the estimate's pelvis (x, z) of the last frames
         self._research_cooldown = 0
         self._travel_checked = False  # travel_heading: the start-up heading checked once
+        self._last_search = 0  # _tracked_frames at the last fresh search
         if self.ik is not None:
             self.ik.reset()
         if forget_shape:
@@ -568,12 +577,14 @@ class BodyTracker:
         backwards = self._facing_away_from_travel(travel)
         first_travel = (self.params.travel_heading and travel is not None
                         and not self._travel_checked and self._research_cooldown == 0)
-        if (every > 0 and self._tracked_frames % every == 0) or backwards or first_travel:
+        travelling = self._travel_search_due(travel)
+        if ((every > 0 and self._tracked_frames % every == 0) or backwards or first_travel
+                or travelling):
             t1 = time.perf_counter()
             if backwards:
                 log.info("stamp %d ns: the body faces more than %g degrees away from its "
                          "travel: fresh search", stamp_ns, self.params.facing_limit)
-            elif first_travel:
+            elif first_travel or travelling:
                 log.info("stamp %d ns: the body travels: fresh search with its travel heading",
                          stamp_ns)
             heading = None
@@ -583,6 +594,7 @@ class BodyTracker:
             self._research(obs, stamp_ns, travel_heading=heading)
             self._pelvis_track.clear()
             self._research_cooldown = self._cooldown_after_search()
+            self._last_search = self._tracked_frames
             timings["research"] = time.perf_counter() - t1
         fit_cost = self._fit_cost(obs)
         if not np.isfinite(fit_cost) or fit_cost > self.params.lost_cost:
@@ -728,6 +740,7 @@ class BodyTracker:
                               if self._hull_track else [])
         self._research_cooldown = 0
         self._travel_checked = False
+        self._last_search = 0
         self.state = "tracking"
 
     def _travel(self) -> np.ndarray | None:
@@ -745,6 +758,12 @@ class BodyTracker:
         if np.linalg.norm(travel) <= n * self.params.backwards_step:
             return None
         return travel
+
+    def _travel_search_due(self, travel: np.ndarray | None) -> bool:
+        """``travel_research_every``: True when the pelvis travels (:meth:`_travel`) and that
+        many tracked frames have passed since the last fresh search (or the start)."""
+        n = self.params.travel_research_every
+        return n > 0 and travel is not None and self._tracked_frames - self._last_search >= n
 
     def _cooldown_after_search(self) -> int:
         """Frames the ``backwards_frames`` check waits after a fresh search
