@@ -374,8 +374,9 @@ def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):
 
 def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig):
     """backwards_frames: the check fires when the pelvis travelled faster than backwards_step
-    per frame and the root yaw faces more than 90 degrees away, never when off, slow or
-    facing forward, and not again during the cool-down after a search."""
+    per frame and the root yaw faces more than facing_limit (90) degrees away, never when off,
+    slow or facing forward, and not again during the cool-down after a search
+    (facing_cooldown, 0: research_every)."""
     skel = model.skeleton
     yaw, t = skel.dof_index("root_yaw"), skel.translation_dofs
 
@@ -410,19 +411,6 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
     assert list(cool.values()) == [25, 10, 5, 5]  # research_every 25, backwards_frames 5
     with pytest.raises(ValueError, match="facing_cooldown"):
         TrackerParams(facing_cooldown=-1)
-    # travel_research_every: due while travelling, that many tracked frames after the last search
-    tracker = BodyTracker(model, rig, TrackerParams(travel_research_every=10),
-                          np.random.default_rng(0))
-    travel = np.array([0.0, 0.5])
-    due = []
-    for frames in (5, 9, 10, 14):
-        tracker._tracked_frames, tracker._last_search = frames, 4
-        due.append((tracker._travel_search_due(travel), tracker._travel_search_due(None)))
-    assert due == [(False, False), (False, False), (False, False), (True, False)]
-    tracker.params = TrackerParams()  # 0: off
-    assert not tracker._travel_search_due(travel)
-    with pytest.raises(ValueError, match="travel_research_every"):
-        TrackerParams(travel_research_every=-1)
     tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=2), np.random.default_rng(0))
     tracker.estimate = rest_pose(skel).copy()
     tracker.estimate[yaw] = np.pi
@@ -434,6 +422,23 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
     assert fired == [False, False, False, True, True, True]
     with pytest.raises(ValueError, match="backwards"):
         TrackerParams(backwards_frames=-1)
+
+
+def test_travel_research_is_due_only_while_travelling(model, rig):
+    """travel_research_every: a fresh search is due while the pelvis travels and that many
+    tracked frames have passed since the last one; never without travel, never when 0."""
+    tracker = BodyTracker(model, rig, TrackerParams(travel_research_every=10),
+                          np.random.default_rng(0))
+    travel = np.array([0.0, 0.5])
+    due = []
+    for frames in (5, 9, 13, 14, 20):
+        tracker._tracked_frames, tracker._last_search = frames, 4
+        due.append((tracker._travel_search_due(travel), tracker._travel_search_due(None)))
+    assert due == [(False, False)] * 3 + [(True, False)] * 2
+    tracker.params = TrackerParams()  # 0: off
+    assert not tracker._travel_search_due(travel)
+    with pytest.raises(ValueError, match="travel_research_every"):
+        TrackerParams(travel_research_every=-1)
 
 
 def test_travel_is_measured_over_backwards_frames(model, rig):

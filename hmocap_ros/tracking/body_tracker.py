@@ -226,7 +226,7 @@ class TrackerParams:
     travel_research_every: int = _param(0, "While the tracked pelvis travels faster than "
                                            "backwards_step (backwards_frames > 0), a fresh "
                                            "search (as research_every, with the travel "
-                                           "heading) runs every this many tracked frames "
+                                           "heading if travel_heading) runs every this many tracked frames "
                                            "after the last one: a runner's legs change fast "
                                            "and the per-frame filter loses them more often "
                                            "(about 3 s per search on 2 cores); 0: off.")
@@ -577,14 +577,14 @@ class BodyTracker:
         backwards = self._facing_away_from_travel(travel)
         first_travel = (self.params.travel_heading and travel is not None
                         and not self._travel_checked and self._research_cooldown == 0)
-        travelling = self._travel_search_due(travel)
+        travel_due = self._travel_search_due(travel)
         if ((every > 0 and self._tracked_frames % every == 0) or backwards or first_travel
-                or travelling):
+                or travel_due):
             t1 = time.perf_counter()
             if backwards:
                 log.info("stamp %d ns: the body faces more than %g degrees away from its "
                          "travel: fresh search", stamp_ns, self.params.facing_limit)
-            elif first_travel or travelling:
+            elif first_travel or travel_due:
                 log.info("stamp %d ns: the body travels: fresh search with its travel heading",
                          stamp_ns)
             heading = None
