@@ -568,29 +568,6 @@ def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
     assert errors[1] < 60.0, errors
 
 
-def test_fresh_search_margin_keeps_the_estimate_unless_clearly_beaten(model, rig):
-    """_research(margin=...) (travel_research_margin): a pose turned by 120 degrees is replaced
-    by the search's at margin 0, kept when the search must beat it by 99 %."""
-    shape = subject_shape()
-    params = clip_poses(model, 60, 3, shape, position=(-0.4, 0.3), heading=-1.0)
-    masks, _ = render_masks(model, rig, params, shape)
-    yaw = model.skeleton.dof_index("root_yaw")
-    reseeded = {}
-    for margin in (0.99, 0.0):
-        tracker = small_tracker(model, rig, shape=shape, research_every=0)
-        for f in range(2):
-            tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
-        assert tracker.state == "tracking"
-        tracker.estimate[yaw] += np.deg2rad(120.0)
-        wrong = tracker.estimate.copy()
-        obs = tracker.fitness.observe(list(masks[1]), STAMP0 + 40_000_000)
-        reseeded[margin] = tracker._research(obs, STAMP0 + 40_000_000, margin=margin)
-        assert np.array_equal(tracker.estimate, wrong) != reseeded[margin]
-    assert reseeded == {0.99: False, 0.0: True}
-    with pytest.raises(ValueError, match="travel_research_margin"):
-        TrackerParams(travel_research_margin=1.0)
-
-
 def test_fresh_search_does_not_jump_to_another_person(model, rig, monkeypatch):
     """research_every: when the hull holds only somebody else (the tracked person hidden),
     the fresh search does not move the track to them."""

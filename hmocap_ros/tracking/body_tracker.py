@@ -231,13 +231,6 @@ class TrackerParams:
                                            "legs change fast "
                                            "and the per-frame filter loses them more often "
                                            "(about 3 s per search on 2 cores); 0: off.")
-    travel_research_margin: float = _param(0.0, "A search run by travel_research_every (and by "
-                                               "no other trigger on its frame) re-seeds the "
-                                               "filter only when its pose's whole-body cost "
-                                               "(eq. 2.8) is below the estimate's by this "
-                                               "fraction: frequent searches re-seed into "
-                                               "poses that fit the silhouettes as well but "
-                                               "are further from the truth; 0: any lower cost.")
     travel_heading: bool = _param(True, "With backwards_frames > 0 (inert at 0): while the "
                                         "tracked pelvis travels faster than backwards_step, a "
                                         "fresh search also fits a pose facing the travel "
@@ -281,8 +274,6 @@ class TrackerParams:
             (0.0 < self.facing_limit <= 180.0, "facing_limit must lie in (0, 180] degrees"),
             (self.facing_cooldown >= 0, "facing_cooldown must be >= 0 (0: research_every)"),
             (self.travel_research_every >= 0, "travel_research_every must be >= 0 (0: off)"),
-            (0.0 <= self.travel_research_margin < 1.0,
-             "travel_research_margin must lie in [0, 1)"),
             (self.backwards_frames >= 0 and self.backwards_step > 0.0,
              "need backwards_frames >= 0 (0: off) and backwards_step > 0"),
             (not self.track_region
@@ -588,8 +579,8 @@ class BodyTracker:
         first_travel = (self.params.travel_heading and travel is not None
                         and not self._travel_checked and self._research_cooldown == 0)
         travel_due = self._travel_search_due(travel)
-        other_due = (every > 0 and self._tracked_frames % every == 0) or backwards or first_travel
-        if other_due or travel_due:
+        if ((every > 0 and self._tracked_frames % every == 0) or backwards or first_travel
+                or travel_due):
             t1 = time.perf_counter()
             if backwards:
                 log.info("stamp %d ns: the body faces more than %g degrees away from its "
@@ -601,8 +592,7 @@ class BodyTracker:
             if self.params.travel_heading and travel is not None:
                 heading = float(np.arctan2(travel[0], travel[1]))
                 self._travel_checked = True
-            self._research(obs, stamp_ns, travel_heading=heading,
-                           margin=0.0 if other_due else self.params.travel_research_margin)
+            self._research(obs, stamp_ns, travel_heading=heading)
             self._pelvis_track.clear()
             self._research_cooldown = self._cooldown_after_search()
             self._last_search = self._tracked_frames
@@ -804,7 +794,7 @@ class BodyTracker:
         return along < np.cos(np.deg2rad(self.params.facing_limit)) * float(np.linalg.norm(travel))
 
     def _research(self, obs: Observation, stamp_ns: int,
-                  travel_heading: float | None = None, margin: float = 0.0) -> bool:
+                  travel_heading: float | None = None) -> bool:
         """A fresh start-up search on this frame at the estimated shape (``research_every``).
 
         The start-up's heading search and Powell fits (sec. 2.3.4) run from the visual hull of
@@ -815,8 +805,7 @@ class BodyTracker:
         with the legs bent to make up for it, legs swapped) is never left otherwise, although
         the silhouettes prefer the truth (``tools/failure_split.py``). Returns True when the
         filter was re-seeded. travel_heading: a heading (root yaw) searched and fitted in
-        addition to the search's own (``travel_heading``). margin: the fraction by which the
-        search's cost must be below the estimate's (``travel_research_margin``).
+        addition to the search's own (``travel_heading``).
         """
         p = self.params
         n = self.skel.n_dofs
@@ -837,7 +826,7 @@ class BodyTracker:
                               axis=1) <= SAME_PERSON_RADIUS
         costs = np.where(near, costs, np.inf)
         best = int(np.argmin(costs))
-        if best == 0 or costs[best] >= (1.0 - margin) * costs[0]:
+        if best == 0:
             return False
         log.info("stamp %d ns: a fresh search fits better (cost %.3f against %.3f): filter "
                  "re-seeded", stamp_ns, costs[best], costs[0])
