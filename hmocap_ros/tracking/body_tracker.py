@@ -123,6 +123,10 @@ class TrackerParams:
     reseed_fraction: float = _param(0.1, "Fraction of the particles whose limb DoFs being "
                                           "diffused are drawn uniformly within the joint "
                                           "limits (lets a lost limb be found again).")
+    legs_fraction: float = _param(0.0, "Fraction of the particles whose thighs keep their "
+                                       "world orientation when a kernel turns the pelvis (a "
+                                       "move of the pelvis alone, out of a turned pelvis with "
+                                       "the legs twisted to make up for it); 0: off.")
     velocity_gain: float = _param(1.0, "Fraction of the estimate's last frame-to-frame "
                                        "change of velocity_dofs added to the particles before "
                                        "filtering (1: constant-velocity prediction, below 1 "
@@ -259,6 +263,7 @@ class TrackerParams:
             (0.0 <= self.jump_fraction <= 1.0 and self.jump_scale >= 1.0,
              "need 0 <= jump_fraction <= 1 and jump_scale >= 1"),
             (0.0 <= self.reseed_fraction <= 1.0, "reseed_fraction must lie in [0, 1]"),
+            (0.0 <= self.legs_fraction <= 1.0, "legs_fraction must lie in [0, 1]"),
             (0.0 <= self.velocity_gain <= 1.0, "velocity_gain must lie in [0, 1]"),
             (self.velocity_dofs in ("root_position", "root", "all"),
              "velocity_dofs must be 'root_position', 'root' or 'all'"),
@@ -359,7 +364,8 @@ class BodyTracker:
             p.method, self.skel, n_particles=p.n_particles or None, n_layers=p.n_layers or None,
             sigma_scale=p.sigma_scale, survival_rate=p.survival_rate, apf_alpha=p.apf_alpha,
             refine_nu=p.refine_nu, jump_fraction=p.jump_fraction, jump_scale=p.jump_scale,
-            reseed_fraction=p.reseed_fraction, arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
+            reseed_fraction=p.reseed_fraction, legs_fraction=p.legs_fraction,
+            arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
         self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
                                 for blocks, boxed in zip(self.schedule.layer_blocks,
                                                          self.schedule.boxed)]
