@@ -405,14 +405,6 @@ def test_pose_kernel_legs_fraction(model):
     lh = skel.joint_names.index("l_hip")
     np.testing.assert_allclose(g[moved][:, lh], np.broadcast_to(np.eye(3), (moved.sum(), 3, 3)),
                                atol=1e-9)
-    # legs_on_jumps: held only among the wide moves (jump_fraction)
-    jumpy = make_schedule("hpf-apo", skel, n_particles=400, jump_fraction=0.2, legs_fraction=1.0,
-                          legs_on_jumps=True).filter.final.kernel
-    f = jumpy(x.copy(), std, np.random.default_rng(4))
-    held_rows = np.abs(f[:, hip]) > 1e-12
-    assert 0.12 < held_rows.mean() < 0.28
-    turned = np.abs(f[:, skel.dof_index("root_yaw")])
-    assert np.median(turned[held_rows]) > 2.5 * np.median(turned[~held_rows])
     legs = np.zeros(skel.n_dofs)
     legs[skel.group_dofs("l_leg")] = 0.05
     d = held(x.copy(), legs, np.random.default_rng(2))

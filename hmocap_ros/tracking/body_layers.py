@@ -188,39 +188,33 @@ def keep_legs_in_place(skel: Skeleton, before: np.ndarray, after: np.ndarray) ->
 
 def _limited_gaussian(particles, std, rng, *, skel, room_lo, room_hi, jump_fraction,
                       jump_scale, reseed_fraction, reseed_mask, legs_fraction=0.0,
-                      legs_on_jumps=False, root_dofs=None):
+                      root_dofs=None):
     n = particles.shape[0]
     active = np.flatnonzero(std > 0)
     held = None
     if legs_fraction > 0.0 and active.size and np.any(std[root_dofs] > 0):
-        held = rng.random(n) < legs_fraction
-        before = particles.copy()
+        held = np.flatnonzero(rng.random(n) < legs_fraction)
+        before = particles[held].copy()
     if active.size:
         if jump_fraction > 0.0:
-            jumps = rng.random(n) < jump_fraction
-            scale = np.where(jumps, jump_scale, 1.0)[:, None]
+            scale = np.where(rng.random(n) < jump_fraction, jump_scale, 1.0)[:, None]
             particles[:, active] += (rng.standard_normal((n, active.size)) * std[active]) * scale
-            if held is not None and legs_on_jumps:
-                held &= jumps
         else:
             gaussian_kernel(particles, std, rng)
-            if held is not None and legs_on_jumps:
-                held[:] = False
         dims = active[reseed_mask[active]] if reseed_fraction > 0.0 else active[:0]
         if dims.size:
             rows = np.flatnonzero(rng.random(n) < reseed_fraction)
             lo, hi = skel.lower[dims], skel.upper[dims]
             particles[np.ix_(rows, dims)] = lo + (hi - lo) * rng.random((rows.size, dims.size))
-    if held is not None and held.any():
-        rows = np.flatnonzero(held)
-        particles[rows] = keep_legs_in_place(skel, before[rows], particles[rows])
+    if held is not None and held.size:
+        particles[held] = keep_legs_in_place(skel, before, particles[held])
     return clip_body_pose(skel, particles, room_lo, room_hi)
 
 
 def pose_kernel(skel: Skeleton, room_lo: np.ndarray | None = None,
                 room_hi: np.ndarray | None = None, jump_fraction: float = 0.0,
                 jump_scale: float = 4.0, reseed_fraction: float = 0.0,
-                legs_fraction: float = 0.0, legs_on_jumps: bool = False):
+                legs_fraction: float = 0.0):
     """Gaussian kernel within the joint limits (:func:`clip_body_pose`), a
     :data:`~.kernels.Kernel`.
 
@@ -235,17 +229,14 @@ def pose_kernel(skel: Skeleton, room_lo: np.ndarray | None = None,
       (all but the torso block's) drawn uniformly within the joint limits.
     - ``legs_fraction``: when the kernel diffuses the root rotation, that fraction of the
       particles (drawn anew each call) keeps its thighs' world orientation
-      (:func:`keep_legs_in_place`): a move of the pelvis alone. ``legs_on_jumps``: only
-      among the particles of the wide component (``jump_fraction``), so the pelvis' small
-      moves keep the legs with it and only its large turns hold them.
+      (:func:`keep_legs_in_place`): a move of the pelvis alone.
     """
     reseed_mask = np.array([g != "torso" for g in skel.dof_groups])
     root_dofs, _ = _root_hip_joints(skel)
     return partial(_limited_gaussian, skel=skel, room_lo=room_lo, room_hi=room_hi,
                    jump_fraction=float(jump_fraction), jump_scale=float(jump_scale),
                    reseed_fraction=float(reseed_fraction), reseed_mask=reseed_mask,
-                   legs_fraction=float(legs_fraction), legs_on_jumps=bool(legs_on_jumps),
-                   root_dofs=root_dofs)
+                   legs_fraction=float(legs_fraction), root_dofs=root_dofs)
 
 
 def root_room_limits(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -332,7 +323,7 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
                   survival_rate: float = 0.5, apf_alpha: float = 0.7, refine_nu: float = 0.25,
                   jump_fraction: float = 0.0, jump_scale: float = 4.0,
                   reseed_fraction: float = 0.0, legs_fraction: float = 0.0,
-                  legs_on_jumps: bool = False, arm_chain: bool = False, room_lo: np.ndarray | None = None,
+                  arm_chain: bool = False, room_lo: np.ndarray | None = None,
                   room_hi: np.ndarray | None = None) -> BodySchedule:
     """The layer schedule of ``method`` (one of :data:`METHODS`); see the module table.
 
@@ -347,8 +338,8 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
         raise ValueError("need at least 2 particles")
     sigma0 = body_sigma0(skel, sigma_scale)
     lo, hi = (None, None) if room_lo is None else root_room_limits(room_lo, room_hi)
-    kernel = pose_kernel(skel, lo, hi, jump_fraction, jump_scale, reseed_fraction, legs_fraction,
-                         legs_on_jumps)
+    kernel = pose_kernel(skel, lo, hi, jump_fraction, jump_scale, reseed_fraction,
+                         legs_fraction)
     if method == "apf":
         k = int(n_layers or default_layers)
         lpf = annealed_filter(sigma0, k, n, alpha=apf_alpha, survival_rate=survival_rate)

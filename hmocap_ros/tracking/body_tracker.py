@@ -127,9 +127,6 @@ class TrackerParams:
                                        "world orientation when a kernel turns the pelvis (a "
                                        "move of the pelvis alone, out of a turned pelvis with "
                                        "the legs twisted to make up for it); 0: off.")
-    legs_on_jumps: bool = _param(False, "legs_fraction counts among the wide moves only "
-                                        "(jump_fraction): the pelvis' small moves keep the legs "
-                                        "with it, its large turns hold them.")
     velocity_gain: float = _param(1.0, "Fraction of the estimate's last frame-to-frame "
                                        "change of velocity_dofs added to the particles before "
                                        "filtering (1: constant-velocity prediction, below 1 "
@@ -368,7 +365,7 @@ class BodyTracker:
             sigma_scale=p.sigma_scale, survival_rate=p.survival_rate, apf_alpha=p.apf_alpha,
             refine_nu=p.refine_nu, jump_fraction=p.jump_fraction, jump_scale=p.jump_scale,
             reseed_fraction=p.reseed_fraction, legs_fraction=p.legs_fraction,
-            legs_on_jumps=p.legs_on_jumps, arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
+            arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
         self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
                                 for blocks, boxed in zip(self.schedule.layer_blocks,
                                                          self.schedule.boxed)]
