@@ -17,6 +17,7 @@ Reading it:
 - a group whose substitution alone brings the cost down to the truth's is the one that is off;
   when only a pair does (e.g. torso and legs), the error is a coupled one that a layer
   searching one group at a time cannot leave;
+- ``yaw_off``: the estimate's pelvis heading (root yaw) minus the truth's, in degrees;
 - ``views``: the cameras that see the whole true skeleton (every joint inside the image, 3 %
   margin, as the simulator places its subjects); the summary splits the error by it, to tell
   a failure of the search from a subject leaving the views.
@@ -87,7 +88,8 @@ def main() -> int:
     dofs = {name: np.concatenate([skel.group_dofs(g) for g in groups])
             for name, groups in GROUPS.items()}
     names = ["estimate", *GROUPS, "truth"]
-    print("frame  views  error_mm  " + "  ".join(f"{n:>10s}" for n in names))
+    yaw = skel.dof_index("root_yaw")
+    print("frame  views  error_mm  yaw_off  " + "  ".join(f"{n:>10s}" for n in names))
     rows = []
     for k, stamp in enumerate(frames.stamps):
         masks = frames.mask_list(k)
@@ -107,8 +109,10 @@ def main() -> int:
         err = float(joint_errors(result.joints[est_idx][None],
                                  frames.truth[k][true_idx][None]).mean())
         views = int(views_seeing(frames.rig, frames.truth[k][None], 0.03)[0].sum())
-        rows.append((err, cost, views))
-        print(f"{k:5d}  {views:5d}  {err:8.1f}  " + "  ".join(f"{c:10.3f}" for c in cost))
+        yaw_off = float(np.rad2deg((est[yaw] - gt[yaw] + np.pi) % (2.0 * np.pi) - np.pi))
+        rows.append((err, cost, views, yaw_off))
+        print(f"{k:5d}  {views:5d}  {err:8.1f}  {yaw_off:7.1f}  "
+              + "  ".join(f"{c:10.3f}" for c in cost))
     if not rows:
         print("no tracked frame with ground truth")
         return 1
@@ -117,6 +121,9 @@ def main() -> int:
     search = cost[:, -1] < cost[:, 0]
     print(f"\n{len(rows)} tracked frames, mean error {err.mean():.1f} mm; mean cost: "
           + ", ".join(f"{n} {c:.3f}" for n, c in zip(names, cost.mean(axis=0))))
+    yaw_abs = np.abs([r[3] for r in rows])
+    print(f"pelvis heading off by {yaw_abs.mean():.1f} degrees on average, {yaw_abs.max():.1f} "
+          "at most")
     print(f"truth cheaper than the estimate (search failure) in {search.sum()}/{len(rows)} "
           f"frames; as cheap or dearer (cost failure) in {(~search).sum()}")
     views = np.array([r[2] for r in rows])
