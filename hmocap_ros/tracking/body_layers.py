@@ -171,7 +171,9 @@ def keep_legs_in_place(skel: Skeleton, before: np.ndarray, after: np.ndarray) ->
     and the legs are twisted to make up for it (the runner's coupled error,
     docs/tracking.md), neither the torso nor a leg layer alone can leave the state, since
     turning either breaks the other's fit. With the legs held in place the torso layer
-    measures the pelvis' turn alone.
+    measures the pelvis' turn alone. On the tuning runner that mends the runs caught in the
+    coupled state and leads others into it, since the torso's silhouette alone hardly tells
+    the pelvis' heading (docs/tracking.md, stop 17): an option, off by default.
     """
     if len(after) == 0:
         return after

@@ -126,7 +126,8 @@ class TrackerParams:
     legs_fraction: float = _param(0.0, "Fraction of the particles whose thighs keep their "
                                        "world orientation when a kernel turns the pelvis (a "
                                        "move of the pelvis alone, out of a turned pelvis with "
-                                       "the legs twisted to make up for it); 0: off.")
+                                       "the legs twisted to make up for it); 0: off "
+                                       "(docs/tracking.md: it also leads into that state).")
     velocity_gain: float = _param(1.0, "Fraction of the estimate's last frame-to-frame "
                                        "change of velocity_dofs added to the particles before "
                                        "filtering (1: constant-velocity prediction, below 1 "
