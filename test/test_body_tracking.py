@@ -27,7 +27,7 @@ from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_PARAMS, Anthropo
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
 from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, body_sigma0, clip_body_pose,
                                              keep_legs_in_place, make_schedule)
-from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
+from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams, heading_cost
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.kernels import rejection_kernel
 from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
@@ -437,6 +437,38 @@ def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):
     own = dataclasses.replace(model, name="custom")
     assert BodyTracker(own, rig, TrackerParams(mesh="tracking_coarse"),
                        np.random.default_rng(0)).model is own
+
+
+def test_heading_prior_adds_its_cost_only_while_travelling(model, rig):
+    """heading_prior: 0 facing the travel, weight * (1 - cos a) turned by a, 2 * weight back
+    to front; the tracker's weighting adds it to every layer's cost while a travel is
+    measured, and leaves the cost as it was otherwise or at 0."""
+    d = np.array([0.6, 0.8])  # unit travel on the floor (x, z)
+    facing = np.arctan2(d[0], d[1])
+    np.testing.assert_allclose(
+        heading_cost(facing + np.array([0.0, np.pi / 3, -np.pi / 3, np.pi]), d, 0.5),
+        [0.0, 0.25, 0.25, 1.0], atol=1e-12)
+    skel = model.skeleton
+    x = np.tile(rest_pose(skel), (6, 1))
+    x[:, skel.translation_dofs] = [0.0, 0.95, 0.0]
+    x[:, skel.dof_index("root_yaw")] = np.linspace(-np.pi, np.pi, 6)
+    masks = [np.zeros((c.height, c.width), np.uint8) for c in rig]
+    for c, m in zip(rig, masks):
+        m[c.height // 4: 3 * c.height // 4, c.width // 3: 2 * c.width // 3] = 255
+    on = BodyTracker(model, rig, TrackerParams(heading_prior=0.5), np.random.default_rng(0))
+    off = BodyTracker(model, rig, TrackerParams(), np.random.default_rng(0))
+    obs = on.fitness.observe(masks, STAMP0)
+    plain = off.weight_fn(obs, None)
+    for layer in range(on.schedule.n_weightings):
+        np.testing.assert_array_equal(on.weight_fn(obs, None)(x, layer), plain(x, layer))
+    on._heading_travel = 0.3 * d  # 30 cm over the last frames
+    off._heading_travel = 0.3 * d
+    for layer in range(on.schedule.n_weightings):
+        np.testing.assert_allclose(on.weight_fn(obs, None)(x, layer) - plain(x, layer),
+                                   heading_cost(x[:, skel.dof_index("root_yaw")], d, 0.5),
+                                   atol=1e-9)
+    with pytest.raises(ValueError, match="heading_prior"):
+        TrackerParams(heading_prior=-1.0)
 
 
 def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig):
