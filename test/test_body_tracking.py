@@ -26,8 +26,8 @@ from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_PARAMS, Anthropo
                                                           shape_to_state)
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
 from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, body_sigma0, clip_body_pose,
-                                             keep_legs_in_place, make_schedule)
-from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams, heading_cost
+                                             make_schedule)
+from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.kernels import rejection_kernel
 from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
@@ -345,73 +345,6 @@ def test_pose_kernel_respects_joint_limits(model):
     assert np.all(out[:, free] <= skel.upper[free] + 1e-12)
 
 
-def _global_rotations(model, params):
-    from hmocap_ros.body.kinematics import forward_kinematics
-    from hmocap_ros.body.skeleton import pose_to_local_rotations
-    rot, t = pose_to_local_rotations(model.skeleton, params)
-    tf, _ = forward_kinematics(rot, t, model.skeleton.joints_rest, model.skeleton.parents)
-    return tf[..., :3, :3]
-
-
-def test_keep_legs_in_place_turns_the_pelvis_alone(model):
-    """The thighs keep their world orientation (eq. 2.11: G_hip = R_root R_hip) when the root
-    turns; the spine, which is not held, turns with it."""
-    skel = model.skeleton
-    rng = np.random.default_rng(5)
-    before = np.tile(rest_pose(skel), (20, 1))
-    for side in ("l", "r"):  # a stride: thighs swung, a little abducted
-        before[:, skel.dof_index(f"{side}_hip_flex")] = rng.uniform(-0.3, 0.6, 20)
-        before[:, skel.dof_index(f"{side}_hip_abd")] = rng.uniform(0.0, 0.2, 20)
-    before[:, skel.dof_index("root_yaw")] = rng.uniform(-3, 3, 20)
-    after = before.copy()
-    after[:, skel.dof_index("root_yaw")] += rng.uniform(-0.4, 0.4, 20)  # up to 23 degrees
-    after[:, skel.dof_index("root_pitch")] += rng.uniform(-0.1, 0.1, 20)
-    turned = after.copy()
-    kept = keep_legs_in_place(skel, before, after.copy())
-    g0, g1, g2 = (_global_rotations(model, x) for x in (before, turned, kept))
-    hips = [skel.joint_names.index(f"{s}_hip") for s in ("l", "r")]
-    spine = skel.joint_names.index("spine")
-    np.testing.assert_allclose(g2[:, hips], g0[:, hips], atol=1e-9)
-    np.testing.assert_allclose(g2[:, 0], g1[:, 0])
-    assert np.abs(g1[:, hips] - g0[:, hips]).max() > 0.1  # without it the legs turn along
-    assert np.abs(g2[:, spine] - g0[:, spine]).max() > 0.1
-    # only the hip DoFs changed
-    hip_dofs = [i for i, g in enumerate(skel.dof_groups) if g.endswith("_leg")
-                and "hip" in skel.dof_names[i]]
-    other = np.setdiff1d(np.arange(skel.n_dofs), hip_dofs)
-    np.testing.assert_array_equal(kept[:, other], turned[:, other])
-
-
-def test_pose_kernel_legs_fraction(model):
-    """legs_fraction: about that share of the particles keep their thighs when the kernel
-    diffuses the root rotation; 0 leaves the kernel's draws as they were (bit for bit), and a
-    kernel that does not diffuse the root holds nothing."""
-    skel = model.skeleton
-    x = np.tile(rest_pose(skel), (400, 1))
-    std = np.zeros(skel.n_dofs)
-    std[list(skel.joint_dofs[0])] = 0.05  # within the hip limits (which clip larger turns)
-    plain = make_schedule("hpf-apo", skel, n_particles=400).filter.final.kernel
-    held = make_schedule("hpf-apo", skel, n_particles=400,
-                         legs_fraction=0.5).filter.final.kernel
-    a = plain(x.copy(), std, np.random.default_rng(1))
-    b = make_schedule("hpf-apo", skel, n_particles=400,
-                      legs_fraction=0.0).filter.final.kernel(x.copy(), std, np.random.default_rng(1))
-    np.testing.assert_array_equal(a, b)
-    c = held(x.copy(), std, np.random.default_rng(1))
-    hip = skel.dof_index("l_hip_twist")
-    moved = np.abs(c[:, hip]) > 1e-12
-    assert 0.4 < moved.mean() < 0.6
-    g = _global_rotations(model, c)
-    lh = skel.joint_names.index("l_hip")
-    np.testing.assert_allclose(g[moved][:, lh], np.broadcast_to(np.eye(3), (moved.sum(), 3, 3)),
-                               atol=1e-9)
-    legs = np.zeros(skel.n_dofs)
-    legs[skel.group_dofs("l_leg")] = 0.05
-    d = held(x.copy(), legs, np.random.default_rng(2))
-    e = plain(x.copy(), legs, np.random.default_rng(2))
-    np.testing.assert_array_equal(d, e)
-
-
 # ----------------------------------------------------------------------------- tracker
 
 
@@ -437,38 +370,6 @@ def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):
     own = dataclasses.replace(model, name="custom")
     assert BodyTracker(own, rig, TrackerParams(mesh="tracking_coarse"),
                        np.random.default_rng(0)).model is own
-
-
-def test_heading_prior_adds_its_cost_only_while_travelling(model, rig):
-    """heading_prior: 0 facing the travel, weight * (1 - cos a) turned by a, 2 * weight back
-    to front; the tracker's weighting adds it to every layer's cost while a travel is
-    measured, and leaves the cost as it was otherwise or at 0."""
-    d = np.array([0.6, 0.8])  # unit travel on the floor (x, z)
-    facing = np.arctan2(d[0], d[1])
-    np.testing.assert_allclose(
-        heading_cost(facing + np.array([0.0, np.pi / 3, -np.pi / 3, np.pi]), d, 0.5),
-        [0.0, 0.25, 0.25, 1.0], atol=1e-12)
-    skel = model.skeleton
-    x = np.tile(rest_pose(skel), (6, 1))
-    x[:, skel.translation_dofs] = [0.0, 0.95, 0.0]
-    x[:, skel.dof_index("root_yaw")] = np.linspace(-np.pi, np.pi, 6)
-    masks = [np.zeros((c.height, c.width), np.uint8) for c in rig]
-    for c, m in zip(rig, masks):
-        m[c.height // 4: 3 * c.height // 4, c.width // 3: 2 * c.width // 3] = 255
-    on = BodyTracker(model, rig, TrackerParams(heading_prior=0.5), np.random.default_rng(0))
-    off = BodyTracker(model, rig, TrackerParams(), np.random.default_rng(0))
-    obs = on.fitness.observe(masks, STAMP0)
-    plain = off.weight_fn(obs, None)
-    for layer in range(on.schedule.n_weightings):
-        np.testing.assert_array_equal(on.weight_fn(obs, None)(x, layer), plain(x, layer))
-    on._heading_travel = 0.3 * d  # 30 cm over the last frames
-    off._heading_travel = 0.3 * d
-    for layer in range(on.schedule.n_weightings):
-        np.testing.assert_allclose(on.weight_fn(obs, None)(x, layer) - plain(x, layer),
-                                   heading_cost(x[:, skel.dof_index("root_yaw")], d, 0.5),
-                                   atol=1e-9)
-    with pytest.raises(ValueError, match="heading_prior"):
-        TrackerParams(heading_prior=-1.0)
 
 
 def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig):

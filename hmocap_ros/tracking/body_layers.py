@@ -53,16 +53,14 @@ from typing import Sequence
 
 import numpy as np
 
-from hmocap_ros.body.rotations import swing_twist_angles
-from hmocap_ros.body.skeleton import (SWING_NORM_MAX, Skeleton, local_rotations_to_pose,
-                                      pose_to_local_rotations)
+from hmocap_ros.body.skeleton import SWING_NORM_MAX, Skeleton, local_rotations_to_pose
 from hmocap_ros.tracking.kernels import gaussian_kernel
 from hmocap_ros.tracking.layered_filter import Layer, LayeredFilter, annealed_filter
 
 __all__ = [
     "BODY_BLOCKS", "DEFAULT_EVALUATIONS", "DEFAULT_SIGMA0", "METHODS", "SIGMA0_FACTOR",
-    "BodySchedule", "body_sigma0", "clip_body_pose", "keep_legs_in_place", "make_schedule",
-    "motion_sigma0", "pose_kernel",
+    "BodySchedule", "body_sigma0", "clip_body_pose", "make_schedule", "motion_sigma0",
+    "pose_kernel",
 ]
 
 METHODS = ("apf", "hpf", "hpf-apo", "dd-hpf")
@@ -154,49 +152,10 @@ def clip_body_pose(skel: Skeleton, particles: np.ndarray, room_lo: np.ndarray | 
     return particles
 
 
-def _root_hip_joints(skel: Skeleton) -> tuple[np.ndarray, np.ndarray]:
-    """The root's rotation DoFs and the ball joints hanging from the root (the hips)."""
-    root_dofs = np.array(skel.joint_dofs[0], dtype=np.intp)
-    hips = np.array([j for j, (q, kind) in enumerate(zip(skel.parents, skel.joint_kind))
-                     if j > 0 and q == 0 and kind == "swing_twist"], dtype=np.intp)
-    return root_dofs, hips
-
-
-def keep_legs_in_place(skel: Skeleton, before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """Turn the hips of ``after`` (B, D) so each thigh keeps the world orientation it had
-    with the root rotation of ``before`` (B, D): G_hip = R_root R_hip (eq. 2.11's chain) is
-    unchanged, R_hip' = R_root'^T R_root R_hip. Returns ``after`` (changed in place).
-
-    A torso layer that turns the pelvis moves the legs with it; when the pelvis is turned
-    and the legs are twisted to make up for it (the runner's coupled error,
-    docs/tracking.md), neither the torso nor a leg layer alone can leave the state, since
-    turning either breaks the other's fit. With the legs held in place the torso layer
-    measures the pelvis' turn alone. On the tuning runner that mends the runs caught in the
-    coupled state and leads others into it, since the torso's silhouette alone hardly tells
-    the pelvis' heading (docs/tracking.md, stop 17): an option, off by default.
-    """
-    if len(after) == 0:
-        return after
-    _, hips = _root_hip_joints(skel)
-    rot_before, _ = pose_to_local_rotations(skel, before)
-    rot_after, _ = pose_to_local_rotations(skel, after)
-    turn = np.swapaxes(rot_after[:, 0], 1, 2) @ rot_before[:, 0]  # R_root'^T R_root
-    for j in hips:
-        dofs = list(skel.joint_dofs[j])
-        axes = skel.joint_axes[j]
-        after[:, dofs] = swing_twist_angles(turn @ rot_after[:, j], axes[:2], axes[2])
-    return after
-
-
 def _limited_gaussian(particles, std, rng, *, skel, room_lo, room_hi, jump_fraction,
-                      jump_scale, reseed_fraction, reseed_mask, legs_fraction=0.0,
-                      root_dofs=None):
+                      jump_scale, reseed_fraction, reseed_mask):
     n = particles.shape[0]
     active = np.flatnonzero(std > 0)
-    held = None
-    if legs_fraction > 0.0 and active.size and np.any(std[root_dofs] > 0):
-        held = np.flatnonzero(rng.random(n) < legs_fraction)
-        before = particles[held].copy()
     if active.size:
         if jump_fraction > 0.0:
             scale = np.where(rng.random(n) < jump_fraction, jump_scale, 1.0)[:, None]
@@ -208,15 +167,12 @@ def _limited_gaussian(particles, std, rng, *, skel, room_lo, room_hi, jump_fract
             rows = np.flatnonzero(rng.random(n) < reseed_fraction)
             lo, hi = skel.lower[dims], skel.upper[dims]
             particles[np.ix_(rows, dims)] = lo + (hi - lo) * rng.random((rows.size, dims.size))
-    if held is not None and held.size:
-        particles[held] = keep_legs_in_place(skel, before, particles[held])
     return clip_body_pose(skel, particles, room_lo, room_hi)
 
 
 def pose_kernel(skel: Skeleton, room_lo: np.ndarray | None = None,
                 room_hi: np.ndarray | None = None, jump_fraction: float = 0.0,
-                jump_scale: float = 4.0, reseed_fraction: float = 0.0,
-                legs_fraction: float = 0.0):
+                jump_scale: float = 4.0, reseed_fraction: float = 0.0):
     """Gaussian kernel within the joint limits (:func:`clip_body_pose`), a
     :data:`~.kernels.Kernel`.
 
@@ -229,16 +185,11 @@ def pose_kernel(skel: Skeleton, room_lo: np.ndarray | None = None,
       ``jump_scale`` times the std;
     - ``reseed_fraction``: that fraction of the particles gets the limb DoFs being diffused
       (all but the torso block's) drawn uniformly within the joint limits.
-    - ``legs_fraction``: when the kernel diffuses the root rotation, that fraction of the
-      particles (drawn anew each call) keeps its thighs' world orientation
-      (:func:`keep_legs_in_place`): a move of the pelvis alone.
     """
     reseed_mask = np.array([g != "torso" for g in skel.dof_groups])
-    root_dofs, _ = _root_hip_joints(skel)
     return partial(_limited_gaussian, skel=skel, room_lo=room_lo, room_hi=room_hi,
                    jump_fraction=float(jump_fraction), jump_scale=float(jump_scale),
-                   reseed_fraction=float(reseed_fraction), reseed_mask=reseed_mask,
-                   legs_fraction=float(legs_fraction), root_dofs=root_dofs)
+                   reseed_fraction=float(reseed_fraction), reseed_mask=reseed_mask)
 
 
 def root_room_limits(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -324,8 +275,8 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
                   n_layers: int | None = None, sigma_scale: float = 1.0,
                   survival_rate: float = 0.5, apf_alpha: float = 0.7, refine_nu: float = 0.25,
                   jump_fraction: float = 0.0, jump_scale: float = 4.0,
-                  reseed_fraction: float = 0.0, legs_fraction: float = 0.0,
-                  arm_chain: bool = False, room_lo: np.ndarray | None = None,
+                  reseed_fraction: float = 0.0, arm_chain: bool = False,
+                  room_lo: np.ndarray | None = None,
                   room_hi: np.ndarray | None = None) -> BodySchedule:
     """The layer schedule of ``method`` (one of :data:`METHODS`); see the module table.
 
@@ -340,8 +291,7 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
         raise ValueError("need at least 2 particles")
     sigma0 = body_sigma0(skel, sigma_scale)
     lo, hi = (None, None) if room_lo is None else root_room_limits(room_lo, room_hi)
-    kernel = pose_kernel(skel, lo, hi, jump_fraction, jump_scale, reseed_fraction,
-                         legs_fraction)
+    kernel = pose_kernel(skel, lo, hi, jump_fraction, jump_scale, reseed_fraction)
     if method == "apf":
         k = int(n_layers or default_layers)
         lpf = annealed_filter(sigma0, k, n, alpha=apf_alpha, survival_rate=survival_rate)

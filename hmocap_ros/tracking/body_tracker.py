@@ -81,15 +81,6 @@ TRACKER_MESHES = ("tracking_coarse", "tracking")
 SAME_PERSON_RADIUS = 0.5
 
 
-def heading_cost(yaw: np.ndarray, travel_dir: np.ndarray, weight: float) -> np.ndarray:
-    """``heading_prior``'s cost term: weight * (1 - cos a) for each root yaw (N,), a the angle
-    between the facing (sin yaw, cos yaw) on the floor (x, z) and the unit travel direction;
-    a prior on the heading added to eq. 2.8's cost (0 facing the travel, 2 * weight back to
-    front)."""
-    along = np.sin(yaw) * travel_dir[0] + np.cos(yaw) * travel_dir[1]
-    return weight * (1.0 - along)
-
-
 def _param(default, description: str):
     return dataclasses.field(default=default, metadata={"description": description,
                                                         "read_only": False})
@@ -132,11 +123,6 @@ class TrackerParams:
     reseed_fraction: float = _param(0.1, "Fraction of the particles whose limb DoFs being "
                                           "diffused are drawn uniformly within the joint "
                                           "limits (lets a lost limb be found again).")
-    legs_fraction: float = _param(0.0, "Fraction of the particles whose thighs keep their "
-                                       "world orientation when a kernel turns the pelvis (a "
-                                       "move of the pelvis alone, out of a turned pelvis with "
-                                       "the legs twisted to make up for it); 0: off "
-                                       "(docs/tracking.md: it also leads into that state).")
     velocity_gain: float = _param(1.0, "Fraction of the estimate's last frame-to-frame "
                                        "change of velocity_dofs added to the particles before "
                                        "filtering (1: constant-velocity prediction, below 1 "
@@ -254,14 +240,6 @@ class TrackerParams:
                                         "measured after a start (the start-up's hull travel "
                                         "counts), so a runner's start-up heading is checked on "
                                         "its second tracked frame.")
-    heading_prior: float = _param(0.0, "While the tracked pelvis travels faster than "
-                                       "backwards_step (backwards_frames > 0), every "
-                                       "particle's cost (eq. 2.8 / 2.15) gains heading_prior "
-                                       "* (1 - cos a), a the angle between its facing (root "
-                                       "yaw) and the travel measured up to the last frame: "
-                                       "people walk and run facing forward, which the "
-                                       "silhouettes hardly tell once the legs may twist to "
-                                       "make up for a turned pelvis; 0: off.")
     forget_shape_frames: int = _param(50, "Frames without a person after which the estimated "
                                           "shape is forgotten.")
 
@@ -281,8 +259,6 @@ class TrackerParams:
             (0.0 <= self.jump_fraction <= 1.0 and self.jump_scale >= 1.0,
              "need 0 <= jump_fraction <= 1 and jump_scale >= 1"),
             (0.0 <= self.reseed_fraction <= 1.0, "reseed_fraction must lie in [0, 1]"),
-            (0.0 <= self.legs_fraction <= 1.0, "legs_fraction must lie in [0, 1]"),
-            (self.heading_prior >= 0.0, "heading_prior must be >= 0"),
             (0.0 <= self.velocity_gain <= 1.0, "velocity_gain must lie in [0, 1]"),
             (self.velocity_dofs in ("root_position", "root", "all"),
              "velocity_dofs must be 'root_position', 'root' or 'all'"),
@@ -383,8 +359,7 @@ class BodyTracker:
             p.method, self.skel, n_particles=p.n_particles or None, n_layers=p.n_layers or None,
             sigma_scale=p.sigma_scale, survival_rate=p.survival_rate, apf_alpha=p.apf_alpha,
             refine_nu=p.refine_nu, jump_fraction=p.jump_fraction, jump_scale=p.jump_scale,
-            reseed_fraction=p.reseed_fraction, legs_fraction=p.legs_fraction,
-            arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
+            reseed_fraction=p.reseed_fraction, arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
         self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
                                 for blocks, boxed in zip(self.schedule.layer_blocks,
                                                          self.schedule.boxed)]
@@ -429,7 +404,6 @@ class BodyTracker:
         self._research_cooldown = 0
         self._travel_checked = False  # travel_heading: the start-up heading checked once
         self._last_search = 0  # _tracked_frames at the last fresh search
-        self._heading_travel: np.ndarray | None = None  # heading_prior: the last travel
         if self.ik is not None:
             self.ik.reset()
         if forget_shape:
@@ -481,10 +455,6 @@ class BodyTracker:
         last = sched.n_weightings - 1
         refine = (extremities is not None and len(extremities.detections) > 0
                   and p.refine_kappa > 0 and self.ik is not None)
-        facing = None  # heading_prior: the unit travel direction (x, z)
-        if p.heading_prior > 0.0 and self._heading_travel is not None:
-            facing = self._heading_travel / np.linalg.norm(self._heading_travel)
-        yaw = self.skel.dof_index("root_yaw")
 
         def weight(particles: np.ndarray, layer: int) -> np.ndarray:
             verts, joints = self.fitness.pose(particles, rest)
@@ -503,8 +473,6 @@ class BodyTracker:
             if refine and layer == last:
                 cost = cost + p.refine_kappa * detection_cost(
                     extremities.assigned, self.ik.end_effectors(particles, rest))
-            if facing is not None:
-                cost = cost + heading_cost(particles[:, yaw], facing, p.heading_prior)
             return cost
 
         return weight
@@ -608,7 +576,6 @@ class BodyTracker:
         self._tracked_frames += 1
         every = self.params.research_every
         travel = self._travel()
-        self._heading_travel = travel
         backwards = self._facing_away_from_travel(travel)
         first_travel = (self.params.travel_heading and travel is not None
                         and not self._travel_checked and self._research_cooldown == 0)
