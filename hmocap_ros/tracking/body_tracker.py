@@ -205,11 +205,11 @@ class TrackerParams:
                                       "measured: when it moved more than backwards_step per "
                                       "frame over them and the body faces away from the "
                                       "travel (by more than facing_limit, 90 degrees), a fresh "
-                                      "search (as "
-                                      "research_every) runs at once, so that a runner started "
-                                      "back to front is put right within a few frames rather "
-                                      "than at the next periodic search (the start-up's visual "
-                                      "hull travel counts as the pelvis'); 0: off.")
+                                      "search (as research_every) runs at once, so that a "
+                                      "runner started back to front is put right within a "
+                                      "few frames rather than at the next periodic search "
+                                      "(the start-up's visual hull travel counts as the "
+                                      "pelvis'); 0: off.")
     backwards_step: float = _param(0.05, "Mean pelvis travel per frame (m) above which "
                                          "backwards_frames checks the facing (0.05 m: 1.25 m/s "
                                          "at 25 frames/s).")
@@ -230,8 +230,8 @@ class TrackerParams:
                                            "heading if travel_heading) runs every this many "
                                            "tracked frames after the last one: a runner's "
                                            "legs change fast and the per-frame filter loses "
-                                           "them more often "
-                                           "(about 3 s per search on 2 cores); 0: off.")
+                                           "them more often (about 3 s per search on 2 "
+                                           "cores); 0: off.")
     travel_heading: bool = _param(True, "With backwards_frames > 0 (inert at 0): while the "
                                         "tracked pelvis travels faster than backwards_step, a "
                                         "fresh search also fits a pose facing the travel "
