@@ -14,7 +14,8 @@ run by run, with the defaults. The bags are never those of the reported tables:
 
 Each (bag, method, tracker seed) is one ``hmocap eval mocap ... --threads 1`` run; ``--jobs``
 of them run at a time (one per core is fastest). A run whose report exists is skipped, so an
-interrupted set resumes. ``compare`` pairs two sets by (bag, method, seed) and prints the
+interrupted set resumes (so give each setting its own NAME: a set's reports are not checked
+against ``--param``). ``compare`` pairs two sets by (bag, method, seed) and prints the
 per-run differences, their mean, the standard error of that mean (the sd of the paired
 differences / sqrt(n)) and, with ``--rule``, whether the candidate passes.
 
