@@ -359,7 +359,8 @@ class BodyTracker:
             p.method, self.skel, n_particles=p.n_particles or None, n_layers=p.n_layers or None,
             sigma_scale=p.sigma_scale, survival_rate=p.survival_rate, apf_alpha=p.apf_alpha,
             refine_nu=p.refine_nu, jump_fraction=p.jump_fraction, jump_scale=p.jump_scale,
-            reseed_fraction=p.reseed_fraction, arm_chain=p.arm_chain, room_lo=self.room[0], room_hi=self.room[1])
+            reseed_fraction=p.reseed_fraction, arm_chain=p.arm_chain, room_lo=self.room[0],
+            room_hi=self.room[1])
         self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
                                 for blocks, boxed in zip(self.schedule.layer_blocks,
                                                          self.schedule.boxed)]
