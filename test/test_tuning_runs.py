@@ -94,3 +94,20 @@ def test_compare_pairs_by_bag_method_and_seed_and_applies_the_rule(tool, tmp_pat
     assert "PASSES" in out
     rc, out = run("--rule", "5", "--guard-limit", "3")
     assert "DOES NOT PASS: running mean does not drop by at least 5 mm" in out
+
+
+def test_reports_made_with_other_settings_are_named(tool, tmp_path):
+    from hmocap_ros.eval.mocap_eval import method_params, params_record
+
+    bags = tool.tuning_sets(tmp_path)["running"][:1]
+    now = json.loads(json.dumps(params_record(method_params("hpf-apo"))))
+    old = dict(now, survival_rate=0.5)
+    for seed, params in ((0, now), (1, old)):
+        (tmp_path / tool.report_name(bags[0].name, "hpf-apo", seed)).write_text(json.dumps(
+            {"methods": {"hpf-apo": {"mean_mm": 50.0, "params": params}}}))
+    lines = tool.settings_mismatches(bags, ["hpf-apo"], [0, 1, 2], tmp_path, [])
+    assert len(lines) == 1 and lines[0].startswith(tool.report_name(bags[0].name, "hpf-apo", 1))
+    assert f"survival_rate 0.5 -> {now['survival_rate']!r}" in lines[0]
+    # asked for the old value, the other report is the odd one
+    lines = tool.settings_mismatches(bags, ["hpf-apo"], [0, 1], tmp_path, ["survival_rate=0.5"])
+    assert len(lines) == 1 and "_hpf-apo_0.json" in lines[0]

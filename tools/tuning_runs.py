@@ -14,8 +14,10 @@ run by run, with the defaults. The bags are never those of the reported tables:
 
 Each (bag, method, tracker seed) is one ``hmocap eval mocap ... --threads 1`` run; ``--jobs``
 of them run at a time (one per core is fastest). A run whose report exists is skipped, so an
-interrupted set resumes (so give each setting its own NAME: a set's reports are not checked
-against ``--param``). ``compare`` pairs two sets by (bag, method, seed) and prints the
+interrupted set resumes; a set whose reports were made with other tracker settings than the
+run would use (another ``--param``, or a default changed since: ``base`` before stop 19 had
+``survival_rate`` 0.5) is refused with the settings that differ, so give each setting its own
+NAME. ``compare`` pairs two sets by (bag, method, seed) and prints the
 per-run differences, their mean, the standard error of that mean (the sd of the paired
 differences / sqrt(n)) and, with ``--rule``, whether the candidate passes.
 
@@ -97,6 +99,33 @@ def pending_runs(bags, methods, seeds, out_dir: Path):
             if not (out_dir / report_name(bag.name, m, s)).exists()]
 
 
+def settings_mismatches(bags, methods, seeds, out_dir: Path, params) -> list[str]:
+    """One line per existing report of the set made with other tracker settings than a run
+    with ``params`` (``--param`` items) would use now: the fields that differ, stored -> now."""
+    from hmocap_ros.eval.mocap_eval import method_params, params_record, tracker_overrides
+
+    overrides = tracker_overrides(params)
+    wanted = {m: json.loads(json.dumps(params_record(method_params(m, overrides=overrides))))
+              for m in methods}
+    lines = []
+    for bag in bags:
+        for m in methods:
+            for s in seeds:
+                path = out_dir / report_name(bag.name, m, s)
+                if not path.exists():
+                    continue
+                try:
+                    stored = json.loads(path.read_text())["methods"][m]["params"]
+                except (OSError, ValueError, KeyError) as err:
+                    lines.append(f"{path.name}: no readable settings ({err!r})")
+                    continue
+                diff = [f"{k} {stored.get(k)!r} -> {v!r}" for k, v in wanted[m].items()
+                        if stored.get(k) != v]
+                if diff:
+                    lines.append(f"{path.name}: " + ", ".join(diff))
+    return lines
+
+
 def _render_missing(bags, bag_dir: Path) -> None:
     from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate
 
@@ -124,6 +153,12 @@ def run_set(ns) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_dir = Path(ns.bag_dir)
     bag_dir.mkdir(parents=True, exist_ok=True)
+    stale = settings_mismatches(bags, ns.methods, ns.seeds, out_dir, ns.param)
+    if stale:
+        raise SystemExit(f"tuning_runs: {len(stale)} report(s) in {out_dir} were made with "
+                         f"other tracker settings than this run's (stored -> now); give this "
+                         f"setting its own NAME or move them away:\n  "
+                         + "\n  ".join(stale[:5]) + ("\n  ..." if len(stale) > 5 else ""))
     todo = pending_runs(bags, ns.methods, ns.seeds, out_dir)
     total = len(bags) * len(ns.methods) * len(ns.seeds)
     print(f"{ns.name}: {total - len(todo)} of {total} runs done, {len(todo)} to run, "
