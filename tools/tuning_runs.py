@@ -102,10 +102,15 @@ def pending_runs(bags, methods, seeds, out_dir: Path):
 def settings_mismatches(bags, methods, seeds, out_dir: Path, params) -> list[str]:
     """One line per existing report of the set made with other tracker settings than a run
     with ``params`` (``--param`` items) would use now: the fields that differ, stored -> now."""
-    from hmocap_ros.eval.mocap_eval import method_params, params_record, tracker_overrides
+    from hmocap_ros.eval.mocap_eval import (_json_default, method_params, params_record,
+                                            tracker_overrides)
 
-    overrides = tracker_overrides(params)
-    wanted = {m: json.loads(json.dumps(params_record(method_params(m, overrides=overrides))))
+    try:
+        overrides = tracker_overrides(params)
+    except ValueError as err:
+        raise SystemExit(f"tuning_runs: {err}") from None
+    wanted = {m: json.loads(json.dumps(params_record(method_params(m, overrides=overrides)),
+                                       default=_json_default))
               for m in methods}
     lines = []
     for bag in bags:
