@@ -106,6 +106,8 @@ def test_bad_input_is_logged_and_survived(tmp_path):
                               env, tmp_path)
     assert node.wait_for_output("detecting gestures once a forest is loaded", 60), node.output()
     assert rec.wait_for_output("recording /gestures [", 30), rec.output()
+    # the recorder must have discovered the node's publisher before any frame is answered
+    assert rec.wait_for_output("receiving /gestures from", 60), rec.output()
     from hmocap_ros.nodes.gesture_detection import DEFAULT_MODEL
 
     pub = NodeProcess("pub", [sys.executable, "-c", BAD_INPUT_PUBLISHER, str(DEFAULT_MODEL)], env, tmp_path)
