@@ -214,6 +214,7 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     default; one made before a default changed is not."""
     import argparse
 
+    from hmocap_ros.eval.mocap_eval import stored_params
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
     table = _mocap_table_module()
@@ -222,7 +223,7 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
 
     def report(gain, overrides):
         path = tmp_path / f"r_{gain}.json"
-        params = table._tracker_params("hpf", {"velocity_gain": gain})
+        params = stored_params("hpf", {"velocity_gain": gain})
         path.write_text(json.dumps({"seed": 0, "max_people": 2, "silhouettes": "fg",
                                     "methods": {"hpf": {"params": params}},
                                     "overrides": overrides}))

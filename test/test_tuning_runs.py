@@ -97,10 +97,10 @@ def test_compare_pairs_by_bag_method_and_seed_and_applies_the_rule(tool, tmp_pat
 
 
 def test_reports_made_with_other_settings_are_named(tool, tmp_path):
-    from hmocap_ros.eval.mocap_eval import method_params, params_record
+    from hmocap_ros.eval.mocap_eval import stored_params
 
     bags = tool.tuning_sets(tmp_path)["running"][:1]
-    now = json.loads(json.dumps(params_record(method_params("hpf-apo"))))
+    now = stored_params("hpf-apo")
     old = dict(now, survival_rate=0.5)
     for seed, params in ((0, now), (1, old)):
         (tmp_path / tool.report_name(bags[0].name, "hpf-apo", seed)).write_text(json.dumps(

@@ -39,8 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from hmocap_ros.eval.mocap_eval import (METHODS, _json_default, evaluate,  # noqa: E402
-                                        method_params, params_record, plot_errors,
-                                        tracker_overrides)
+                                        plot_errors, stored_params, tracker_overrides)
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"
@@ -81,12 +80,6 @@ def _cell(res: dict) -> str:
     return f"{res['mean_mm']:.1f} ({res['std_mm']:.1f})"
 
 
-def _tracker_params(method: str, overrides: dict) -> dict:
-    """The settings a run of ``method`` with ``overrides`` uses, as its JSON report stores them."""
-    return json.loads(json.dumps(params_record(method_params(method, overrides=overrides)),
-                                 default=_json_default))
-
-
 def _reusable(path: Path, ns, overrides: dict) -> dict | None:
     """The report at ``path`` if it was made with this run's seed, max-people and methods and
     with the tracker settings this run would use (the defaults as they are now, with
@@ -101,7 +94,7 @@ def _reusable(path: Path, ns, overrides: dict) -> dict | None:
     if report.get("seed") != ns.seed or report.get("max_people") != ns.max_people \
             or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]):
         return None
-    if any(report["methods"][m].get("params") != _tracker_params(m, overrides)
+    if any(report["methods"][m].get("params") != stored_params(m, overrides)
            for m in ns.methods):
         return None
     return report

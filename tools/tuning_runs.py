@@ -102,16 +102,13 @@ def pending_runs(bags, methods, seeds, out_dir: Path):
 def settings_mismatches(bags, methods, seeds, out_dir: Path, params) -> list[str]:
     """One line per existing report of the set made with other tracker settings than a run
     with ``params`` (``--param`` items) would use now: the fields that differ, stored -> now."""
-    from hmocap_ros.eval.mocap_eval import (_json_default, method_params, params_record,
-                                            tracker_overrides)
+    from hmocap_ros.eval.mocap_eval import stored_params, tracker_overrides
 
     try:
         overrides = tracker_overrides(params)
     except ValueError as err:
         raise SystemExit(f"tuning_runs: {err}") from None
-    wanted = {m: json.loads(json.dumps(params_record(method_params(m, overrides=overrides)),
-                                       default=_json_default))
-              for m in methods}
+    wanted = {m: stored_params(m, overrides) for m in methods}
     lines = []
     for bag in bags:
         for m in methods:
@@ -155,15 +152,15 @@ def run_set(ns) -> int:
     if unknown:
         raise SystemExit(f"tuning_runs: no bag {sorted(unknown)} in the set(s) {ns.set}")
     out_dir = Path(ns.workdir) / ns.name
-    out_dir.mkdir(parents=True, exist_ok=True)
-    bag_dir = Path(ns.bag_dir)
-    bag_dir.mkdir(parents=True, exist_ok=True)
     stale = settings_mismatches(bags, ns.methods, ns.seeds, out_dir, ns.param)
     if stale:
         raise SystemExit(f"tuning_runs: {len(stale)} report(s) in {out_dir} were made with "
                          f"other tracker settings than this run's (stored -> now); give this "
                          f"setting its own NAME or move them away:\n  "
                          + "\n  ".join(stale[:5]) + ("\n  ..." if len(stale) > 5 else ""))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bag_dir = Path(ns.bag_dir)
+    bag_dir.mkdir(parents=True, exist_ok=True)
     todo = pending_runs(bags, ns.methods, ns.seeds, out_dir)
     total = len(bags) * len(ns.methods) * len(ns.seeds)
     print(f"{ns.name}: {total - len(todo)} of {total} runs done, {len(todo)} to run, "

@@ -320,6 +320,13 @@ def params_record(params) -> dict:
     return {f.name: getattr(params, f.name) for f in fields(params)}
 
 
+def stored_params(method: str, overrides: dict | None = None) -> dict:
+    """The settings a run of ``method`` with ``overrides`` uses, in JSON types, as a report
+    read back from disk holds them: what a tool compares a stored report's params with."""
+    return json.loads(json.dumps(params_record(method_params(method, overrides=overrides)),
+                                 default=_json_default))
+
+
 def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int = 0,
                layers: int = 0, overrides: dict | None = None, given_shape: bool = False,
                max_people: int = 1, progress=None) -> EvalResult:
