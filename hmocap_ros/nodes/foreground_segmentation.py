@@ -33,6 +33,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from sensor_msgs.msg import Image
@@ -124,7 +126,8 @@ class ForegroundSegmentation(Node):
                 log.error(f"{name}: {err}; relearning", throttle_duration_sec=5.0)
                 state.model.relearn()
                 return
-            skin = skin_probability(rgb, mask=mask) if name in self.skin_pubs else None
+            skin = (skin_probability(rgb, mask=np.where(mask == 255, mask, 0) if state.model.params.shadow_value
+                                     else mask) if name in self.skin_pubs else None)
             state.seconds += time.perf_counter() - t0
             state.frames += 1
             if skin is not None:  # before the mask: body_tracker takes the maps that are there
