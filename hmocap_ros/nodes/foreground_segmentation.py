@@ -10,7 +10,8 @@ Subscriptions:
   effort) with a queue of ``queue_depth`` frames, so that a stall (CPU starvation, a publisher
   catching up) loses no frame as long as the node keeps up on average.
 Publications:
-  ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id).
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255, and ``shadow_value`` where the
+  shadow test took a pixel out if that is not 0; the input's stamp and frame_id).
   ``<camera>/skin`` (sensor_msgs/Image mono8, half resolution, 255 = probability 1), when
   ``publish_skin``: the per-pixel skin probability inside the foreground
   (:mod:`hmocap_ros.segmentation.skin`), the extremity detector that body_tracker's ``dd-hpf``
@@ -126,8 +127,10 @@ class ForegroundSegmentation(Node):
                 log.error(f"{name}: {err}; relearning", throttle_duration_sec=5.0)
                 state.model.relearn()
                 return
-            skin = (skin_probability(rgb, mask=np.where(mask == 255, mask, 0) if state.model.params.shadow_value
-                                     else mask) if name in self.skin_pubs else None)
+            skin = None
+            if name in self.skin_pubs:  # inside the foreground proper, not its shadows
+                fg = np.where(mask == 255, mask, 0) if state.model.params.shadow_value else mask
+                skin = skin_probability(rgb, mask=fg)
             state.seconds += time.perf_counter() - t0
             state.frames += 1
             if skin is not None:  # before the mask: body_tracker takes the maps that are there
