@@ -114,52 +114,6 @@ def test_xor_cost_matches_reference_rasteriser(model, rig):
     assert fitness.costs(truth[None], obs)[0] < cost.min()
 
 
-def test_shadow_pixels_are_background_or_uncertain(model, rig):
-    """Mask value 127 (the segmentation's shadow value): background by default; with
-    ``shadow_pixels="uncertain"`` counted neither way, so a head the shadow test took (the
-    top of each silhouette) no longer pushes the true pose away."""
-    truth = clip_poses(model, 40, 1)[0]
-    masks, _ = render_masks(model, rig, truth)
-    masks = masks[0].copy()
-    for m in masks:  # the top fifth of each silhouette became "shadow"
-        rows = np.flatnonzero(m.any(axis=1))
-        top = rows[0] + (rows[-1] - rows[0]) // 5
-        m[:top][m[:top] != 0] = 127
-        m[-20:, :40] = 127  # and a cast shadow far from the body
-    exact, _ = render_masks(model, rig, truth)
-    plain = SilhouetteFitness(model, rig, working_scale=0.5)
-    unsure = SilhouetteFitness(model, rig, working_scale=0.5, shadow_pixels="uncertain")
-    o_bg, o_unc, o_exact = plain.observe(list(masks)), unsure.observe(list(masks)), plain.observe(list(exact[0]))
-    no_head = [np.where(m == 127, 0, m) for m in masks]
-    np.testing.assert_array_equal(o_bg.masks, plain.observe(no_head).masks)
-    assert o_bg.uncertain is None and o_unc.uncertain is not None
-    np.testing.assert_array_equal(o_unc.masks, o_bg.masks)  # foreground is the same
-    assert o_unc.uncertain.sum() > 0 and not (o_unc.uncertain & o_unc.masks).any()
-    rng = np.random.default_rng(1)
-    particles = np.vstack([truth, truth + rng.normal(0.0, 0.05, (2, truth.size))
-                           * (np.arange(truth.size) >= 3)])
-    verts, _ = unsure.pose(particles)
-    uv = unsure.project(verts, o_unc)
-    got = unsure.view_xor(uv, o_unc)
-    for b in range(len(particles)):
-        for m in range(o_unc.n_views):
-            ref = silhouette_reference(uv[b, m], model.faces, o_unc.height, o_unc.width) != 0
-            unc = o_unc.uncertain[m] != 0
-            wrong = (ref != (o_unc.masks[m] != 0)) & ~unc
-            assert got[b, m] == wrong.sum() + 0.5 * unc.sum()
-    # the true pose: dearer than on exact masks when the head is background, not when uncertain
-    c_exact = plain.costs(truth[None], o_exact)[0]
-    c_bg = plain.costs(truth[None], o_bg)[0]
-    c_unc = unsure.costs(truth[None], o_unc)[0] - (0.5 * o_unc.uncertain.sum(axis=(1, 2))
-                                                   / np.maximum(o_unc.counts, unsure.min_count)).sum()
-    assert c_bg > c_exact + 0.2
-    assert c_unc < 0.5 * c_bg
-    with pytest.raises(ValueError, match="shadow_pixels"):
-        SilhouetteFitness(model, rig, shadow_pixels="foreground")
-    with pytest.raises(ValueError, match="shadow_pixels"):
-        TrackerParams(shadow_pixels="maybe")
-
-
 def test_missing_and_wrong_size_views_are_dropped(model, rig):
     truth = rest_pose(model.skeleton)
     masks, _ = render_masks(model, rig, truth)

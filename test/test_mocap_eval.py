@@ -198,27 +198,6 @@ def test_eval_segments_a_bag_with_empty_frames_and_rejects_bad_bags(tmp_path):
     assert run_eval([str(empty)]) == 2
 
 
-def test_shadow_pixels_reach_the_tracker_through_the_bag_frames(tmp_path):
-    """--param shadow_pixels=uncertain makes the evaluation's segmentation publish its shadow
-    value, and BagFrames keeps it apart from the foreground (two bit planes)."""
-    from hmocap_ros.eval.mocap_eval import load_frames
-
-    plain = load_frames(DEMO_BAG, "fg", max_frames=3)
-    marked = load_frames(DEMO_BAG, "fg", max_frames=3, fg_params={"shadow_value": 127})
-    k = len(plain.stamps) - 1
-    a, b = plain.mask_list(k), marked.mask_list(k)
-    assert all(set(np.unique(m).tolist()) <= {0, 1} for m in a)
-    assert any((m == 127).any() for m in b)
-    for m0, m1 in zip(a, b):
-        np.testing.assert_array_equal(m1 == 1, m0 == 1)  # the same foreground
-    out = tmp_path / "r.json"
-    assert run_eval([str(DEMO_BAG), "--method", "hpf-apo", "--frames", "3", "--param",
-                     "shadow_pixels=uncertain", "--json", str(out)]) == 0
-    report = json.loads(out.read_text())
-    assert report["fg_overrides"] == {"shadow_value": 127}
-    assert report["methods"]["hpf-apo"]["params"]["shadow_pixels"] == "uncertain"
-
-
 def _mocap_table_module():
     import importlib.util
 

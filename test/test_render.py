@@ -105,45 +105,6 @@ def test_xor_counts_equal_numpy_xor(body):
     assert (xor_counts(uv, faces, observed, front_only=True) == expected).all()
 
 
-def test_uncertain_pixels_count_neither_way(body):
-    """With ``uncertain`` pixels the count is the XOR outside them plus half of them in the
-    box, whatever covers them; the fused kernel counts the same from vertices."""
-    from hmocap_ros.tracking.fused_xor import xor_counts_from_vertices
-
-    verts, faces = body
-    rng = np.random.default_rng(5)
-    poses = _poses(verts, 5, rng)
-    cams = _cameras(160, 120)
-    uv, _ = project_batch(poses, *cams)
-    rendered = render_silhouettes(uv, faces, 120, 160) != 0
-    observed = render_silhouettes(uv[0] + rng.normal(0, 2, (4, 1, 2)).astype(np.float32),
-                                  faces, 120, 160) * 255
-    uncertain = (rng.random((4, 120, 160)) < 0.2).astype(np.uint8)
-    uncertain[:, 30:70, 60:100] = 1  # a block where the head would be
-    fg = observed != 0
-    unc = (uncertain != 0) & ~fg
-    boxes = np.array([[40, 10, 120, 60], [0, 0, 160, 120], [70, 50, 70, 90], [150, 100, 400, 300]])
-    expected = np.zeros((5, 4))
-    for m, (x0, y0, x1, y1) in enumerate(boxes):
-        x1, y1 = min(x1, 160), min(y1, 120)
-        sl = (slice(None), m, slice(y0, y1), slice(x0, x1))
-        wrong = (rendered != fg[None, m]) & ~unc[None, m]
-        expected[:, m] = wrong[sl].sum(axis=(1, 2)) + 0.5 * unc[m, y0:y1, x0:x1].sum()
-    got = xor_counts(uv, faces, observed, boxes, uncertain=uncertain)
-    assert got.dtype == np.float64
-    np.testing.assert_array_equal(got, expected)
-    fused = xor_counts_from_vertices(poses, *cams, faces, observed, boxes, uncertain=uncertain)
-    np.testing.assert_array_equal(fused, expected)
-    # no uncertain pixel: the plain XOR, as a float
-    none = np.zeros_like(uncertain)
-    np.testing.assert_array_equal(xor_counts(uv, faces, observed, boxes, uncertain=none),
-                                  xor_counts(uv, faces, observed, boxes))
-    # an uncertain pixel changes a pose's count by the same whether it is covered or not
-    plain_fg_only = xor_counts(uv, faces, observed, boxes)
-    covered = (rendered[:, :, 30:70, 60:100]).any()
-    assert covered and not np.array_equal(got, plain_fg_only)
-
-
 def test_xor_counts_only_inside_box(body):
     verts, faces = body
     rng = np.random.default_rng(3)

@@ -99,10 +99,9 @@ def test_moving_blob_f1_after_learning(rng, room):
     assert model.last_stamp_ns == 74 * FRAME_NS
 
 
-def _shadow_scene(room, rng, suppression: bool, shadow_value: int = 0):
+def _shadow_scene(room, rng, suppression: bool):
     h, w = room.shape[:2]
-    model = learned_model(rng, room, ForegroundParams(learn_frames=15, shadow_suppression=suppression,
-                                                      shadow_value=shadow_value))
+    model = learned_model(rng, room, ForegroundParams(learn_frames=15, shadow_suppression=suppression))
     truth = disc_mask(h, w, (120, 100), 30)
     shadow = np.zeros((h, w), np.uint8)  # cast by the disc onto the floor, touching it
     cv2.ellipse(shadow, (175, 150), (90, 35), 20, 0, 360, 255, -1)
@@ -121,20 +120,6 @@ def test_cast_shadow_is_not_foreground(rng, room):
     assert np.count_nonzero(mask[in_shadow]) / np.count_nonzero(in_shadow) < 0.01
     assert np.count_nonzero(model.shadow_mask[in_shadow]) / np.count_nonzero(in_shadow) > 0.95
     assert mask_scores(mask, truth).f1 > 0.95
-
-
-def test_shadow_value_marks_what_the_shadow_test_took(room):
-    """shadow_value 127 (MOG2's convention): the same foreground, and 127 exactly where the
-    shadow test took a pixel out of it; the same random stream gives the same scene."""
-    model0, mask0, truth, shadow = _shadow_scene(room, np.random.default_rng(7), suppression=True)
-    model1, mask1, _, _ = _shadow_scene(room, np.random.default_rng(7), suppression=True, shadow_value=127)
-    assert set(np.unique(mask1).tolist()) == {0, 127, 255}
-    np.testing.assert_array_equal(mask1 == 255, mask0 == 255)
-    np.testing.assert_array_equal(mask1 == 127, (mask0 == 0) & (model1.shadow_mask != 0))
-    in_shadow = shadow > 0
-    assert np.count_nonzero(mask1[in_shadow] == 127) / np.count_nonzero(in_shadow) > 0.95
-    with pytest.raises(ValueError, match="shadow_value"):
-        ForegroundParams(shadow_value=255)
 
 
 def test_without_shadow_suppression_the_shadow_is_foreground(rng, room):

@@ -84,19 +84,11 @@ class BagFrames:
     detector_s: float = 0.0
 
     def mask_list(self, k: int) -> list:
-        """Frame ``k``'s masks: uint8 1 foreground, 0 background, and ``SHADOW_VALUE`` (127)
-        where the segmentation published its shadow value (``ForegroundParams.shadow_value``)."""
-        from hmocap_ros.tracking.body_fitness import SHADOW_VALUE
-
         h, w = self.shape_hw
         out = []
         for packed in self.masks[k]:
             if packed is None:
                 out.append(None)
-            elif isinstance(packed, tuple):  # (foreground, shadow) bit planes
-                m = np.unpackbits(packed[0], count=h * w).reshape(h, w)
-                m[np.unpackbits(packed[1], count=h * w).reshape(h, w) != 0] = SHADOW_VALUE
-                out.append(m)
             else:
                 out.append(np.unpackbits(packed, count=h * w).reshape(h, w))
         return out
@@ -156,7 +148,6 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     from hmocap_ros.rig import rig_from_msg
     from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
     from hmocap_ros.segmentation.skin import skin_probability
-    from hmocap_ros.tracking.body_fitness import split_shadows
 
     out = sys.stderr if out is None else out
     if silhouettes not in ("fg", "gt"):
@@ -247,12 +238,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                     row.append(None)
                     continue
                 shape_hw = shape_hw or mask.shape[:2]
-                if mask.shape[:2] != shape_hw:
-                    row.append(None)
-                    continue
-                fg, shadow = split_shadows(mask)
-                row.append(np.packbits(fg) if shadow is None
-                           else (np.packbits(fg), np.packbits(shadow)))
+                row.append(np.packbits(mask != 0) if mask.shape[:2] == shape_hw else None)
             seg_time += time.perf_counter() - t0
             if detector_maps:
                 t0 = time.perf_counter()
@@ -409,19 +395,9 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
              overrides: dict | None = None, given_shape: bool = False,
              fg_params: dict | None = None, max_people: int = 1, out=None) -> dict:
     """Evaluate ``methods`` on one bag; returns the JSON-ready report (``max_people``: see
-    :func:`run_method`).
-
-    With the tracker override ``shadow_pixels="uncertain"`` the segmentation publishes its
-    shadow value (``ForegroundParams.shadow_value`` 127, unless ``fg_params`` sets it), as the
-    two nodes would be configured together; otherwise the option would have nothing to read.
-    """
+    :func:`run_method`)."""
     out = sys.stderr if out is None else out
     t0 = time.perf_counter()
-    fg_params = dict(fg_params or {})
-    if (overrides or {}).get("shadow_pixels") == "uncertain" and "shadow_value" not in fg_params:
-        from hmocap_ros.tracking.body_fitness import SHADOW_VALUE
-
-        fg_params["shadow_value"] = SHADOW_VALUE
     frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,
                          detector_maps=any(m in DETECTOR_METHODS for m in methods))
     report = {
@@ -437,7 +413,6 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
         "seed": seed,
         "given_shape": bool(given_shape),
         "max_people": int(max_people),
-        "fg_overrides": fg_params,
         "methods": {},
     }
     for method in methods:

@@ -10,8 +10,7 @@ Subscriptions:
   effort) with a queue of ``queue_depth`` frames, so that a stall (CPU starvation, a publisher
   catching up) loses no frame as long as the node keeps up on average.
 Publications:
-  ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255, and ``shadow_value`` where the
-  shadow test took a pixel out if that is not 0; the input's stamp and frame_id).
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id).
   ``<camera>/skin`` (sensor_msgs/Image mono8, half resolution, 255 = probability 1), when
   ``publish_skin``: the per-pixel skin probability inside the foreground
   (:mod:`hmocap_ros.segmentation.skin`), the extremity detector that body_tracker's ``dd-hpf``
@@ -33,8 +32,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-
-import numpy as np
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
@@ -127,10 +124,7 @@ class ForegroundSegmentation(Node):
                 log.error(f"{name}: {err}; relearning", throttle_duration_sec=5.0)
                 state.model.relearn()
                 return
-            skin = None
-            if name in self.skin_pubs:  # inside the foreground proper, not its shadows
-                fg = np.where(mask == 255, mask, 0) if state.model.params.shadow_value else mask
-                skin = skin_probability(rgb, mask=fg)
+            skin = skin_probability(rgb, mask=mask) if name in self.skin_pubs else None
             state.seconds += time.perf_counter() - t0
             state.frames += 1
             if skin is not None:  # before the mask: body_tracker takes the maps that are there

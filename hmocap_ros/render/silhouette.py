@@ -70,17 +70,15 @@ def _fill_silhouette(buf, proj, faces, x_min, y_min, x_max, y_max, front_only):
 
 @nb.njit(cache=True, nogil=True, inline="always")
 def count_xor_and_clear(buf, observed, x0, y0, x1, y1):
-    """Over ``[x0, x1) x [y0, y1)``: the rendered pixels of ``buf`` and the sum of
-    ``observed`` over them (``|M|``, ``|M and S|`` for a 0/1 mask; with the 0/1/2 masks of
-    :func:`weighted_observation`, twice that plus ``|M and U|``), clearing ``buf`` for its
-    next use."""
+    """Over ``[x0, x1) x [y0, y1)``: the rendered pixels of ``buf`` and those also set in
+    ``observed`` (``|M|``, ``|M and S|``), clearing ``buf`` for its next use."""
     rendered = 0
     both = 0
     for y in range(y0, y1):
         for x in range(x0, x1):
             v = buf[y, x]
             rendered += v
-            both += v * observed[y, x]
+            both += v & observed[y, x]
             buf[y, x] = 0
     return rendered, both
 
@@ -96,8 +94,7 @@ def _render_kernel(proj, faces, out, front_only):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def _xor_kernel(proj, faces, observed, rects, observed_in_rect, front_only, n_chunks,
-                render_weight, out):
+def _xor_kernel(proj, faces, observed, rects, observed_in_rect, front_only, n_chunks, out):
     n_poses = proj.shape[0]
     n_views = proj.shape[1]
     height = observed.shape[1]
@@ -113,28 +110,7 @@ def _xor_kernel(proj, faces, observed, rects, observed_in_rect, front_only, n_ch
                 buf, proj[b, m], faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3],
                 front_only)
             rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
-            out[b, m] = observed_in_rect[m] + render_weight * rendered - 2 * both
-
-
-def weighted_observation(observed: np.ndarray, uncertain: np.ndarray | None):
-    """The masks the XOR kernels count against, and the weight of a rendered pixel.
-
-    Without ``uncertain``: ``(observed != 0)`` as 0/1 and weight 1, so the kernels count
-    ``|S| + |M| - 2 |M and S|`` = the XOR. With it (pixels the segmentation could not call,
-    e.g. its shadow test's; foreground wins where both are set): 0 background, 1 uncertain,
-    2 foreground, and weight 2, so they count ``2 |S| + |U| + 2 |M| - 4 |M and S| -
-    2 |M and U|`` = twice the XOR outside ``U`` plus ``|U|``: an uncertain pixel adds the
-    same whether the model covers it or not (counted neither way).
-    """
-    fg = np.asarray(observed) != 0
-    if uncertain is None:
-        return np.ascontiguousarray(fg, dtype=np.uint8), 1
-    unc = np.asarray(uncertain) != 0
-    if unc.shape != fg.shape:
-        raise ValueError(f"uncertain must have the masks' shape {fg.shape}, got {unc.shape}")
-    out = fg.astype(np.uint8) * 2
-    out[unc & ~fg] = 1
-    return np.ascontiguousarray(out), 2
+            out[b, m] = observed_in_rect[m] + rendered - 2 * both
 
 
 def _check_proj_faces(proj, faces, n_vertices_axis=-2):
@@ -177,12 +153,6 @@ def observed_counts(observed: np.ndarray, boxes: np.ndarray | None = None) -> np
                      for m, (x0, y0, x1, y1) in enumerate(rects)], dtype=np.int64)
 
 
-def _observed_sums(observed: np.ndarray, rects: np.ndarray) -> np.ndarray:
-    """Sum of the 0/1/2 values of :func:`weighted_observation` inside each view's rect."""
-    return np.array([int(observed[m, y0:y1, x0:x1].sum(dtype=np.int64))
-                     for m, (x0, y0, x1, y1) in enumerate(rects)], dtype=np.int64)
-
-
 def render_silhouettes(proj: np.ndarray, faces: np.ndarray, height: int, width: int, *,
                        front_only: bool = False, out: np.ndarray | None = None) -> np.ndarray:
     """Render binary silhouettes of a mesh for any batch of projections.
@@ -214,8 +184,7 @@ def render_silhouettes(proj: np.ndarray, faces: np.ndarray, height: int, width: 
 
 
 def xor_counts(proj: np.ndarray, faces: np.ndarray, observed: np.ndarray,
-               boxes: np.ndarray | None = None, *, front_only: bool = False,
-               uncertain: np.ndarray | None = None) -> np.ndarray:
+               boxes: np.ndarray | None = None, *, front_only: bool = False) -> np.ndarray:
     """Silhouette XOR counts of B poses against M observed foreground masks (eq. 2.8 / 2.15).
 
     Args:
@@ -226,15 +195,11 @@ def xor_counts(proj: np.ndarray, faces: np.ndarray, observed: np.ndarray,
             only pixels inside the box count (the approximate partitioning of observations,
             eq. 2.15). ``None`` counts the whole image.
         front_only: see :func:`render_silhouettes`.
-        uncertain: optional masks ``(M, H, W)`` of pixels counted neither way (non-zero;
-            :func:`weighted_observation`).
 
     Returns:
         int64 ``(B, M)``: number of pixels (inside the box) where the rendered silhouette and
-        the observed mask differ. With ``uncertain``, float64: that number outside the
-        uncertain pixels plus half the uncertain pixels in the box (the same for every
-        pose). Runs in parallel over poses x views (``numba.set_num_threads`` sets the
-        thread count).
+        the observed mask differ. Runs in parallel over poses x views
+        (``numba.set_num_threads`` sets the thread count).
     """
     proj, faces = _check_proj_faces(proj, faces)
     if proj.ndim != 4:
@@ -243,14 +208,14 @@ def xor_counts(proj: np.ndarray, faces: np.ndarray, observed: np.ndarray,
     if observed.ndim != 3 or observed.shape[0] != proj.shape[1]:
         raise ValueError(f"observed must have shape (M={proj.shape[1]}, H, W), "
                          f"got {observed.shape}")
-    obs, weight = weighted_observation(observed, uncertain)
-    n_views, height, width = obs.shape
+    obs01 = np.ascontiguousarray(observed != 0, dtype=np.uint8)
+    n_views, height, width = obs01.shape
     rects = clip_boxes(boxes, n_views, height, width)
-    counts = _observed_sums(obs, rects)
+    counts = observed_counts(obs01, rects)
     out = np.empty(proj.shape[:2], dtype=np.int64)
     n = out.size
     if n == 0:
-        return out if weight == 1 else out.astype(np.float64)
+        return out
     n_chunks = min(n, 4 * nb.get_num_threads())
-    _xor_kernel(proj, faces, obs, rects, counts, bool(front_only), n_chunks, weight, out)
-    return out if weight == 1 else out / 2.0
+    _xor_kernel(proj, faces, obs01, rects, counts, bool(front_only), n_chunks, out)
+    return out

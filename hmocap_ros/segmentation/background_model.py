@@ -244,8 +244,7 @@ class BackgroundModel:
         return self.frames_learned < self.params.learn_frames
 
     def apply(self, rgb: np.ndarray, stamp_ns: int) -> np.ndarray:
-        """Segment one frame (and learn from it); returns the uint8 0/255 foreground mask
-        (with ``shadow_value`` where the shadow/highlight test took a pixel out, if non-zero).
+        """Segment one frame (and learn from it); returns the uint8 0/255 foreground mask.
 
         Raises ValueError, leaving the model unchanged, for a frame that is not uint8 (H, W, 3),
         has another size than the learned background, or a stamp older than the last one.
@@ -297,10 +296,7 @@ class BackgroundModel:
             np.float32(p.learning_rate), p.absorb_frames, np.float32(p.absorb_rate),
             self.raw_mask, self.shadow_mask)
         self._mask = clean_mask(self.raw_mask, self._opening, self._closing, p.min_blob_area, p.max_hole_area)
-        out = self._mask.copy()
-        if p.shadow_value:
-            out[(out == 0) & (self.shadow_mask != 0)] = p.shadow_value
-        return out
+        return self._mask.copy()
 
 
 def compile_kernels(params: ForegroundParams | None = None) -> None:

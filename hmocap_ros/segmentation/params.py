@@ -61,11 +61,6 @@ class ForegroundParams:
     shadow_chroma_sigma: float = _param(
         2.0, "Extra tolerance of the chromaticity test for sensor noise, in standard deviations "
              "(matters for dark pixels, whose colour angle is noisy).")
-    shadow_value: int = _param(
-        0, "Value published for pixels the shadow/highlight test took out of the foreground "
-           "(0: background, as any other; 127: OpenCV MOG2's shadow value, which body_tracker's "
-           "shadow_pixels can count as uncertain: a grey head against a light wall passes the "
-           "shadow test, see docs/tracking.md). Foreground stays 255.")
     illumination_compensation: bool = _param(
         True, "Estimate a global gain per frame (median brightness ratio over the last frame's "
               "background pixels) and compare each pixel with the gain-scaled background.")
@@ -94,7 +89,6 @@ class ForegroundParams:
              "need 0 < shadow_min_brightness < shadow_max_brightness <= 1"),
             (self.shadow_max_chroma >= 0.0, "shadow_max_chroma must be >= 0"),
             (self.shadow_chroma_sigma >= 0.0, "shadow_chroma_sigma must be >= 0"),
-            (0 <= self.shadow_value <= 254, "shadow_value must be in [0, 254] (255 is foreground)"),
             (self.gain_sample_step >= 1, "gain_sample_step must be >= 1"),
             (self.opening_size >= 0 and self.closing_size >= 0, "morphology sizes must be >= 0"),
             (self.min_blob_area >= 0 and self.max_hole_area >= 0, "areas must be >= 0"),

@@ -64,24 +64,6 @@ def serial_below(n_items: int, limit: int = SERIAL_BELOW):
         numba.set_num_threads(previous)
 
 
-#: Mask value of a pixel the segmentation's shadow test took out of the foreground
-#: (``ForegroundParams.shadow_value`` 127, OpenCV MOG2's convention): background, or
-#: uncertain with ``shadow_pixels="uncertain"``. Any other non-zero value is foreground.
-SHADOW_VALUE = 127
-SHADOW_PIXELS = ("background", "uncertain")
-
-
-def split_shadows(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """``(foreground (H, W) bool, shadow (H, W) bool or None when there is none)`` of a mask."""
-    m = np.asarray(mask)
-    if m.ndim == 3:
-        m = m[..., 0]
-    shadow = m == SHADOW_VALUE
-    if not shadow.any():
-        return m != 0, None
-    return (m != 0) & ~shadow, shadow
-
-
 def downsample_mask(mask: np.ndarray, width: int, height: int) -> np.ndarray:
     """Foreground mask reduced to ``width x height`` by area averaging, thresholded at 1/2.
 
@@ -141,8 +123,6 @@ class Observation:
     """Foreground silhouettes of one frame set at the working resolution.
 
     masks: (M, h, w) uint8 {0, 1}, one per available view, in rig order.
-    uncertain: None, or (M, h, w) uint8 {0, 1}: pixels counted neither way by the XOR
-    (shadow-test pixels, ``SilhouetteFitness.shadow_pixels="uncertain"``).
     views: (M,) rig indices of those views; dropped: rig indices of missing/invalid masks.
     K, R, t, D: stacked working-resolution cameras of the available views.
     counts: C(S_v), foreground pixels per view (int64, (M,)).
@@ -160,7 +140,6 @@ class Observation:
     counts: np.ndarray
     stamp_ns: int = 0
     max_r2: np.ndarray | None = None
-    uncertain: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -184,9 +163,6 @@ class SilhouetteFitness:
     working_scale: image scale of the comparison (0.25: 640x480 -> 160x120).
     front_only: rasterise only front faces (exact for the closed body mesh, about 2x faster).
     min_count: floor of ``C(S_v)`` in working-resolution pixels.
-    shadow_pixels: what mask pixels of value :data:`SHADOW_VALUE` are: "background", or
-    "uncertain" (counted neither way by eq. 2.8 / 2.15: a shadow, or a grey head in front of
-    a light wall that the shadow test took for one).
     times: accumulated :class:`StageTimes` (reset by the caller when it wants).
     """
 
@@ -195,15 +171,11 @@ class SilhouetteFitness:
     working_scale: float = 0.25
     front_only: bool = True
     min_count: int = 20
-    shadow_pixels: str = "background"
     times: StageTimes = field(default_factory=StageTimes)
 
     def __post_init__(self):
         if not 0.0 < self.working_scale <= 1.0:
             raise ValueError(f"working_scale must lie in (0, 1], got {self.working_scale}")
-        if self.shadow_pixels not in SHADOW_PIXELS:
-            raise ValueError(f"shadow_pixels must be one of {SHADOW_PIXELS}, "
-                             f"got {self.shadow_pixels!r}")
         self.cameras = tuple(self.cameras)
         self.working = tuple(c.scaled(self.working_scale) for c in self.cameras)
         self._K, self._R, self._t, self._D = camera_arrays(self.working)
@@ -222,7 +194,7 @@ class SilhouetteFitness:
         if len(masks) != len(self.cameras):
             raise ValueError(f"expected {len(self.cameras)} masks (one per camera, None for a "
                              f"missing one), got {len(masks)}")
-        kept, dropped, small, unsure = [], [], [], []
+        kept, dropped, small = [], [], []
         for i, (mask, full, work) in enumerate(zip(masks, self.cameras, self.working)):
             if mask is None:
                 dropped.append(i)
@@ -232,29 +204,17 @@ class SilhouetteFitness:
                 dropped.append(i)
                 continue
             kept.append(i)
-            fg, shadow = split_shadows(mask)
-            small.append(downsample_mask(fg, work.width, work.height))
-            if shadow is not None and self.shadow_pixels == "uncertain":
-                # a working pixel is foreground when half of it is, else uncertain when half
-                # of it is foreground or shadow
-                either = downsample_mask(fg | shadow, work.width, work.height)
-                unsure.append((len(small) - 1, either & (1 - small[-1])))
+            small.append(downsample_mask(mask, work.width, work.height))
         views = np.asarray(kept, dtype=np.intp)
         if small:
             stack = np.ascontiguousarray(np.stack(small))
         else:
             w = self.working[0]
             stack = np.zeros((0, w.height, w.width), dtype=np.uint8)
-        uncertain = None
-        if unsure:
-            uncertain = np.zeros_like(stack)
-            for k, u in unsure:
-                uncertain[k] = u
         counts = stack.sum(axis=(1, 2), dtype=np.int64)
         return Observation(masks=stack, views=views, dropped=tuple(dropped), K=self._K[views],
                            R=self._R[views], t=self._t[views], D=self._D[views], counts=counts,
-                           stamp_ns=int(stamp_ns), max_r2=self._max_r2[views],
-                           uncertain=uncertain)
+                           stamp_ns=int(stamp_ns), max_r2=self._max_r2[views])
 
     # ------------------------------------------------------------------ posing
 
@@ -294,7 +254,7 @@ class SilhouetteFitness:
         rendering ``faces`` (a subset of the mesh's triangles; default all)."""
         t0 = time.perf_counter()
         out = xor_counts(uv, self.faces if faces is None else faces, obs.masks, boxes,
-                         front_only=self.front_only, uncertain=obs.uncertain)
+                         front_only=self.front_only)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += uv.shape[0]
         return out
@@ -326,8 +286,7 @@ class SilhouetteFitness:
         t0 = time.perf_counter()
         xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D,
                                        self.faces if faces is None else faces, obs.masks, boxes,
-                                       front_only=self.front_only, max_r2=obs.max_r2,
-                                       uncertain=obs.uncertain)
+                                       front_only=self.front_only, max_r2=obs.max_r2)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += verts.shape[0]
         return xor

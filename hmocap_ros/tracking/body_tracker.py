@@ -53,8 +53,7 @@ import numpy as np
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator, EstimationParams
 from hmocap_ros.render.silhouette import observed_counts
-from hmocap_ros.tracking.body_fitness import (SHADOW_PIXELS, Observation, SilhouetteFitness,
-                                              serial_below, split_shadows)
+from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness, serial_below
 from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
 from hmocap_ros.tracking.extremity_detection import (Extremities, ExtremityDetector,
                                                      ExtremityParams, detection_cost)
@@ -87,13 +86,6 @@ def _param(default, description: str):
                                                         "read_only": False})
 
 
-def _foreground_only(mask: np.ndarray) -> np.ndarray:
-    """The mask with its shadow pixels (value 127, ``ForegroundParams.shadow_value``) zeroed;
-    the mask itself when it has none."""
-    fg, shadow = split_shadows(mask)
-    return mask if shadow is None else np.where(fg, 255, 0).astype(np.uint8)
-
-
 @dataclass(frozen=True)
 class TrackerParams:
     """Tunables of :class:`BodyTracker` (each field's metadata has a ``description`` for the
@@ -116,11 +108,6 @@ class TrackerParams:
                                    "'tracking_coarse' (1,000, about one per silhouette pixel "
                                    "at 160x120: about twice as fast per frame, and 2.8 mm "
                                    "worse on the tuning clips).")
-    shadow_pixels: str = _param("background", "What mask pixels of value 127 (the "
-                                              "segmentation's shadow_value) are: 'background', "
-                                              "or 'uncertain', counted neither way by the "
-                                              "silhouette XOR (eq. 2.8): the shadow test also "
-                                              "takes a grey head in front of a light wall.")
     sigma_scale: float = _param(1.0, "Factor on the per-DoF inter-frame motion std sigma0 "
                                      "(motion statistics, see body_layers).")
     survival_rate: float = _param(0.3, "Particle survival rate that sets each layer's annealing "
@@ -262,7 +249,6 @@ class TrackerParams:
         object.__setattr__(self, "track_region", tuple(float(v) for v in self.track_region))
         checks = [
             (self.method in METHODS, f"method must be one of {METHODS}"),
-            (self.shadow_pixels in SHADOW_PIXELS, f"shadow_pixels must be one of {SHADOW_PIXELS}"),
             (self.n_particles >= 0 and self.n_layers >= 0, "n_particles, n_layers must be >= 0"),
             (0.0 < self.working_scale <= 1.0, "working_scale must lie in (0, 1]"),
             (self.mesh in TRACKER_MESHES, f"mesh must be one of {TRACKER_MESHES}"),
@@ -366,11 +352,9 @@ class BodyTracker:
         self.rng = rng if rng is not None else np.random.default_rng()
         self.given_shape = shape
         p = self.params
-        self.fitness = SilhouetteFitness(model, self.cameras, p.working_scale,
-                                         shadow_pixels=p.shadow_pixels)
+        self.fitness = SilhouetteFitness(model, self.cameras, p.working_scale)
         self.shape_fitness = (self.fitness if p.shape_working_scale == p.working_scale else
-                              SilhouetteFitness(model, self.cameras, p.shape_working_scale,
-                                                shadow_pixels=p.shadow_pixels))
+                              SilhouetteFitness(model, self.cameras, p.shape_working_scale))
         self.room = room_bounds(self.cameras)
         self.schedule: BodySchedule = make_schedule(
             p.method, self.skel, n_particles=p.n_particles or None, n_layers=p.n_layers or None,
@@ -639,8 +623,8 @@ class BodyTracker:
         rest = self.fitness.rest(self.shape)
         _, joints = self.fitness.pose(reference[None], rest)
         targets = self.ik.end_effectors(reference[None], rest)[0]
-        ok_masks = [_foreground_only(m) if m is not None and np.shape(m) == (c.height, c.width)
-                    else None for m, c in zip(masks, self.cameras)]
+        ok_masks = [m if m is not None and np.shape(m) == (c.height, c.width) else None
+                    for m, c in zip(masks, self.cameras)]
         j = np.asarray(joints[0])
         chain = np.concatenate([j[self._arms], targets[:2, None]], axis=1)  # (2, 4, 3)
         shoulders = chain[:, 0]

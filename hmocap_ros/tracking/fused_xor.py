@@ -15,14 +15,14 @@ import numba as nb
 import numpy as np
 
 from hmocap_ros.render.projection import _dist8, _project_one, distortion_valid_r2
-from hmocap_ros.render.silhouette import (_fill_silhouette, _observed_sums, clip_boxes,
-                                          count_xor_and_clear, weighted_observation)
+from hmocap_ros.render.silhouette import (_fill_silhouette, clip_boxes, count_xor_and_clear,
+                                          observed_counts)
 
 __all__ = ["xor_counts_from_vertices"]
 
 
 def _fused_body(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
-                front_only, n_chunks, render_weight, out, c):
+                front_only, n_chunks, out, c):
     n_poses = verts.shape[0]
     n_views = K.shape[0]
     n_vert = verts.shape[1]
@@ -39,7 +39,7 @@ def _fused_body(verts, K, R, t, d, near, max_r2, faces, observed, rects, observe
         x0, y0, x1, y1 = _fill_silhouette(
             buf, uv, faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3], front_only)
         rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
-        out[b, m] = observed_in_rect[m] + render_weight * rendered - 2 * both
+        out[b, m] = observed_in_rect[m] + rendered - 2 * both
 
 
 _fused_chunk = nb.njit(cache=True, nogil=True)(_fused_body)
@@ -47,17 +47,17 @@ _fused_chunk = nb.njit(cache=True, nogil=True)(_fused_body)
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def _fused_parallel(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
-                    front_only, n_chunks, render_weight, out):
+                    front_only, n_chunks, out):
     for c in nb.prange(n_chunks):
         _fused_chunk(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
-                     front_only, n_chunks, render_weight, out, c)
+                     front_only, n_chunks, out, c)
 
 
 @nb.njit(cache=True, nogil=True)
 def _fused_serial(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
-                  front_only, render_weight, out):
+                  front_only, out):
     _fused_chunk(verts, K, R, t, d, near, max_r2, faces, observed, rects, observed_in_rect,
-                 front_only, 1, render_weight, out, 0)
+                 front_only, 1, out, 0)
 
 
 #: Below this many (pose, view) pairs the kernel runs on the calling thread: waking numba's
@@ -68,16 +68,13 @@ PARALLEL_MIN_ITEMS = 64
 def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
                              dist, faces: np.ndarray, observed: np.ndarray,
                              boxes: np.ndarray | None = None, *, front_only: bool = False,
-                             near: float = 1e-3, max_r2: np.ndarray | None = None,
-                             uncertain: np.ndarray | None = None) -> np.ndarray:
+                             near: float = 1e-3, max_r2: np.ndarray | None = None) -> np.ndarray:
     """XOR counts (B, M) of posed meshes ``verts (B, V, 3)`` against masks ``(M, H, W)``.
 
     Cameras: ``K, R (M, 3, 3)``, ``t (M, 3)``, ``dist (M, k)`` OpenCV coefficients or None, at
     the masks' resolution. ``faces``, ``boxes`` and ``front_only`` as in
     :func:`hmocap_ros.render.xor_counts`. ``max_r2`` (M,): the cameras'
     :func:`~hmocap_ros.render.projection.distortion_valid_r2`, if the caller keeps them.
-    ``uncertain`` (M, H, W): pixels counted neither way; the result is then float64, as in
-    :func:`hmocap_ros.render.xor_counts`.
     Parallel over poses x views (serial below :data:`PARALLEL_MIN_ITEMS` pairs).
     """
     verts = np.asarray(verts)
@@ -103,18 +100,18 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     if max_r2 is None:
         max_r2 = np.array([distortion_valid_r2(x) for x in d])
     max_r2 = np.ascontiguousarray(max_r2, dtype=np.float64)
-    obs, weight = weighted_observation(observed, uncertain)
-    _, height, width = obs.shape
+    obs01 = np.ascontiguousarray(observed != 0, dtype=np.uint8)
+    _, height, width = obs01.shape
     rects = clip_boxes(boxes, n_views, height, width)
-    counts = _observed_sums(obs, rects)
+    counts = observed_counts(obs01, rects)
     out = np.empty((verts.shape[0], n_views), dtype=np.int64)
     if out.size == 0:
-        return out if weight == 1 else out.astype(np.float64)
+        return out
     if out.size < PARALLEL_MIN_ITEMS or nb.get_num_threads() == 1:
-        _fused_serial(verts, K, R, t, d, float(near), max_r2, faces, obs, rects, counts,
-                      bool(front_only), weight, out)
+        _fused_serial(verts, K, R, t, d, float(near), max_r2, faces, obs01, rects, counts,
+                      bool(front_only), out)
     else:
         n_chunks = min(out.size, 4 * nb.get_num_threads())
-        _fused_parallel(verts, K, R, t, d, float(near), max_r2, faces, obs, rects, counts,
-                        bool(front_only), n_chunks, weight, out)
-    return out if weight == 1 else out / 2.0
+        _fused_parallel(verts, K, R, t, d, float(near), max_r2, faces, obs01, rects, counts,
+                        bool(front_only), n_chunks, out)
+    return out
