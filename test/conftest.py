@@ -36,3 +36,25 @@ def rig():
 
     full = load_rig(Path(__file__).resolve().parents[1] / "config" / "rig_example.yaml")
     return Rig(full.frame_id, tuple(c.scaled(0.5) for c in full))
+
+
+@pytest.fixture(scope="session")
+def load_tool():
+    """``load_tool("name")``: the module ``tools/name.py`` (the tools are scripts, not a package)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    tools = Path(__file__).resolve().parents[1] / "tools"
+
+    def load(name: str):
+        spec = importlib.util.spec_from_file_location(name, tools / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # dataclasses look their module up there
+        try:
+            spec.loader.exec_module(module)
+        finally:
+            del sys.modules[spec.name]
+        return module
+
+    return load

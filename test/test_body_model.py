@@ -4,9 +4,7 @@ Fast (a few seconds): no downloads, the reference values are copied in below.
 """
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -182,14 +180,8 @@ def test_corrupt_file_gives_clear_error(tmp_path):
         read_body_model(partial)
 
 
-def test_deterministic_npz_writer(tmp_path):
-    spec = importlib.util.spec_from_file_location("build_body_model", ROOT / "tools" / "build_body_model.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # dataclasses resolve annotations through sys.modules
-    try:
-        spec.loader.exec_module(mod)
-    finally:
-        del sys.modules[spec.name]
+def test_deterministic_npz_writer(tmp_path, load_tool):
+    mod = load_tool("build_body_model")
     arrays = {"a": np.arange(5, dtype=np.float32), "names": np.array(["x", "yy"])}
     mod.write_npz_deterministic(tmp_path / "1.npz", arrays)
     mod.write_npz_deterministic(tmp_path / "2.npz", arrays)

@@ -198,17 +198,7 @@ def test_eval_segments_a_bag_with_empty_frames_and_rejects_bad_bags(tmp_path):
     assert run_eval([str(empty)]) == 2
 
 
-def _mocap_table_module():
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "tools" / "mocap_table.py"
-    spec = importlib.util.spec_from_file_location("mocap_table", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_path):
+def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_path, load_tool):
     """--reuse compares the settings a report was made with (stored per method) with those the
     run would use: a report made with ``--param KEY=VALUE`` is reused once VALUE is KEY's
     default; one made before a default changed is not."""
@@ -217,7 +207,7 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     from hmocap_ros.eval.mocap_eval import stored_params
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
-    table = _mocap_table_module()
+    table = load_tool("mocap_table")
     default = TrackerParams().velocity_gain
     ns = argparse.Namespace(seed=0, max_people=2, methods=["hpf"])
 

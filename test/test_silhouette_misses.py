@@ -1,8 +1,6 @@
 """``tools/silhouette_misses.py``: the split of the subject pixels the foreground misses."""
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,16 +10,8 @@ DEMO = ROOT / "hmocap_ros" / "data" / "demo"
 
 
 @pytest.fixture(scope="module")
-def tool():
-    spec = importlib.util.spec_from_file_location("silhouette_misses",
-                                                  ROOT / "tools" / "silhouette_misses.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclass looks its module up there
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        del sys.modules[spec.name]
-    return module
+def tool(load_tool):
+    return load_tool("silhouette_misses")
 
 
 def test_misses_are_split_without_remainder(tool):

@@ -1,27 +1,16 @@
 """``tools/tuning_runs.py``: the tuning protocol's run list and its paired comparison."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
-import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 @pytest.fixture(scope="module")
-def tool():
-    spec = importlib.util.spec_from_file_location("tuning_runs", ROOT / "tools" / "tuning_runs.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclass looks its module up there
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        del sys.modules[spec.name]
-    return module
+def tool(load_tool):
+    return load_tool("tuning_runs")
 
 
 def _report(path: Path, bag: str, method: str, seed: int, mean: float) -> None:
