@@ -57,6 +57,7 @@ import numpy as np
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.param_overrides import field_overrides
 from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -153,15 +154,10 @@ def evaluate_bag(bag: Path, params: ForegroundParams) -> dict:
 
 
 def parse_overrides(items: list[str]) -> dict:
-    fields = {f.name: f for f in dataclasses.fields(ForegroundParams)}
-    out = {}
-    for item in items:
-        name, _, value = item.partition("=")
-        if name not in fields:
-            raise SystemExit(f"unknown parameter {name!r}; see ForegroundParams")
-        kind = type(fields[name].default)
-        out[name] = (value.lower() in ("1", "true", "yes")) if kind is bool else kind(value)
-    return out
+    try:
+        return field_overrides(ForegroundParams, items, "ForegroundParams field")
+    except ValueError as err:
+        raise SystemExit(f"bench_segmentation: {err}") from None
 
 
 def main(argv=None) -> int:

@@ -41,6 +41,7 @@ from hmocap_ros.io import topics  # noqa: E402
 from hmocap_ros.io.bag_reader import BagReader  # noqa: E402
 from hmocap_ros.io.conversions import image_to_numpy, image_to_rgb  # noqa: E402
 from hmocap_ros.io.msg_factory import stamp_to_ns  # noqa: E402
+from hmocap_ros.param_overrides import field_overrides  # noqa: E402
 from hmocap_ros.rig import rig_from_msg  # noqa: E402
 from hmocap_ros.segmentation import BackgroundModel, ForegroundParams  # noqa: E402
 
@@ -173,14 +174,10 @@ def main(argv=None) -> int:
     ap.add_argument("-p", dest="params", action="append", default=[], metavar="NAME=VALUE",
                     help="override a ForegroundParams field (repeatable)")
     ns = ap.parse_args(argv)
-    fields = {f.name: f for f in dataclasses.fields(ForegroundParams)}
-    params = {}
-    for item in ns.params:
-        name, _, value = item.partition("=")
-        if name not in fields or not value:
-            ap.error(f"-p {item!r}: expected NAME=VALUE with a ForegroundParams field")
-        kind = type(fields[name].default)
-        params[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+    try:
+        params = field_overrides(ForegroundParams, ns.params, "ForegroundParams field")
+    except ValueError as err:
+        ap.error(f"-p: {err}")
     try:
         result = split_misses(ns.bag, params, ns.frames)
     except (ValueError, OSError) as err:

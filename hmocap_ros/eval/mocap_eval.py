@@ -40,12 +40,13 @@ import json
 import logging
 import sys
 import time
-from dataclasses import MISSING, asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
+from hmocap_ros.param_overrides import field_overrides
 
 __all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames",
            "main_from_args", "plot_errors", "run_method", "tracker_overrides"]
@@ -469,26 +470,11 @@ def plot_errors(report: dict, path: str | Path, title: str | None = None) -> Non
 
 
 def tracker_overrides(items) -> dict:
-    """TrackerParams fields from ``KEY=VALUE`` strings (``--param``): typed as the field's
-    default; a list field (``track_region``) takes comma-separated numbers."""
+    """TrackerParams fields from ``KEY=VALUE`` strings (``--param``; see
+    :func:`hmocap_ros.param_overrides.field_overrides`)."""
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
-    known = {f.name: f for f in fields(TrackerParams)}
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise ValueError(f"--param expects KEY=VALUE, got {item!r}")
-        key, value = item.split("=", 1)
-        if key not in known:
-            raise ValueError(f"unknown tracker parameter {key!r}; known: {sorted(known)}")
-        default = known[key].default
-        if default is MISSING:  # a list (track_region): comma-separated numbers
-            out[key] = [float(v) for v in value.split(",") if v.strip()]
-        elif isinstance(default, bool):
-            out[key] = value.lower() in ("1", "true", "yes", "on")
-        else:
-            out[key] = type(default)(value)
-    return out
+    return field_overrides(TrackerParams, items, "tracker parameter")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
