@@ -180,6 +180,12 @@ class TrackerParams:
     min_hull_height: float = _param(0.9, "Smallest hull top (m) accepted as a person.")
     hull_max_misses: int = _param(0, "Views in which a hull voxel may project onto background "
                                      "(tolerates holes in the foreground).")
+    hull_bridge_misses: int = _param(0, "Views more than hull_max_misses in which a voxel may "
+                                        "project onto background and still join the hull's "
+                                        "parts into one person (the hull keeps only the "
+                                        "hull_max_misses voxels): a band of the body lost in "
+                                        "one view, such as a shirt the colour of the wall, "
+                                        "then does not cut the person in two at start-up.")
     estimate_shape: bool = _param(True, "Estimate the anthropometry at start (sec. 2.3); "
                                         "False keeps the model's proportions, scaled to the "
                                         "visual hull.")
@@ -268,6 +274,8 @@ class TrackerParams:
             (self.proposal_limbs in ("arms", "legs", "all"),
              "proposal_limbs must be 'arms', 'legs' or 'all'"),
             (self.min_views >= 1, "min_views must be >= 1"),
+            (self.hull_max_misses >= 0 and self.hull_bridge_misses >= 0,
+             "hull_max_misses and hull_bridge_misses must be >= 0"),
             (0.0 < self.rejection_tau <= 1.0, "rejection_tau must lie in (0, 1]"),
             (self.shape_frames >= 1 and self.shape_particles >= 2, "shape_frames >= 1, "
                                                                    "shape_particles >= 2"),
@@ -691,7 +699,8 @@ class BodyTracker:
         return visual_hull(obs.masks, obs.K, obs.R, obs.t, obs.D, self.room,
                            fine_voxel=p.voxel_size, min_views=min(p.min_views, obs.n_views),
                            max_misses=p.hull_max_misses, near=near, region=region,
-                           exclude=exclude, exclude_radius=SAME_PERSON_RADIUS)
+                           exclude=exclude, exclude_radius=SAME_PERSON_RADIUS,
+                           bridge_misses=p.hull_bridge_misses)
 
     def _same_person_hull(self, obs: Observation, point: np.ndarray):
         """The hull of the person at ``point`` (room, 3), or None when the hull nearest it

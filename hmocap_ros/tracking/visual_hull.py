@@ -81,12 +81,13 @@ def _grid(lo: np.ndarray, hi: np.ndarray, voxel: float) -> tuple[np.ndarray, tup
 
 def carve(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.ndarray,
           points: np.ndarray, min_views: int = 2, max_misses: int = 0,
-          return_seen: bool = False):
+          return_seen: bool = False, return_misses: bool = False):
     """Occupancy (P,) bool of world points ``(P, 3)`` against foreground masks ``(M, H, W)``.
 
     A point is occupied when at least ``min_views`` views see it (it projects inside the
     image) and it projects onto background in at most ``max_misses`` of them. With
-    ``return_seen``: ``(occupancy, views seeing each point (P,))``.
+    ``return_seen``: ``(occupancy, views seeing each point (P,))``; with ``return_misses``:
+    ``(occupancy, views seeing it, views seeing it on background (P,))``.
     """
     n_views, height, width = masks.shape
     uv, _ = project_batch(points[None], K, R, t, D)
@@ -103,15 +104,33 @@ def carve(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, D: np.
     n_seen = seen.sum(axis=0)
     misses = n_seen - fg.sum(axis=0)
     occ = (n_seen >= min_views) & (misses <= max_misses)
+    if return_misses:
+        return occ, n_seen, misses
     return (occ, n_seen) if return_seen else occ
 
 
+def bridged(occ: np.ndarray, n_seen: np.ndarray, misses: np.ndarray, min_views: int,
+            max_misses: int, bridge_misses: int) -> np.ndarray:
+    """The carving that groups hull voxels into people: ``occ`` plus the voxels that miss
+    the foreground in up to ``bridge_misses`` more views and are still on foreground in at
+    least ``min_views`` views. A band of the person lost in one view (a shirt the colour of
+    the wall behind it) then no longer cuts the hull in two; the hull keeps ``occ``'s voxels."""
+    if bridge_misses <= 0:
+        return occ
+    return occ | ((misses <= max_misses + bridge_misses) & (n_seen - misses >= min_views))
+
+
 def _components(occ: np.ndarray, n_seen: np.ndarray | None = None,
-                centres: np.ndarray | None = None):
+                centres: np.ndarray | None = None, link: np.ndarray | None = None):
     """26-connected components of ``occ``: ``(labels, n, sizes (n,), seen (n,) or None,
     centroids (n, 3) or None)``; ``seen`` is the mean of ``n_seen`` over each component's
-    voxels, ``centroids`` the mean of the voxel ``centres`` (``occ.shape + (3,)``)."""
-    labels, n = ndimage.label(occ, structure=np.ones((3, 3, 3), dtype=bool))
+    voxels, ``centroids`` the mean of the voxel ``centres`` (``occ.shape + (3,)``).
+    ``link`` (a superset of ``occ``, :func:`bridged`): the components are ``link``'s, and
+    labels, sizes, ``seen`` and centroids count only their ``occ`` voxels."""
+    labels, n = ndimage.label(occ if link is None else link,
+                              structure=np.ones((3, 3, 3), dtype=bool))
+    if link is not None:
+        labels = np.where(occ, labels, 0)
     flat = labels.ravel()
     sizes = np.bincount(flat, minlength=n + 1)[1:]
     seen = c = None
@@ -124,25 +143,30 @@ def _components(occ: np.ndarray, n_seen: np.ndarray | None = None,
     return labels, n, sizes, seen, c
 
 
-def _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel, min_views, max_misses):
-    """The coarse room grid carved: ``(occupancy, views seeing each voxel, voxel centres)``
-    shaped as the grid (the last with a trailing 3)."""
+def _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel, min_views, max_misses,
+                      bridge_misses=0):
+    """The coarse room grid carved: ``(occupancy, its bridged carving (:func:`bridged`),
+    views seeing each voxel, voxel centres)`` shaped as the grid (the last with a trailing 3)."""
     lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
     points, shape = _grid(lo, hi, coarse_voxel)
-    occ, n_seen = carve(masks, K, R, t, D, points, min_views, max_misses, return_seen=True)
-    return occ.reshape(shape), n_seen.reshape(shape), points.reshape(shape + (3,))
+    occ, n_seen, misses = carve(masks, K, R, t, D, points, min_views, max_misses,
+                                return_misses=True)
+    link = bridged(occ, n_seen, misses, min_views, max_misses, bridge_misses)
+    return (occ.reshape(shape), link.reshape(shape), n_seen.reshape(shape),
+            points.reshape(shape + (3,)))
 
 
 def coarse_people(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
                   D: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], *,
                   coarse_voxel: float = 0.08, min_views: int = 2, max_misses: int = 0,
-                  min_fraction: float = 0.3) -> list[tuple[int, float, np.ndarray]]:
+                  min_fraction: float = 0.3,
+                  bridge_misses: int = 0) -> list[tuple[int, float, np.ndarray]]:
     """The candidates :func:`visual_hull` chooses from: per component of the coarse hull of at
     least ``min_fraction`` of the largest one's size, ``(voxels, mean views seeing them,
     centroid (3,))`` (for diagnostics: whom the tracker could start on, and why)."""
-    occ, n_seen, centres = _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel,
-                                             min_views, max_misses)
-    _, n, sizes, seen, c = _components(occ, n_seen, centres)
+    occ, link, n_seen, centres = _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel,
+                                                   min_views, max_misses, bridge_misses)
+    _, n, sizes, seen, c = _components(occ, n_seen, centres, link=link)
     if n == 0:
         return []
     return [(int(sizes[k]), float(seen[k]), c[k]) for k in range(n)
@@ -155,7 +179,8 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
                       near_radius: float = 1.0,
                       region: Sequence[float] | None = None,
                       exclude: np.ndarray | None = None,
-                      exclude_radius: float = 0.5) -> np.ndarray | None:
+                      exclude_radius: float = 0.5,
+                      link: np.ndarray | None = None) -> np.ndarray | None:
     """The component to track: of the connected components at least ``min_fraction`` of the
     largest one's size, the one the views see best (highest mean number of views seeing its
     voxels), then the largest. With two people in the room, the rig tracks the one it
@@ -166,9 +191,10 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
     ``centres``: only components whose centroid lies in that floor box count (None when there
     is none). ``exclude`` (K, 3) with ``centres``: components whose centroid lies within
     ``exclude_radius`` metres of one of these points on the floor are no candidates (people
-    other trackers already follow; None when nobody else is there)."""
+    other trackers already follow; None when nobody else is there). ``link``: group the
+    voxels of ``occ`` by the components of this superset (:func:`bridged`)."""
     located = near is not None or region is not None or exclude is not None
-    labels, n, sizes, seen, c = _components(occ, n_seen, centres if located else None)
+    labels, n, sizes, seen, c = _components(occ, n_seen, centres if located else None, link)
     if n == 0:
         return None
     allowed = np.ones(n, dtype=bool)
@@ -199,7 +225,7 @@ def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, 
                 fine_voxel: float = 0.03, min_views: int = 2, max_misses: int = 0,
                 min_volume: float = 0.01, near: np.ndarray | None = None,
                 region: Sequence[float] | None = None, exclude: np.ndarray | None = None,
-                exclude_radius: float = 0.5) -> Hull | None:
+                exclude_radius: float = 0.5, bridge_misses: int = 0) -> Hull | None:
     """Carve the person's visual hull; None when nothing of at least ``min_volume`` m^3 is found.
 
     masks: (M, H, W) foreground (non-zero) at the resolution of the cameras ``K, R, t, D``
@@ -208,15 +234,17 @@ def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, 
     there, see :func:`_person_component`). region: ``(x_min, z_min, x_max, z_max)``, the
     floor box a person's centroid must stand in (None: anywhere in the room). exclude:
     (K, 3) points where people other trackers follow stand; nobody within
-    ``exclude_radius`` metres of one on the floor is chosen.
+    ``exclude_radius`` metres of one on the floor is chosen. bridge_misses: group the
+    voxels into people over a carving that lets a voxel miss the foreground in this many
+    more views (:func:`bridged`); the hull's voxels stay those of ``max_misses``.
     """
     if masks.shape[0] < min_views:
         return None
     lo = np.asarray(bounds[0], dtype=np.float64)
-    occ, n_seen, centres = _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel,
-                                             min_views, max_misses)
+    occ, link, n_seen, centres = _coarse_occupancy(masks, K, R, t, D, bounds, coarse_voxel,
+                                                   min_views, max_misses, bridge_misses)
     comp = _person_component(occ, n_seen, centres=centres, near=near, region=region,
-                             exclude=exclude, exclude_radius=exclude_radius)
+                             exclude=exclude, exclude_radius=exclude_radius, link=link)
     if comp is None or comp.sum() * coarse_voxel ** 3 < min_volume:
         return None
     idx = np.argwhere(comp)
@@ -224,8 +252,11 @@ def visual_hull(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, 
     fhi = lo + (idx.max(axis=0) + 1) * coarse_voxel + coarse_voxel
     flo[1] = max(flo[1], lo[1])
     points, shape = _grid(flo, fhi, fine_voxel)
-    occ = carve(masks, K, R, t, D, points, min_views, max_misses).reshape(shape)
-    comp = _person_component(occ)  # inside the chosen person's box: the largest part
+    occ, n_seen, misses = carve(masks, K, R, t, D, points, min_views, max_misses,
+                                return_misses=True)
+    link = bridged(occ, n_seen, misses, min_views, max_misses, bridge_misses).reshape(shape)
+    # Inside the chosen person's box: the largest part.
+    comp = _person_component(occ.reshape(shape), link=link)
     if comp is None:
         return None
     pts = points.reshape(shape + (3,))[comp]
