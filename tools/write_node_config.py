@@ -5,9 +5,9 @@
         hmocap_ros.nodes.foreground_segmentation:ForegroundNodeConfig hmocap_ros.segmentation:ForegroundParams
 """
 
+import argparse
 import dataclasses
 import importlib
-import sys
 import textwrap
 from pathlib import Path
 
@@ -22,8 +22,18 @@ def _yaml_value(value) -> str:
     return repr(value)
 
 
-def main() -> None:
-    node, *specs = sys.argv[1:]
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("node", help="node name: writes config/<node>.yaml")
+    ap.add_argument("specs", nargs="+", metavar="module:Class",
+                    help="parameter dataclasses, in the file's order")
+    ns = ap.parse_args(argv)
+    node, specs = ns.node, ns.specs
+    if not node.isidentifier():
+        ap.error(f"node must be a node name such as body_tracker, got {node!r}")
+    bad = [s for s in specs if s.count(":") != 1]
+    if bad:
+        ap.error(f"expected module:Class, got {bad}")
     lines = [f"# Parameters of {node} (see `{node} --help`).", f"{node}:", "  ros__parameters:"]
     for spec in specs:
         module, name = spec.split(":")
