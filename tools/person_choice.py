@@ -65,8 +65,10 @@ def _bag(work: Path, bvh: Path, start: float, seed: int, seconds: float) -> Path
 def people_seen(tracker: BodyTracker, obs) -> list[tuple[int, float, list]]:
     """(voxels, mean views seeing them, floor x/z) of the coarse hull's large components."""
     return [(size, round(seen, 2), centroid[[0, 2]].round(2).tolist())
-            for size, seen, centroid in coarse_people(obs.masks, obs.K, obs.R, obs.t, obs.D,
-                                                      tracker.room)]
+            for size, seen, centroid in coarse_people(
+                obs.masks, obs.K, obs.R, obs.t, obs.D, tracker.room,
+                max_misses=tracker.params.hull_max_misses,
+                bridge_misses=tracker.params.hull_bridge_misses)]
 
 
 def start_position(frames, model):
