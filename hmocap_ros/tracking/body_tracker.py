@@ -180,12 +180,14 @@ class TrackerParams:
     min_hull_height: float = _param(0.9, "Smallest hull top (m) accepted as a person.")
     hull_max_misses: int = _param(0, "Views in which a hull voxel may project onto background "
                                      "(tolerates holes in the foreground).")
-    hull_bridge_misses: int = _param(0, "Views more than hull_max_misses in which a voxel may "
+    hull_bridge_misses: int = _param(1, "Views more than hull_max_misses in which a voxel may "
                                         "project onto background and still join the hull's "
                                         "parts into one person (the hull keeps only the "
                                         "hull_max_misses voxels): a band of the body lost in "
                                         "one view, such as a shirt the colour of the wall, "
-                                        "then does not cut the person in two at start-up.")
+                                        "then does not cut the person in two. 1 (0 until stop "
+                                        "22) gained 5.8 mm on 24 tuning runs and 71 mm on a "
+                                        "camouflaged runner.")
     estimate_shape: bool = _param(True, "Estimate the anthropometry at start (sec. 2.3); "
                                         "False keeps the model's proportions, scaled to the "
                                         "visual hull.")
