@@ -239,6 +239,15 @@ def test_visual_hull_takes_the_best_seen_person_or_the_one_near_the_last_pose(mo
     other = visual_hull(*args, exclude=np.array([[0.5, 0.9, 0.3]]))
     assert np.linalg.norm(other.centroid[[0, 2]] - [-2.3, -1.8]) < 0.3
     assert visual_hull(*args, exclude=np.array([[0.4, 0.9, 0.2], [-2.3, 0.9, -1.8]])) is None
+    # the first person erased from one view: bridging joins nothing but its ghost, which holds
+    # no voxel of the hull; with the second person excluded, nobody is left
+    erased = obs.masks.copy()
+    erased[1][fitness.observe(list(masks[0])).masks[1] > 0] = 0
+    args = (erased,) + args[1:]
+    assert visual_hull(*args, bridge_misses=1, exclude=np.array([[-2.3, 0.9, -1.8]]),
+                       min_volume=0.001) is None
+    kept = visual_hull(*args, bridge_misses=1)
+    assert np.linalg.norm(kept.centroid[[0, 2]] - [-2.3, -1.8]) < 0.3
 
 
 def test_tracker_starts_only_on_a_person_in_its_track_region(model, rig):

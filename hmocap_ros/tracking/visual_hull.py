@@ -170,7 +170,7 @@ def coarse_people(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray
     if n == 0:
         return []
     return [(int(sizes[k]), float(seen[k]), c[k]) for k in range(n)
-            if sizes[k] >= min_fraction * sizes.max()]
+            if sizes[k] > 0 and sizes[k] >= min_fraction * sizes.max()]
 
 
 def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
@@ -205,10 +205,12 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
         taken = np.asarray(exclude, dtype=np.float64).reshape(-1, 3)[:, [0, 2]]
         gap = np.linalg.norm(c[:, None, [0, 2]] - taken[None], axis=2).min(axis=1)
         allowed &= gap > exclude_radius
+    # A component of ``link`` may hold no voxel of ``occ``: it is nobody.
+    allowed &= sizes > 0
     if not allowed.any():
         return None
     sizes = np.where(allowed, sizes, 0)
-    big = sizes >= min_fraction * sizes.max()
+    big = allowed & (sizes >= min_fraction * sizes.max())
     if near is not None and c is not None:
         dist = np.linalg.norm(c[:, [0, 2]] - np.asarray(near)[[0, 2]], axis=1)
         dist[~big] = np.inf
