@@ -12,6 +12,13 @@ full view of the cameras, not whoever is nearest a camera or half out of its fie
 ``exclude`` (where the people other trackers follow stand) leaves those people out.
 The grid is coarse over the whole room, then fine inside that component's box.
 
+Bridging (``bridge_misses``, our addition): the components are taken over a carving that lets
+a voxel miss the foreground in ``bridge_misses`` more views (still on foreground in
+``min_views``), and each keeps only its voxels of the strict carving. A band of the body that
+the segmentation loses in one view (a shirt the colour of the wall behind it) otherwise cuts
+the hull in two, and the largest part, legs and hips, gives the start-up a height 0.5 m short
+(``docs/tracking.md``, Tuning, stop 22).
+
 Outputs (:class:`Hull`): centroid, top height (the feet stand on the floor, y = 0), volume,
 and a heading guess from the principal horizontal axis of the upper-body voxels (the shoulder
 line is the widest horizontal direction of a standing person): the person faces one of the
