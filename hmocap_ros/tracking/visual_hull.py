@@ -133,11 +133,19 @@ def _components(occ: np.ndarray, n_seen: np.ndarray | None = None,
     centroids (n, 3) or None)``; ``seen`` is the mean of ``n_seen`` over each component's
     voxels, ``centroids`` the mean of the voxel ``centres`` (``occ.shape + (3,)``).
     ``link`` (a superset of ``occ``, :func:`bridged`): the components are ``link``'s, and
-    labels, sizes, ``seen`` and centroids count only their ``occ`` voxels."""
+    labels, sizes, ``seen`` and centroids count only their ``occ`` voxels; a component of
+    ``link`` without any voxel of ``occ`` (a ghost of the looser carving) is nobody and left
+    out."""
     labels, n = ndimage.label(occ if link is None else link,
                               structure=np.ones((3, 3, 3), dtype=bool))
     if link is not None:
         labels = np.where(occ, labels, 0)
+        present = np.bincount(labels.ravel(), minlength=n + 1)[1:] > 0
+        if not present.all():
+            renumber = np.zeros(n + 1, dtype=labels.dtype)
+            n = int(present.sum())
+            renumber[1:][present] = np.arange(1, n + 1)
+            labels = renumber[labels]
     flat = labels.ravel()
     sizes = np.bincount(flat, minlength=n + 1)[1:]
     seen = c = None
@@ -177,7 +185,7 @@ def coarse_people(masks: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray
     if n == 0:
         return []
     return [(int(sizes[k]), float(seen[k]), c[k]) for k in range(n)
-            if sizes[k] > 0 and sizes[k] >= min_fraction * sizes.max()]
+            if sizes[k] >= min_fraction * sizes.max()]
 
 
 def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
@@ -212,12 +220,10 @@ def _person_component(occ: np.ndarray, n_seen: np.ndarray | None = None,
         taken = np.asarray(exclude, dtype=np.float64).reshape(-1, 3)[:, [0, 2]]
         gap = np.linalg.norm(c[:, None, [0, 2]] - taken[None], axis=2).min(axis=1)
         allowed &= gap > exclude_radius
-    # A component of ``link`` may hold no voxel of ``occ``: it is nobody.
-    allowed &= sizes > 0
     if not allowed.any():
         return None
     sizes = np.where(allowed, sizes, 0)
-    big = allowed & (sizes >= min_fraction * sizes.max())
+    big = sizes >= min_fraction * sizes.max()
     if near is not None and c is not None:
         dist = np.linalg.norm(c[:, [0, 2]] - np.asarray(near)[[0, 2]], axis=1)
         dist[~big] = np.inf
