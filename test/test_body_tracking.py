@@ -21,7 +21,8 @@ from hmocap_ros.body import (BodyShape, entity_sizes, local_rotations_to_pose,
 from hmocap_ros.render import project_batch, render_silhouettes
 from hmocap_ros.render.reference import silhouette_reference
 from hmocap_ros.sim.retarget import load_motion, place_in_room
-from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_PARAMS, AnthropometryEstimator,
+from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARAMS,
+                                                          AnthropometryEstimator, Hypothesis,
                                                           EstimationParams, shape_from_state,
                                                           shape_to_state)
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
@@ -319,6 +320,38 @@ def test_anthropometry_estimation_reduces_entity_size_error(model, rig):
     assert est.shape().height(model) == pytest.approx(shape.height(model), abs=0.03)
 
 
+def test_start_up_grows_to_a_taller_hull(model, rig):
+    """grow_to: a hypothesis whose body stands more than the margin below the hull's top (the
+    start frame's segmentation lost the head) grows to it; within the margin nothing moves."""
+    fitness = SilhouetteFitness(model, rig, working_scale=0.25)
+    est = AnthropometryEstimator(fitness, EstimationParams(n_particles=8, frames=1),
+                                 np.random.default_rng(0), room=room_bounds(rig))
+    skel = model.skeleton
+    g = skel.n_dofs + SHAPE_KEYS.index("global")
+    ty = int(skel.translation_dofs[1])
+    x = np.concatenate([np.zeros(skel.n_dofs), np.ones(len(SHAPE_KEYS))])
+    x[g] = 0.9
+    x[ty] = float(skel.joints_rest[0][1]) * 0.9
+    est.hypotheses = [Hypothesis(heading=0.0, particles=np.tile(x, (8, 1)), estimate=x.copy())]
+
+    def body_top():
+        e = est.hypotheses[0].estimate
+        return float(model.forward(e[None, :skel.n_dofs],
+                                   shape_from_state(e[None, skel.n_dofs:])).vertices[0, :, 1].max())
+
+    top = body_top()
+    assert est.grow_to(top + 0.05, margin=0.06) == [1.0]
+    np.testing.assert_array_equal(est.hypotheses[0].estimate, x)
+    (f,) = est.grow_to(top + 0.15, margin=0.06)
+    assert f == pytest.approx((top + 0.15) / top)
+    assert body_top() == pytest.approx(top + 0.15, abs=2e-3)
+    np.testing.assert_allclose(est.hypotheses[0].particles[:, g], 0.9 * f)
+    np.testing.assert_allclose(est.hypotheses[0].particles[:, ty], x[ty] * f)
+    # never past the scale limits
+    (f2,) = est.grow_to(5.0, margin=0.06)
+    assert est.hypotheses[0].estimate[g] == pytest.approx(est.params.scale_limits[1])
+
+
 def test_heading_search_keeps_required_headings(model, rig):
     """search_headings / start(also=...): a required heading (the travel direction) is posed,
     kept and Powell-fitted in addition to the searched ones, whatever its cost."""
@@ -392,6 +425,8 @@ def test_tracker_params_are_described():
         TrackerParams(method="kalman")
     with pytest.raises(ValueError, match="mesh"):
         TrackerParams(mesh="hands")
+    with pytest.raises(ValueError, match="start_height_margin"):
+        TrackerParams(start_height_margin=-0.1)
 
 
 def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):

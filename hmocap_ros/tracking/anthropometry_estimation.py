@@ -584,6 +584,39 @@ class AnthropometryEstimator:
                 break
         return chosen + [(float(cands[i]), poses[i]) for i in range(searched, len(cands))]
 
+    def grow_to(self, top: float, margin: float) -> list:
+        """Make each hypothesis whose body estimate stands more than ``margin`` metres below
+        ``top`` (the visual hull's top on this frame) taller by their ratio: the global scale
+        and the pelvis height of its particles and estimate grow, clipped to ``scale_limits``.
+
+        The start-up scales the body to one frame's hull height (sec. 2.3.4); when the
+        segmentation lost the head in that frame, a later start-up frame's hull stands taller
+        than the body, and the body's height is taken from it (our addition; the thesis
+        assumes one good frame). Only growing: a lower hull is a bent pose or a lost head.
+        Returns the factors applied (1.0 for hypotheses left as they were)."""
+        if not self.estimate_shape or not self.hypotheses:
+            return []
+        est = np.stack([h.estimate for h in self.hypotheses])
+        verts = self.model.forward(est[:, :self.n_pose],
+                                   shape_from_state(est[:, self.n_pose:])).vertices
+        body_top = verts[..., 1].max(axis=1)
+        g = self.n_pose + SHAPE_KEYS.index("global")
+        ty = int(self.skel.translation_dofs[1])
+        lo, hi = self.params.scale_limits
+        factors = []
+        for hyp, have in zip(self.hypotheses, body_top):
+            if top - float(have) <= margin:
+                factors.append(1.0)
+                continue
+            scale = float(hyp.estimate[g])
+            f = float(np.clip(scale * top / float(have), lo, hi)) / scale
+            for x in (hyp.particles, hyp.estimate[None]):
+                x[:, g] *= f
+                x[:, ty] *= f
+            hyp.particles[:, g] = np.clip(hyp.particles[:, g], lo, hi)
+            factors.append(f)
+        return factors
+
     @property
     def done(self) -> bool:
         return self.frames_done >= max(self.params.frames, 1)
