@@ -25,6 +25,17 @@ def test_the_sets_are_the_documented_tuning_bags(tool, tmp_path):
     assert all(b.silhouettes == "fg" and b.frames is None for b in running)
     assert running[0].bvh.exists()  # the runner ships with the tools
     assert {b.name for b in guard} == {"tune_13_29", "tune_02_05", "tune_01_01"}
+    wide, distractors = sets["wide"], sets["distractors"]
+    assert [b.seed for b in wide] == list(range(31, 57))
+    assert not {b.name for b in wide} & {b.name for b in running}
+    assert all(b.distractors and b.max_people == 2 and b.silhouettes == "fg"
+               for b in distractors)
+    assert distractors[0].name == "tune_02_03_s60_distractors"
+    cmd = tool.eval_command(distractors[0], tmp_path / "d.mcap", "hpf-apo", 6, [],
+                            tmp_path / "d.json")
+    assert cmd[cmd.index("--max-people") + 1] == "2"
+    assert "--max-people" not in tool.eval_command(running[0], tmp_path / "r.mcap", "hpf-apo",
+                                                   6, [], tmp_path / "r.json")
     assert all(b.silhouettes == "gt" and b.frames == 60 and b.bvh.parent == tmp_path
                for b in guard)
 
@@ -100,3 +111,11 @@ def test_reports_made_with_other_settings_are_named(tool, tmp_path):
     # asked for the old value, the other report is the odd one
     lines = tool.settings_mismatches(bags, ["hpf-apo"], [0, 1], tmp_path, ["survival_rate=0.5"])
     assert len(lines) == 1 and "_hpf-apo_0.json" in lines[0]
+    # a report from before start_height_margin existed was made at its inert value (0)
+    older = {k: v for k, v in now.items() if k != "start_height_margin"}
+    (tmp_path / tool.report_name(bags[0].name, "hpf-apo", 2)).write_text(json.dumps(
+        {"methods": {"hpf-apo": {"mean_mm": 50.0, "params": older}}}))
+    assert tool.settings_mismatches(bags, ["hpf-apo"], [0, 2], tmp_path, []) == []
+    lines = tool.settings_mismatches(bags, ["hpf-apo"], [0, 2], tmp_path,
+                                     ["start_height_margin=0.06"])
+    assert len(lines) == 2 and "start_height_margin None -> 0.06" in lines[1]

@@ -39,7 +39,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from hmocap_ros.eval.mocap_eval import (METHODS, _json_default, evaluate,  # noqa: E402
-                                        plot_errors, stored_params, tracker_overrides)
+                                        plot_errors, settings_diff, stored_params,
+                                        tracker_overrides)
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"
@@ -94,7 +95,8 @@ def _reusable(path: Path, ns, overrides: dict) -> dict | None:
     if report.get("seed") != ns.seed or report.get("max_people") != ns.max_people \
             or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]):
         return None
-    if any(report["methods"][m].get("params") != stored_params(m, overrides)
+    if any(report["methods"][m].get("params") is None
+           or settings_diff(report["methods"][m]["params"], stored_params(m, overrides))
            for m in ns.methods):
         return None
     return report

@@ -10,7 +10,13 @@ run by run, with the defaults. The bags are never those of the reported tables:
   fg``), every frame;
 - ``guard``: the 4-s tuning clips 13_29 (jumping jacks), 02_05 (punches), 01_01 (jumps)
   from ``../shared/data/bvh`` (seeds 21-23), exact silhouettes, 60 frames: a candidate for
-  the runner must not cost the other motions.
+  the runner must not cost the other motions;
+- ``wide``: the same runner with simulator seeds 31-56 (other subjects, clothing, rooms;
+  stop 21's camouflaged runners 31-39 among them), segmented foreground: where a failure
+  shows in one bag of twenty or more, ``running`` is too small to show what a change does;
+- ``distractors``: the runner with ``--distractors`` (a door, a ball, a bystander) and
+  seeds 60-75, segmented foreground, two people followed (``--max-people 2``, as the
+  reported tables).
 
 Each (bag, method, tracker seed) is one ``hmocap eval mocap ... --threads 1`` run; ``--jobs``
 of them run at a time (one per core is fastest). A run whose report exists is skipped, so an
@@ -64,6 +70,8 @@ class TuningBag:
     seed: int
     silhouettes: str  # "fg" (segmented from the images) or "gt" (exact)
     frames: int | None = None  # frames evaluated (None: all)
+    distractors: bool = False  # rendered with a door, a ball and a bystander
+    max_people: int = 1  # people followed (the subject is scored on its nearest track)
 
 
 def tuning_sets(shared_bvh: Path = SHARED_BVH) -> dict[str, tuple[TuningBag, ...]]:
@@ -74,7 +82,11 @@ def tuning_sets(shared_bvh: Path = SHARED_BVH) -> dict[str, tuple[TuningBag, ...
     guard = (TuningBag("tune_13_29", shared_bvh / "CMU_13_29.bvh", 5.0, 4.0, 21, "gt", 60),
              TuningBag("tune_02_05", shared_bvh / "002_05.bvh", 2.0, 4.0, 22, "gt", 60),
              TuningBag("tune_01_01", shared_bvh / "01_01.bvh", 4.0, 4.0, 23, "gt", 60))
-    return {"running": running, "guard": guard}
+    wide = tuple(TuningBag(f"tune_02_03_s{s}", runner, 0.0, 1.4, s, "fg")
+                 for s in range(31, 57))
+    distractors = tuple(TuningBag(f"tune_02_03_s{s}_distractors", runner, 0.0, 1.4, s, "fg",
+                                  distractors=True, max_people=2) for s in range(60, 76))
+    return {"running": running, "guard": guard, "wide": wide, "distractors": distractors}
 
 
 def report_name(bag: str, method: str, seed: int) -> str:
@@ -88,6 +100,8 @@ def eval_command(bag: TuningBag, bag_path: Path, method: str, seed: int, params,
            "--silhouettes", bag.silhouettes, "--json", str(out)]
     if bag.frames is not None:
         cmd += ["--frames", str(bag.frames)]
+    if bag.max_people != 1:
+        cmd += ["--max-people", str(bag.max_people)]
     for p in params:
         cmd += ["--param", p]
     return cmd
@@ -102,7 +116,7 @@ def pending_runs(bags, methods, seeds, out_dir: Path):
 def settings_mismatches(bags, methods, seeds, out_dir: Path, params) -> list[str]:
     """One line per existing report of the set made with other tracker settings than a run
     with ``params`` (``--param`` items) would use now: the fields that differ, stored -> now."""
-    from hmocap_ros.eval.mocap_eval import stored_params, tracker_overrides
+    from hmocap_ros.eval.mocap_eval import settings_diff, stored_params, tracker_overrides
 
     try:
         overrides = tracker_overrides(params)
@@ -121,8 +135,7 @@ def settings_mismatches(bags, methods, seeds, out_dir: Path, params) -> list[str
                 except (OSError, ValueError, KeyError) as err:
                     lines.append(f"{path.name}: no readable settings ({err!r})")
                     continue
-                diff = [f"{k} {stored.get(k)!r} -> {v!r}" for k, v in wanted[m].items()
-                        if stored.get(k) != v]
+                diff = settings_diff(stored, wanted[m])
                 if diff:
                     lines.append(f"{path.name}: " + ", ".join(diff))
     return lines
@@ -141,7 +154,7 @@ def _render_missing(bags, bag_dir: Path) -> None:
         t0 = time.perf_counter()
         print(f"rendering {path.name} ...", flush=True)
         generate(MocapSimConfig(out=path, bvh=bag.bvh, start=bag.start, seconds=bag.seconds,
-                                seed=bag.seed, progress=False))
+                                seed=bag.seed, distractors=bag.distractors, progress=False))
         print(f"rendered {path.name} in {time.perf_counter() - t0:.0f} s", flush=True)
 
 
@@ -258,7 +271,7 @@ def compare(ns) -> int:
     if unpaired:
         print(f"({unpaired} runs in only one of the two sets left out)")
     summary = {}
-    for name in ("running", "guard", "other"):
+    for name in ("running", "guard", "wide", "distractors", "other"):
         sel = [k for k in keys if set_of.get(k[0], "other") == name]
         if not sel:
             continue
@@ -292,7 +305,8 @@ def main(argv=None) -> int:
     r.add_argument("name", help="name of this set of runs (its folder under --workdir)")
     r.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="tracker setting of the candidate (as hmocap eval mocap --param)")
-    r.add_argument("--set", nargs="+", choices=("running", "guard"), default=["running"])
+    r.add_argument("--set", nargs="+", choices=("running", "guard", "wide", "distractors"),
+                   default=["running"])
     r.add_argument("--bags", nargs="+", default=None, metavar="NAME",
                    help="only these bags of the set(s) (e.g. tune_02_03_s29)")
     r.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))

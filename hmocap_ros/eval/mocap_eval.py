@@ -328,6 +328,23 @@ def stored_params(method: str, overrides: dict | None = None) -> dict:
                                  default=_json_default))
 
 
+#: Tracker settings added after reports were stored, with the value at which the tracker does
+#: what it did before the setting existed: a stored report without the key was made with it.
+INERT_SETTINGS = {"start_height_margin": 0.0}
+
+
+def settings_diff(stored: dict, wanted: dict) -> list[str]:
+    """``"key stored -> wanted"`` for each setting a stored report's ``params`` differ in from
+    those a run would use now (:func:`stored_params`); a key of :data:`INERT_SETTINGS` that
+    the report lacks counts as its inert value."""
+    out = []
+    for k, v in wanted.items():
+        have = stored[k] if k in stored else INERT_SETTINGS.get(k)
+        if have != v:
+            out.append(f"{k} {stored.get(k)!r} -> {v!r}")
+    return out
+
+
 def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int = 0,
                layers: int = 0, overrides: dict | None = None, given_shape: bool = False,
                max_people: int = 1, progress=None) -> EvalResult:
