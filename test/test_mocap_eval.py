@@ -229,3 +229,21 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     assert table._reusable(made_at_an_old_default, ns, {}) is None
     assert table._reusable(made_at_an_old_default, ns, {"velocity_gain": default / 2}) is not None
     assert table._reusable(tmp_path / "missing.json", ns, {}) is None
+    # a report from before an option existed was made at its inert value (INERT_SETTINGS)
+    older = report(default, {})
+    data = json.loads(older.read_text())
+    del data["methods"]["hpf"]["params"]["start_height_margin"]
+    older.write_text(json.dumps(data))
+    assert table._reusable(older, ns, {}) is not None
+    assert table._reusable(older, ns, {"start_height_margin": 0.06}) is None
+
+
+def test_startup_scan_refuses_bad_arguments(tmp_path, load_tool, capsys):
+    scan = load_tool("startup_scan")
+    with pytest.raises(SystemExit):
+        scan.main([str(tmp_path / "missing.mcap")])
+    assert "no such bag" in capsys.readouterr().err
+    (tmp_path / "b.mcap").write_bytes(b"")
+    with pytest.raises(SystemExit):
+        scan.main([str(tmp_path / "b.mcap"), "--param", "no_such_setting=1"])
+    assert "no_such_setting" in capsys.readouterr().err
