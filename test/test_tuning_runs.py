@@ -25,6 +25,8 @@ def test_the_sets_are_the_documented_tuning_bags(tool, tmp_path):
     assert all(b.silhouettes == "fg" and b.frames is None for b in running)
     assert running[0].bvh.exists()  # the runner ships with the tools
     assert {b.name for b in guard} == {"tune_13_29", "tune_02_05", "tune_01_01"}
+    assert all(b.silhouettes == "gt" and b.frames == 60 and b.bvh.parent == tmp_path
+               for b in guard)
     wide, distractors = sets["wide"], sets["distractors"]
     assert [b.seed for b in wide] == list(range(31, 57))
     assert not {b.name for b in wide} & {b.name for b in running}
@@ -36,8 +38,6 @@ def test_the_sets_are_the_documented_tuning_bags(tool, tmp_path):
     assert cmd[cmd.index("--max-people") + 1] == "2"
     assert "--max-people" not in tool.eval_command(running[0], tmp_path / "r.mcap", "hpf-apo",
                                                    6, [], tmp_path / "r.json")
-    assert all(b.silhouettes == "gt" and b.frames == 60 and b.bvh.parent == tmp_path
-               for b in guard)
 
 
 def test_eval_command_and_resume(tool, tmp_path):
