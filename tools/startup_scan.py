@@ -13,8 +13,8 @@ tuning bags that option acts at all (``docs/tracking.md``, Tuning)::
     .venv/bin/python tools/startup_scan.py /tmp/ev/tune_02_03_s6*_distractors.mcap \\
         --param start_height_margin=0.06
 
-Bags whose name holds a guard clip (13_29, 02_05, 01_01) are read with their exact
-silhouettes, as ``tools/tuning_runs.py`` tracks them; others are segmented (``fg``).
+A bag of one of ``tools/tuning_runs.py``'s sets is read with that set's silhouettes (the
+guard's exact ones); any other bag is segmented (``fg``).
 """
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ from hmocap_ros.body import load_body_model  # noqa: E402
 from hmocap_ros.eval.mocap_eval import load_frames, tracker_overrides  # noqa: E402
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams  # noqa: E402
 
-GUARD_CLIPS = ("13_29", "02_05", "01_01")
+sys.path.insert(0, str(ROOT / "tools"))
+from tuning_runs import tuning_sets  # noqa: E402
 
 
 class _Growths(logging.Handler):
@@ -95,9 +96,10 @@ def main(argv=None) -> int:
     logging.getLogger("hmocap_ros.tracking.body_tracker").addHandler(growths)
     logging.getLogger("hmocap_ros.tracking.body_tracker").setLevel(logging.INFO)
     model = load_body_model("tracking")
+    silhouettes = {b.name: b.silhouettes for bags in tuning_sets().values() for b in bags}
     acted = 0
     for bag in ns.bags:
-        sil = "gt" if any(c in bag.name for c in GUARD_CLIPS) else "fg"
+        sil = silhouettes.get(bag.stem, "fg")
         r = scan(bag, model, overrides, ns.seed, ns.max_frames, sil, growths)
         if r["start"] is None:
             print(f"{bag.name} ({sil}): no track within {ns.max_frames} frames", flush=True)
