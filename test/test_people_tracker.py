@@ -89,3 +89,35 @@ def test_a_second_slot_waits_while_only_one_person_is_there(model, rig, scene):
     assert people.ids == ("user", "guest")
     with pytest.raises(ValueError, match="distinct"):
         PeopleTracker(model, rig, TrackerParams(**SMALL), max_people=2, ids=("a", "a"))
+
+
+def test_ignoring_the_other_person_leaves_the_bystander_out_of_the_xor(model, rig, scene):
+    masks, joints, _, subject_only = scene
+    people = PeopleTracker(model, rig, TrackerParams(**SMALL, ignore_other_people=True),
+                           np.random.default_rng(0), max_people=2)
+    results = _run(people, masks, range(3))[-1]
+    assert [r.state for r in results] == ["tracking", "tracking"]
+    near = int(np.argmin([np.linalg.norm(r.joints - joints[2], axis=1).mean()
+                          for r in results]))
+    assert np.linalg.norm(results[near].joints - joints[2], axis=1).mean() < 0.08
+    subject, bystander = people.trackers[near], people.trackers[1 - near]
+    fitness = subject.fitness
+    both = fitness.observe(list(masks[2]))
+    alone = fitness.observe(list(subject_only[2]))
+    subject._others = (bystander,)
+    masked = subject._without_others(both)
+    assert masked.ignore is not None and masked.ignore.any()
+    assert (masked.counts < both.counts).all()
+    # with the bystander's foreground ignored (its tracker's body, one pixel wider), the
+    # subject's pose costs about what it costs with the subject alone in the room; counted,
+    # the bystander is unexplained foreground
+    verts, _ = fitness.pose(subject.estimate[None], subject.shape)
+    xor = {name: int(fitness.view_xor_from_verts(verts, obs).sum())
+           for name, obs in (("alone", alone), ("masked", masked), ("both", both))}
+    assert abs(xor["masked"] - xor["alone"]) < 0.15 * xor["alone"], xor
+    assert xor["both"] > 1.5 * xor["alone"], xor
+    # nobody else followed: nothing is masked
+    subject._others = ()
+    assert subject._without_others(both) is both
+    with pytest.raises(ValueError, match="shape"):
+        both.without(np.zeros((1, 2, 2), np.uint8))

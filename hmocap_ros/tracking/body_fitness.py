@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import cv2
@@ -128,6 +128,8 @@ class Observation:
     counts: C(S_v), foreground pixels per view (int64, (M,)).
     max_r2: per view, the squared normalised radius where the distortion stays monotonic.
     stamp_ns: the frame set's stamp.
+    ignore: (M, h, w) bool or None: foreground pixels the XOR counts neither way (where
+    another tracked person stands, :meth:`without`); ``counts`` then leaves them out.
     """
 
     masks: np.ndarray
@@ -140,6 +142,19 @@ class Observation:
     counts: np.ndarray
     stamp_ns: int = 0
     max_r2: np.ndarray | None = None
+    ignore: np.ndarray | None = None
+
+    def without(self, others: np.ndarray) -> "Observation":
+        """This observation with the foreground under ``others`` ((M, h, w), non-zero where
+        other people's bodies are rendered) left out of the XOR and of ``counts``."""
+        others = np.asarray(others)
+        if others.shape != self.masks.shape:
+            raise ValueError(f"others must have the masks' shape {self.masks.shape}, "
+                             f"got {others.shape}")
+        ignore = (others != 0) & (self.masks != 0)
+        counts = (self.masks != 0).sum(axis=(1, 2), dtype=np.int64) - ignore.sum(
+            axis=(1, 2), dtype=np.int64)
+        return replace(self, ignore=ignore, counts=counts)
 
     @property
     def n_views(self) -> int:
@@ -254,7 +269,7 @@ class SilhouetteFitness:
         rendering ``faces`` (a subset of the mesh's triangles; default all)."""
         t0 = time.perf_counter()
         out = xor_counts(uv, self.faces if faces is None else faces, obs.masks, boxes,
-                         front_only=self.front_only)
+                         front_only=self.front_only, ignore=obs.ignore)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += uv.shape[0]
         return out
@@ -286,7 +301,8 @@ class SilhouetteFitness:
         t0 = time.perf_counter()
         xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D,
                                        self.faces if faces is None else faces, obs.masks, boxes,
-                                       front_only=self.front_only, max_r2=obs.max_r2)
+                                       front_only=self.front_only, max_r2=obs.max_r2,
+                                       ignore=obs.ignore)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += verts.shape[0]
         return xor

@@ -12,6 +12,10 @@ trackers on the same frame sets, each following a person of its own:
   follow (``exclude``), so two slots never start on the same person;
 - if two slots nevertheless end up on one person (a track that lost its person and drifted
   onto another), the one with the worse fit (higher ``fit_cost``) is reset and searches again;
+- with ``ignore_other_people`` each slot's silhouette XOR leaves out the foreground under the
+  other slots' bodies (their latest estimates: the earlier slots' of this frame, the later
+  ones' of the last), so that a bystander beside or behind the subject is not fitted by the
+  subject's limbs; a slot that follows nobody masks nothing;
 - each slot draws from its own generator (slot 0 from the one passed in, the others spawned
   from it), so runs repeat bit for bit.
 
@@ -79,7 +83,9 @@ class PeopleTracker:
             others = [t.position for j, t in enumerate(self.trackers) if j != k]
             others = np.array([p for p in others if p is not None]).reshape(-1, 3)
             results.append(tracker.update(masks, stamp_ns, detector_maps,
-                                          exclude=others if len(others) else None))
+                                          exclude=others if len(others) else None,
+                                          others=[t for j, t in enumerate(self.trackers)
+                                                  if j != k]))
         self._drop_duplicates(results)
         return results
 
