@@ -117,6 +117,6 @@ def test_reports_made_with_other_settings_are_named(tool, tmp_path):
         {"methods": {"hpf-apo": {"mean_mm": 50.0, "params": older}}}))
     assert tool.settings_mismatches(bags, ["hpf-apo"], [2], tmp_path,
                                     ["start_height_margin=0"]) == []
-    lines = tool.settings_mismatches(bags, ["hpf-apo"], [2], tmp_path, [])
-    assert len(lines) == 1 and (f"start_height_margin None -> {now['start_height_margin']!r}"
-                                in lines[0])
+    lines = tool.settings_mismatches(bags, ["hpf-apo"], [2], tmp_path,
+                                     ["start_height_margin=0.06"])
+    assert len(lines) == 1 and "start_height_margin None -> 0.06" in lines[0]
