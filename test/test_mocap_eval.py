@@ -6,6 +6,7 @@ check the fall-back to the ground-truth silhouettes).
 """
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -202,8 +203,6 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     """--reuse compares the settings a report was made with (stored per method) with those the
     run would use: a report made with ``--param KEY=VALUE`` is reused once VALUE is KEY's
     default; one made before a default changed is not."""
-    import argparse
-
     from hmocap_ros.eval.mocap_eval import stored_params
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
@@ -247,3 +246,16 @@ def test_startup_scan_refuses_bad_arguments(tmp_path, load_tool, capsys):
     with pytest.raises(SystemExit):
         scan.main([str(tmp_path / "b.mcap"), "--param", "no_such_setting=1"])
     assert "no_such_setting" in capsys.readouterr().err
+
+
+def test_startup_scan_reads_the_highest_true_point(load_tool):
+    scan = load_tool("startup_scan")
+    names = ("pelvis", "head_top", "l_hand_tip")
+    truth = np.array([[[0.0, 1.0, 0.0], [0.0, 1.6, 0.0], [0.3, 1.9, 0.0]],
+                      [[0.0, 1.0, 0.0], [0.0, 1.6, 0.0], [0.3, 1.1, 0.0]],
+                      [[np.nan] * 3] * 3])
+    frames = argparse.Namespace(joint_names=names, truth=truth)
+    assert scan._truth_top(frames, 0) == (1.6, "l_hand_tip", 1.9)   # a raised hand
+    assert scan._truth_top(frames, 1) == (1.6, "head_top", 1.6)
+    assert scan._truth_top(frames, 2) is None                        # no truth on that frame
+    assert scan._truth_top(argparse.Namespace(joint_names=None, truth=None), 0) is None

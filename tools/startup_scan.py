@@ -52,12 +52,14 @@ class _Growths(logging.Handler):
 def scan(bag: Path, model, overrides: dict, seed: int, max_frames: int, silhouettes: str,
          growths: _Growths) -> dict:
     """One bag's start-up: ``{"start": frame index or None, "scale", "true_scale",
-    "hull_top", "growths"}``."""
+    "hull_top", "truth_top", "growths"}``; ``truth_top`` is, on the frame the start-up began,
+    the true head top's height and the highest true point's name and height (a raised hand
+    tops the hull as it tops the body), or None without truth."""
     frames = load_frames(bag, silhouettes, max_frames=max_frames)
     tracker = BodyTracker(model, frames.rig, TrackerParams(method="hpf-apo", **overrides),
                           np.random.default_rng(seed))
     growths.lines.clear()
-    out = {"start": None, "scale": None, "hull_top": None, "growths": []}
+    out = {"start": None, "scale": None, "hull_top": None, "truth_top": None, "growths": []}
     truth = frames.body_shape
     out["true_scale"] = None if truth is None else float(truth.global_scale)
     for k in range(len(frames.stamps)):
@@ -67,12 +69,25 @@ def scan(bag: Path, model, overrides: dict, seed: int, max_frames: int, silhouet
         if was == "searching" and tracker.state == "initialising":
             hull = tracker._hull(tracker.fitness.observe(masks, int(frames.stamps[k])))
             out["hull_top"] = None if hull is None else float(hull.top)
+            out["truth_top"] = _truth_top(frames, k)
         if tracker.state == "tracking":
             out["start"] = k
             out["scale"] = float(tracker.shape.global_scale)
             break
     out["growths"] = list(growths.lines)
     return out
+
+
+def _truth_top(frames, k: int) -> tuple | None:
+    """(head top height, name of the highest true point, its height) on frame set ``k``."""
+    names = list(frames.joint_names or ())
+    if frames.truth is None or "head_top" not in names:
+        return None
+    heights = np.asarray(frames.truth[k])[:, 1]
+    if not np.isfinite(heights).all():
+        return None
+    top = int(np.argmax(heights))
+    return float(heights[names.index("head_top")]), names[top], float(heights[top])
 
 
 def main(argv=None) -> int:
@@ -106,8 +121,11 @@ def main(argv=None) -> int:
             continue
         true = "?" if r["true_scale"] is None else f"{r['true_scale']:.3f}"
         top = "?" if r["hull_top"] is None else f"{r['hull_top']:.2f} m"
+        truth = ("" if r["truth_top"] is None else
+                 " (truth: head top {:.2f} m, highest {} {:.2f} m)".format(*r["truth_top"]))
         print(f"{bag.name} ({sil}): tracks from frame {r['start']}, global scale "
-              f"{r['scale']:.3f} (true {true}), start frame's hull top {top}", flush=True)
+              f"{r['scale']:.3f} (true {true}), start frame's hull top {top}{truth}",
+              flush=True)
         for line in r["growths"]:
             print(f"    {line}", flush=True)
         acted += bool(r["growths"])
