@@ -6,9 +6,10 @@ The start-up scales the body to the visual hull's height on the frame a track st
 (thesis sec. 2.3.4) and refines the shape over ``shape_frames`` frames (sec. 2.3.3). This tool
 feeds each bag's frames to one tracker (as ``hmocap eval mocap --threads 1`` does, without
 scoring) until it tracks, and prints per bag: the frame it tracks from, the estimated global
-scale against the simulator subject's, the hull's top on the start frame, and every growth
-``start_height_margin`` applied (the tracker's log line). It is how stop 23 found on which
-tuning bags that option acts at all (``docs/tracking.md``, Tuning)::
+scale against the simulator subject's, the hull's top on the start frame next to the true
+head top and the highest true point there (stop 24: a raised hand tops the hull), and every
+growth ``start_height_margin`` applied (the tracker's log line). It is how stop 23 found on
+which tuning bags that option acts at all (``docs/tracking.md``, Tuning)::
 
     .venv/bin/python tools/startup_scan.py /tmp/ev/tune_02_03_s6*_distractors.mcap \\
         --param start_height_margin=0.06
