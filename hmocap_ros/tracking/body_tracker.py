@@ -209,7 +209,7 @@ class TrackerParams:
                                              "rule (stop 23) but failed on the held-out table "
                                              "(stop 24): a hand raised above the head tops "
                                              "the hull, and a hypothesis whose arm is not yet "
-                                             "raised grew 10 % too big.")
+                                             "raised grew by 10 %, to 14 % too big.")
     estimate_shape: bool = _param(True, "Estimate the anthropometry at start (sec. 2.3); "
                                         "False keeps the model's proportions, scaled to the "
                                         "visual hull.")
