@@ -91,13 +91,22 @@ def test_top_left_rule_tiles_without_gaps_or_overlaps():
     assert ((face_id >= 0) == (mask == 1)).all()
 
 
-def test_xor_counts_equal_numpy_xor(body):
+def _jittered_scene(body, seed: int, n_poses: int):
+    """(uv, faces, rendered masks (B, 4, 120, 160), observed (4, 120, 160) 0/1, the generator
+    for more draws): ``n_poses`` random poses in 4 views at 160x120, observed = the first
+    pose shifted by ~2 px per view."""
     verts, faces = body
-    rng = np.random.default_rng(2)
-    uv, _ = project_batch(_poses(verts, 6, rng), *_cameras(160, 120))
+    rng = np.random.default_rng(seed)
+    uv, _ = project_batch(_poses(verts, n_poses, rng), *_cameras(160, 120))
     rendered = render_silhouettes(uv, faces, 120, 160)
     observed = render_silhouettes(uv[0] + rng.normal(0, 2, (4, 1, 2)).astype(np.float32),
-                                  faces, 120, 160) * 255
+                                  faces, 120, 160)
+    return uv, faces, rendered, observed, rng
+
+
+def test_xor_counts_equal_numpy_xor(body):
+    uv, faces, rendered, observed, rng = _jittered_scene(body, 2, 6)
+    observed = observed * 255
     observed[:, 100:110, 10:30] = 255  # spurious foreground, as from a bad segmentation
     observed[rng.random(observed.shape) < 0.01] = 255
     expected = (rendered != (observed[None] != 0)).sum(axis=(2, 3))
@@ -106,12 +115,7 @@ def test_xor_counts_equal_numpy_xor(body):
 
 
 def test_xor_counts_leave_ignored_pixels_out(body):
-    verts, faces = body
-    rng = np.random.default_rng(4)
-    uv, _ = project_batch(_poses(verts, 5, rng), *_cameras(160, 120))
-    rendered = render_silhouettes(uv, faces, 120, 160)
-    observed = render_silhouettes(uv[0] + rng.normal(0, 2, (4, 1, 2)).astype(np.float32),
-                                  faces, 120, 160)
+    uv, faces, rendered, observed, _ = _jittered_scene(body, 4, 5)
     observed[:, 20:90, 100:140] = 1  # another person's foreground
     ignore = np.zeros(observed.shape, bool)
     ignore[:, 15:95, 95:145] = True  # where that person's body is rendered
