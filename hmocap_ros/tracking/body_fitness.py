@@ -152,9 +152,8 @@ class Observation:
             raise ValueError(f"others must have the masks' shape {self.masks.shape}, "
                              f"got {others.shape}")
         ignore = (others != 0) & (self.masks != 0)
-        counts = (self.masks != 0).sum(axis=(1, 2), dtype=np.int64) - ignore.sum(
-            axis=(1, 2), dtype=np.int64)
-        return replace(self, ignore=ignore, counts=counts)
+        return replace(self, ignore=ignore,
+                       counts=self.counts - ignore.sum(axis=(1, 2), dtype=np.int64))
 
     @property
     def n_views(self) -> int:

@@ -479,10 +479,9 @@ class BodyTracker:
     def silhouettes(self, obs: Observation) -> np.ndarray | None:
         """The body of the latest estimate rendered in the views of ``obs`` at its working
         resolution ((M, h, w) uint8), or None when not following anybody."""
-        shape = self._current_shape()
         if self.state not in ("initialising", "tracking") or self.estimate is None:
             return None
-        verts, _ = self.fitness.pose(self.estimate[None], shape)
+        verts, _ = self.fitness.pose(self.estimate[None], self._current_shape())
         uv = self.fitness.project(verts, obs)
         return render_silhouettes(uv[0], self.fitness.faces, obs.height, obs.width,
                                   front_only=self.fitness.front_only)
