@@ -33,7 +33,7 @@ from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.kernels import rejection_kernel
 from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d)
-from hmocap_ros.tracking.visual_hull import carve, room_bounds, visual_hull
+from hmocap_ros.tracking.visual_hull import Hull, carve, room_bounds, visual_hull
 
 ROOT = Path(__file__).resolve().parents[1]
 CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"
@@ -320,9 +320,22 @@ def test_anthropometry_estimation_reduces_entity_size_error(model, rig):
     assert est.shape().height(model) == pytest.approx(shape.height(model), abs=0.03)
 
 
+def _column_hull(columns) -> Hull:
+    """A hull of vertical voxel lines ``[(x, z, top), ...]`` from the floor (3-cm voxels)."""
+    voxel = 0.03
+    pts = np.concatenate([np.stack([np.full(n, x), (np.arange(n) + 0.5) * voxel,
+                                    np.full(n, z)], axis=1)
+                          for x, z, top in columns for n in [int(round(top / voxel))]])
+    return Hull(points=pts, voxel_size=voxel, centroid=pts.mean(axis=0),
+                top=float(pts[:, 1].max() + 0.5 * voxel), bottom=0.0, volume=0.0,
+                heading=0.0, elongation=1.0)
+
+
 def test_start_up_grows_to_a_taller_hull(model, rig):
     """grow_to: a hypothesis whose body stands more than the margin below the hull's top (the
-    start frame's segmentation lost the head) grows to it; within the margin nothing moves."""
+    start frame's segmentation lost the head) grows to it; within the margin nothing moves.
+    With ``column``, only the hull over the body's head counts: a raised hand beside it
+    (stop 24's held-out laugh) grows nothing, and a column without voxels neither."""
     fitness = SilhouetteFitness(model, rig, working_scale=0.25)
     est = AnthropometryEstimator(fitness, EstimationParams(n_particles=8, frames=1),
                                  np.random.default_rng(0), room=room_bounds(rig))
@@ -332,23 +345,45 @@ def test_start_up_grows_to_a_taller_hull(model, rig):
     x = np.concatenate([np.zeros(skel.n_dofs), np.ones(len(SHAPE_KEYS))])
     x[g] = 0.9
     x[ty] = float(skel.joints_rest[0][1]) * 0.9
-    est.hypotheses = [Hypothesis(heading=0.0, particles=np.tile(x, (8, 1)), estimate=x.copy())]
+
+    def reset():
+        est.hypotheses = [Hypothesis(heading=0.0, particles=np.tile(x, (8, 1)),
+                                     estimate=x.copy())]
+
+    def posed():
+        e = est.hypotheses[0].estimate
+        return model.forward(e[None, :skel.n_dofs], shape_from_state(e[None, skel.n_dofs:]))
 
     def body_top():
-        e = est.hypotheses[0].estimate
-        return float(model.forward(e[None, :skel.n_dofs],
-                                   shape_from_state(e[None, skel.n_dofs:])).vertices[0, :, 1].max())
+        return float(posed().vertices[0, :, 1].max())
 
+    reset()
     top = body_top()
-    assert est.grow_to(top + 0.05, margin=0.06) == [1.0]
+    head_x, _, head_z = posed().end_sites[0, model.end_site_names.index("head_top")]
+    over_head = _column_hull([(head_x, head_z, top + 0.15)])
+    assert est.grow_to(_column_hull([(head_x, head_z, top + 0.02)]), margin=0.06) == [1.0]
     np.testing.assert_array_equal(est.hypotheses[0].estimate, x)
-    (f,) = est.grow_to(top + 0.15, margin=0.06)
-    assert f == pytest.approx((top + 0.15) / top)
-    assert body_top() == pytest.approx(top + 0.15, abs=2e-3)
+    (f,) = est.grow_to(over_head, margin=0.06)
+    assert f == pytest.approx(over_head.top / top)
+    assert body_top() == pytest.approx(over_head.top, abs=2e-3)
     np.testing.assert_allclose(est.hypotheses[0].particles[:, g], 0.9 * f)
     np.testing.assert_allclose(est.hypotheses[0].particles[:, ty], x[ty] * f)
+    # the same growth read in the head's column
+    reset()
+    assert est.grow_to(over_head, margin=0.06, column=0.15) == pytest.approx([f], abs=2e-3)
+    # a raised hand 40 cm beside the head, the head's column as tall as the body
+    reset()
+    hand = _column_hull([(head_x, head_z, top), (head_x + 0.4, head_z, top + 0.3)])
+    assert est.grow_to(hand, margin=0.06, column=0.15) == [1.0]
+    np.testing.assert_array_equal(est.hypotheses[0].estimate, x)
+    (f_hand,) = est.grow_to(hand, margin=0.06)
+    assert f_hand > 1.15
+    # nothing of the hull over the head: nothing to read, nothing grows
+    reset()
+    assert est.grow_to(_column_hull([(head_x + 1.0, head_z, top + 0.3)]), margin=0.06,
+                       column=0.15) == [1.0]
     # never past the scale limits
-    est.grow_to(5.0, margin=0.06)
+    est.grow_to(_column_hull([(head_x, head_z, 5.0)]), margin=0.06)
     assert est.hypotheses[0].estimate[g] == pytest.approx(est.params.scale_limits[1])
 
 
@@ -427,6 +462,8 @@ def test_tracker_params_are_described():
         TrackerParams(mesh="hands")
     with pytest.raises(ValueError, match="start_height_margin"):
         TrackerParams(start_height_margin=-0.1)
+    with pytest.raises(ValueError, match="start_height_column"):
+        TrackerParams(start_height_column=-0.1)
 
 
 def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):

@@ -584,28 +584,44 @@ class AnthropometryEstimator:
                 break
         return chosen + [(float(cands[i]), poses[i]) for i in range(searched, len(cands))]
 
-    def grow_to(self, top: float, margin: float) -> list:
+    def grow_to(self, hull: Hull, margin: float, column: float = 0.0) -> list:
         """Make each hypothesis whose body estimate stands more than ``margin`` metres below
-        ``top`` (the visual hull's top on this frame) taller by their ratio: the global scale
-        and the pelvis height of its particles and estimate grow, clipped to ``scale_limits``.
+        the visual hull's top on this frame taller by their ratio: the global scale and the
+        pelvis height of its particles and estimate grow, clipped to ``scale_limits``.
 
         The start-up scales the body to one frame's hull height (sec. 2.3.4); when the
         segmentation lost the head in that frame, a later start-up frame's hull stands taller
         than the body, and the body's height is taken from it (our addition; the thesis
         assumes one good frame). Only growing: a lower hull is a bent pose or a lost head.
+
+        ``column`` > 0 (stop 25): both tops are read in the column of that radius (metres,
+        on the floor) around the hypothesis' head top, the hull's with
+        :meth:`Hull.top_within`, the body's from its vertices there; a hand raised beside
+        the head then tops neither (stop 24's held-out laugh: the hull's highest voxel was
+        the hand, and a body whose arm was still down grew by 10 %). A hypothesis whose
+        column holds no hull voxel is left as it is. 0: the hull's and the body's highest
+        points (stop 23).
         Returns the factors applied (1.0 for hypotheses left as they were)."""
         if not self.estimate_shape or not self.hypotheses:
             return []
         est = np.stack([h.estimate for h in self.hypotheses])
-        verts = self.model.forward(est[:, :self.n_pose],
-                                   shape_from_state(est[:, self.n_pose:])).vertices
-        body_top = verts[..., 1].max(axis=1)
+        posed = self.model.forward(est[:, :self.n_pose], shape_from_state(est[:, self.n_pose:]))
+        verts = posed.vertices
+        if column > 0.0:
+            head = posed.end_sites[:, self.model.end_site_names.index("head_top")][:, [0, 2]]
+            near = np.einsum("bvk,bvk->bv", verts[..., [0, 2]] - head[:, None],
+                             verts[..., [0, 2]] - head[:, None]) <= column * column
+            body_top = np.where(near, verts[..., 1], -np.inf).max(axis=1)
+            hull_top = [hull.top_within(c, column) for c in head]
+        else:
+            body_top = verts[..., 1].max(axis=1)
+            hull_top = [hull.top] * len(self.hypotheses)
         g = self.n_pose + SHAPE_KEYS.index("global")
         ty = int(self.skel.translation_dofs[1])
         lo, hi = self.params.scale_limits
         factors = []
-        for hyp, have in zip(self.hypotheses, body_top):
-            if top - float(have) <= margin:
+        for hyp, have, top in zip(self.hypotheses, body_top, hull_top):
+            if top is None or top - float(have) <= margin:
                 factors.append(1.0)
                 continue
             scale = float(hyp.estimate[g])

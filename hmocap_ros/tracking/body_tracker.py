@@ -210,6 +210,13 @@ class TrackerParams:
                                              "(stop 24): a hand raised above the head tops "
                                              "the hull, and a hypothesis whose arm is not yet "
                                              "raised grew by 10 %, to 14 % too big.")
+    start_height_column: float = _param(0.0, "With start_height_margin > 0: the radius "
+                                             "(m, on the floor) of the column around each "
+                                             "start-up hypothesis' head top in which the "
+                                             "hull's top and the body's are read, so a hand "
+                                             "raised beside the head tops neither (stop "
+                                             "25); 0: the hull's and the body's highest "
+                                             "points (stops 23-24).")
     estimate_shape: bool = _param(True, "Estimate the anthropometry at start (sec. 2.3); "
                                         "False keeps the model's proportions, scaled to the "
                                         "visual hull.")
@@ -299,6 +306,7 @@ class TrackerParams:
              "proposal_limbs must be 'arms', 'legs' or 'all'"),
             (self.min_views >= 1, "min_views must be >= 1"),
             (self.start_height_margin >= 0.0, "start_height_margin must be >= 0"),
+            (self.start_height_column >= 0.0, "start_height_column must be >= 0"),
             (self.hull_max_misses >= 0 and self.hull_bridge_misses >= 0,
              "hull_max_misses and hull_bridge_misses must be >= 0"),
             (0.0 < self.rejection_tau <= 1.0, "rejection_tau must lie in (0, 1]"),
@@ -786,7 +794,8 @@ class BodyTracker:
             hyp.particles[:, t] += step
             hyp.estimate[t] += step
         if self.params.start_height_margin > 0.0:
-            grown = self._estimator.grow_to(hull.top, self.params.start_height_margin)
+            grown = self._estimator.grow_to(hull, self.params.start_height_margin,
+                                            self.params.start_height_column)
             if any(f != 1.0 for f in grown):
                 log.info("start-up: the visual hull's top (%.2f m) stands above the body; "
                          "scale x %s", hull.top, ", ".join(f"{f:.3f}" for f in grown))

@@ -52,6 +52,16 @@ class Hull:
     heading: float
     elongation: float
 
+    def top_within(self, centre_xz, radius: float) -> float | None:
+        """Top of the hull's voxels standing within ``radius`` metres of ``centre_xz`` (x, z)
+        on the floor: the height of one column, e.g. over a body's head, which a raised hand
+        beside it does not top (stop 25); None when the column holds no voxel."""
+        d = self.points[:, [0, 2]] - np.asarray(centre_xz, dtype=np.float64)
+        inside = np.einsum("ij,ij->i", d, d) <= radius * radius
+        if not inside.any():
+            return None
+        return float(self.points[inside, 1].max() + 0.5 * self.voxel_size)
+
     @property
     def height(self) -> float:
         """Standing height estimate: top of the hull above the floor (y = 0)."""
