@@ -86,16 +86,15 @@ def tuning_sets(shared_bvh: Path = SHARED_BVH) -> dict[str, tuple[TuningBag, ...
                  for s in range(31, 57))
     distractors = tuple(TuningBag(f"tune_02_03_s{s}_distractors", runner, 0.0, 1.4, s, "fg",
                                   distractors=True, max_people=2) for s in range(60, 76))
-    # stop 25: hands above the head while the start-up runs (the held-out laugh's failure of
-    # stop 24, which none of the sets above shows): 13_29's jumping jacks (from 0.35 s) and
-    # arms held up (from 13.4 s), 02_05's upward strike (from 1.2 s), each alone and with
-    # the bystander, door and ball
-    clip_13_29, clip_02_05 = shared_bvh / "CMU_13_29.bvh", shared_bvh / "002_05.bvh"
+    # stop 25: a hand above the head while the start-up runs (the clip's first frames, after
+    # the second of empty room), the held-out laugh's failure of stop 24, which none of the
+    # sets above shows: 13_29's jumping jacks with the hands up (from 0.42 s and 2.62 s)
+    # and bending with raised hands (16.8 s), each alone and with the bystander, door, ball
+    clip_13_29 = shared_bvh / "CMU_13_29.bvh"
     raised = tuple(
-        TuningBag(f"tune_{tag}_raised_s{s}" + ("_distractors" if d else ""), bvh, start, 2.0,
-                  s, "fg", distractors=d, max_people=2 if d else 1)
-        for tag, bvh, start, s0 in (("13_29", clip_13_29, 0.35, 81), ("13_29b", clip_13_29, 13.4, 83),
-                                    ("02_05", clip_02_05, 1.2, 85))
+        TuningBag(f"tune_13_29{tag}_raised_s{s}" + ("_distractors" if d else ""), clip_13_29,
+                  start, 2.0, s, "fg", distractors=d, max_people=2 if d else 1)
+        for tag, start, s0 in (("a", 0.42, 81), ("b", 16.8, 83), ("c", 2.62, 85))
         for s, d in ((s0, False), (s0 + 1, True)))
     return {"running": running, "guard": guard, "wide": wide, "distractors": distractors,
             "raised": raised}
