@@ -796,8 +796,11 @@ class BodyTracker:
             grown = self._estimator.grow_to(hull, self.params.start_height_margin,
                                             self.params.start_height_column)
             if any(f != 1.0 for f in grown):
-                log.info("start-up: the visual hull's top (%.2f m) stands above the body; "
-                         "scale x %s", hull.top, ", ".join(f"{f:.3f}" for f in grown))
+                log.info("start-up: the visual hull's top stands above the body (%s; the "
+                         "whole hull's top %.2f m); scale x %s",
+                         "over its head" if self.params.start_height_column > 0.0
+                         else "highest points", hull.top,
+                         ", ".join(f"{f:.3f}" for f in grown))
 
     def _finish_start(self) -> None:
         est = self._estimator
