@@ -19,7 +19,10 @@ run by run, with the defaults. The bags are never those of the reported tables:
   reported tables);
 - ``raised`` (stop 25): 13_29 with the hands up while the start-up runs (jumping jacks from
   0.42 s and 2.62 s, bending over with raised hands from 16.8 s; seeds 81-86, each alone and
-  with distractors, segmented foreground): where a hand, not the head, tops the visual hull.
+  with distractors, segmented foreground): where a hand, not the head, tops the visual hull;
+- ``arm_up`` (stop 25): an upright subject holding the left hand up from the first frame
+  (``tools/raised_arm_bvh.py``: 13_29's upright stretch, the arm straight up beside the head,
+  or the hand over the head; seeds 91-94, alone and with distractors, segmented foreground).
 
 Each (bag, method, tracker seed) is one ``hmocap eval mocap ... --threads 1`` run; ``--jobs``
 of them run at a time (one per core is fastest). A run whose report exists is skipped, so an
@@ -99,8 +102,17 @@ def tuning_sets(shared_bvh: Path = SHARED_BVH) -> dict[str, tuple[TuningBag, ...
                   start, 2.0, s, "fg", distractors=d, max_people=2 if d else 1)
         for tag, start, s0 in (("a", 0.42, 81), ("b", 16.8, 83), ("c", 2.62, 85))
         for s, d in ((s0, False), (s0 + 1, True)))
+    # stop 25: an upright subject holding a hand up from the first frame (13_29's upright
+    # stretch with the left arm posed, tools/raised_arm_bvh.py): the arm straight up beside
+    # the head, and the hand over the head (the held-out laugh's case)
+    arm_up = tuple(
+        TuningBag(f"tune_{clip}_s{s}" + ("_distractors" if d else ""),
+                  ROOT / "tools" / "tuning_bvh" / f"{clip}.bvh", 0.0, 2.0, s, "fg",
+                  distractors=d, max_people=2 if d else 1)
+        for clip, s0 in (("13_29_left_arm_up", 91), ("13_29_left_hand_over_head", 93))
+        for s, d in ((s0, False), (s0 + 1, True)))
     return {"running": running, "guard": guard, "wide": wide, "distractors": distractors,
-            "raised": raised}
+            "raised": raised, "arm_up": arm_up}
 
 
 def report_name(bag: str, method: str, seed: int) -> str:
@@ -319,7 +331,8 @@ def main(argv=None) -> int:
     r.add_argument("name", help="name of this set of runs (its folder under --workdir)")
     r.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="tracker setting of the candidate (as hmocap eval mocap --param)")
-    r.add_argument("--set", nargs="+", choices=("running", "guard", "wide", "distractors", "raised"),
+    r.add_argument("--set", nargs="+", choices=("running", "guard", "wide", "distractors", "raised",
+                                                "arm_up"),
                    default=["running"])
     r.add_argument("--bags", nargs="+", default=None, metavar="NAME",
                    help="only these bags of the set(s) (e.g. tune_02_03_s29)")
