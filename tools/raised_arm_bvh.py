@@ -21,11 +21,14 @@ these clips (``tools/tuning_runs.py --set arm_up``).
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT.parent / "shared" / "data" / "bvh" / "CMU_13_29.bvh"
 OUT_DIR = ROOT / "tools" / "tuning_bvh"
+sys.path.insert(0, str(ROOT))
+from hmocap_ros.sim.bvh import parse_bvh  # noqa: E402
 WINDOW = (8.5, 12.5)  # seconds of 13_29: upright, the hands below the head
 #: clip name -> (LeftArm, LeftForeArm) channels (Zrotation, Yrotation, Xrotation), degrees
 POSES = {
@@ -34,31 +37,17 @@ POSES = {
 }
 
 
-def _channel_columns(header: str) -> dict[str, int]:
-    """Column of the first channel of each joint, from the HIERARCHY text."""
-    columns, col = {}, 0
-    name = None
-    for line in header.splitlines():
-        words = line.split()
-        if words[:1] in (["ROOT"], ["JOINT"]):
-            name = words[1]
-        elif words[:1] == ["CHANNELS"]:
-            columns[name] = col
-            col += int(words[1])
-    return columns
-
-
 def posed_clip(text: str, arm, forearm, window=WINDOW) -> str:
     """The BVH ``text`` cut to ``window`` (seconds; frame 0 kept first) with the LeftArm and
     LeftForeArm channels set to ``arm`` and ``forearm`` in every frame but frame 0."""
+    bvh = parse_bvh(text)
     header, motion = text.split("MOTION", 1)
     lines = motion.strip().splitlines()
-    frame_time = float(lines[1].split(":")[1])
     rows = lines[2:]
-    first, last = (int(round(t / frame_time)) for t in window)
+    first, last = (int(round(t / bvh.frame_time)) for t in window)
     if not 1 <= first < last <= len(rows):
         raise ValueError(f"window {window} s lies outside the clip ({len(rows)} frames)")
-    cols = _channel_columns(header)
+    cols = {j: int(bvh.channel_start[bvh.joint_index(j)]) for j in ("LeftArm", "LeftForeArm")}
     out = [rows[0]]
     for row in rows[first:last]:
         values = row.split()

@@ -92,25 +92,29 @@ def tuning_sets(shared_bvh: Path = SHARED_BVH) -> dict[str, tuple[TuningBag, ...
                  for s in range(31, 57))
     distractors = tuple(TuningBag(f"tune_02_03_s{s}_distractors", runner, 0.0, 1.4, s, "fg",
                                   distractors=True, max_people=2) for s in range(60, 76))
+
+    def alone_and_with_distractors(name: str, bvh: Path, start: float, seed: int):
+        """The clip rendered with ``seed`` alone and with ``seed + 1`` with distractors
+        (two people followed), 2 s, segmented foreground."""
+        return (TuningBag(f"{name}_s{seed}", bvh, start, 2.0, seed, "fg"),
+                TuningBag(f"{name}_s{seed + 1}_distractors", bvh, start, 2.0, seed + 1, "fg",
+                          distractors=True, max_people=2))
+
     # stop 25: a hand above the head while the start-up runs (the clip's first frames, after
     # the second of empty room), the held-out laugh's failure of stop 24, which none of the
     # sets above shows: 13_29's jumping jacks with the hands up (from 0.42 s and 2.62 s)
     # and bending with raised hands (16.8 s), each alone and with the bystander, door, ball
     clip_13_29 = shared_bvh / "CMU_13_29.bvh"
-    raised = tuple(
-        TuningBag(f"tune_13_29{tag}_raised_s{s}" + ("_distractors" if d else ""), clip_13_29,
-                  start, 2.0, s, "fg", distractors=d, max_people=2 if d else 1)
-        for tag, start, s0 in (("a", 0.42, 81), ("b", 16.8, 83), ("c", 2.62, 85))
-        for s, d in ((s0, False), (s0 + 1, True)))
+    raised = tuple(bag for tag, start, seed in (("a", 0.42, 81), ("b", 16.8, 83), ("c", 2.62, 85))
+                   for bag in alone_and_with_distractors(f"tune_13_29{tag}_raised", clip_13_29,
+                                                         start, seed))
     # stop 25: an upright subject holding a hand up from the first frame (13_29's upright
     # stretch with the left arm posed, tools/raised_arm_bvh.py): the arm straight up beside
     # the head, and the hand over the head (the held-out laugh's case)
-    arm_up = tuple(
-        TuningBag(f"tune_{clip}_s{s}" + ("_distractors" if d else ""),
-                  ROOT / "tools" / "tuning_bvh" / f"{clip}.bvh", 0.0, 2.0, s, "fg",
-                  distractors=d, max_people=2 if d else 1)
-        for clip, s0 in (("13_29_left_arm_up", 91), ("13_29_left_hand_over_head", 93))
-        for s, d in ((s0, False), (s0 + 1, True)))
+    arm_up = tuple(bag for clip, seed in (("13_29_left_arm_up", 91),
+                                          ("13_29_left_hand_over_head", 93))
+                   for bag in alone_and_with_distractors(
+                       f"tune_{clip}", ROOT / "tools" / "tuning_bvh" / f"{clip}.bvh", 0.0, seed))
     return {"running": running, "guard": guard, "wide": wide, "distractors": distractors,
             "raised": raised, "arm_up": arm_up}
 
@@ -331,8 +335,7 @@ def main(argv=None) -> int:
     r.add_argument("name", help="name of this set of runs (its folder under --workdir)")
     r.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="tracker setting of the candidate (as hmocap eval mocap --param)")
-    r.add_argument("--set", nargs="+", choices=("running", "guard", "wide", "distractors", "raised",
-                                                "arm_up"),
+    r.add_argument("--set", nargs="+", choices=tuple(tuning_sets()),
                    default=["running"])
     r.add_argument("--bags", nargs="+", default=None, metavar="NAME",
                    help="only these bags of the set(s) (e.g. tune_02_03_s29)")

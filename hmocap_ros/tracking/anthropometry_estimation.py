@@ -609,8 +609,8 @@ class AnthropometryEstimator:
         verts = posed.vertices
         if column > 0.0:
             head = posed.end_sites[:, self.model.end_site_names.index("head_top")][:, [0, 2]]
-            near = np.einsum("bvk,bvk->bv", verts[..., [0, 2]] - head[:, None],
-                             verts[..., [0, 2]] - head[:, None]) <= column * column
+            d = verts[..., [0, 2]] - head[:, None]
+            near = np.einsum("bvk,bvk->bv", d, d) <= column * column
             body_top = np.where(near, verts[..., 1], -np.inf).max(axis=1)
             hull_top = [hull.top_within(c, column) for c in head]
         else:
