@@ -312,15 +312,25 @@ def views_seeing(rig, points: np.ndarray, margin: float) -> np.ndarray:
     return inside.all(axis=2).T
 
 
+#: (m) a placement keeps the pelvis this far from every wall and furniture footprint in every
+#: frame, if any candidate can: half a torso's width, so that no part of the trunk enters a wall
+MIN_PELVIS_CLEARANCE = 0.25
+
+
 def _place(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int = 64):
     """Choose position and heading so the subject stays in every view and off the furniture.
 
     Candidates are drawn from ``rng``: positions uniform over the central floor; headings
     uniform, or (for a motion that travels) turning its path along the room's axes or
-    diagonals. A candidate scores first the fraction of frames in which every joint and end
-    site is inside every image (3 % margin) with the pelvis 0.45 m from walls and
-    furniture, then the fraction of (frame, camera) pairs that see the whole body; the first
-    perfect candidate wins, else the best.
+    diagonals. A candidate scores first whether its pelvis keeps
+    :data:`MIN_PELVIS_CLEARANCE` from walls and furniture in every frame (a motion too long
+    for the views, like a 4 m run, must still not leave the room: otherwise the best
+    candidate may take it through a wall, out of every view, where the ground truth goes on),
+    then the fraction of frames in which every joint and end site is inside every image (3 %
+    margin) with the pelvis 0.45 m from walls and furniture, then the fraction of (frame,
+    camera) pairs that see the whole body; the first perfect candidate wins, else the best.
+    A perfect candidate keeps 0.45 m everywhere, so the first rule changes no placement
+    that has one.
     """
     from hmocap_ros.body import end_site_positions, forward_kinematics
     from hmocap_ros.sim.retarget import heading_of, place_in_room
@@ -332,7 +342,7 @@ def _place(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int
     diagonal = math.atan2(room.spec.size_x, room.spec.size_z)
     axes = [0.0, math.pi / 2, math.pi, -math.pi / 2, diagonal, -diagonal,
             math.pi - diagonal, diagonal - math.pi]
-    best, best_score = None, (-1.0, -1.0)
+    best, best_score = None, (-1.0, -1.0, -1.0)
     for k in range(n_candidates):
         if k == 0:
             xz = (0.0, 0.0)
@@ -349,17 +359,22 @@ def _place(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int
         ends = end_site_positions(transforms, skeleton.end_sites_rest,
                                   skeleton.end_site_parents, skeleton.joints_rest)
         seeing = views_seeing(rig, np.concatenate([pos, ends], axis=1), 0.03)
-        clear = room.clearance(placed.root_translation[:, [0, 2]]) >= 0.45
-        score = (float(np.mean(seeing.all(axis=1) & clear)),
+        clearance = room.clearance(placed.root_translation[:, [0, 2]])
+        clear = clearance >= 0.45
+        score = (float(clearance.min() >= MIN_PELVIS_CLEARANCE),
+                 float(np.mean(seeing.all(axis=1) & clear)),
                  float(np.mean(seeing & clear[:, None])))
         if score > best_score:
             best, best_score = placed, score
-        if score[0] >= 1.0:
+        if score[1] >= 1.0:
             break
     if best_score[0] < 1.0:
+        print(f"hmocap sim mocap: no placement keeps the pelvis {MIN_PELVIS_CLEARANCE} m from "
+              "the walls and furniture: the subject passes through one", file=sys.stderr)
+    if best_score[1] < 1.0:
         print(f"hmocap sim mocap: the motion leaves some camera's view in "
-              f"{100 * (1 - best_score[0]):.0f} % of its frames (whole body seen in "
-              f"{100 * best_score[1]:.0f} % of the images)", file=sys.stderr)
+              f"{100 * (1 - best_score[1]):.0f} % of its frames (whole body seen in "
+              f"{100 * best_score[2]:.0f} % of the images)", file=sys.stderr)
     return best
 
 
