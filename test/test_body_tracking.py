@@ -387,6 +387,87 @@ def test_start_up_grows_to_a_taller_hull(model, rig):
     assert est.hypotheses[0].estimate[g] == pytest.approx(est.params.scale_limits[1])
 
 
+def _block_hull(blocks) -> Hull:
+    """A hull of boxes ``[(x0, x1, y0, y1, z0, z1), ...]`` filled with 3-cm voxels."""
+    voxel = 0.03
+    pts = []
+    for x0, x1, y0, y1, z0, z1 in blocks:
+        axes = [np.arange(a + 0.5 * voxel, b, voxel) for a, b in ((x0, x1), (y0, y1), (z0, z1))]
+        pts.append(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3))
+    pts = np.unique(np.round(np.concatenate(pts), 6), axis=0)
+    return Hull(points=pts, voxel_size=voxel, centroid=pts.mean(axis=0),
+                top=float(pts[:, 1].max() + 0.5 * voxel), bottom=0.0, volume=0.0,
+                heading=0.0, elongation=1.0)
+
+
+#: a standing block body: legs and trunk to 1.44 m, an 18-cm head to 1.71 m
+_TRUNK = (-0.18, 0.18, 0.0, 1.44, -0.12, 0.12)
+_HEAD = (-0.09, 0.09, 1.44, 1.71, -0.09, 0.09)
+
+
+def test_head_top_passes_over_a_hand_held_over_the_head():
+    """Hull.head_top (stop 26): the column's top down to the first layer as full as a head;
+    a forearm held over the head (6 cm square, 8 cm off the axis) or an arm raised beside
+    it leaves the head's top where it is, while the plain column top and the hull's top
+    take the hand; with nothing over the head, the head's top is the column's."""
+    plain = _block_hull([_TRUNK, _HEAD])
+    assert plain.head_top(None, 0.15, 0.2) == pytest.approx(1.71, abs=0.015)
+    assert plain.head_top(None, 0.15, 0.2) == pytest.approx(plain.top_within((0, 0), 0.15))
+    over = _block_hull([_TRUNK, _HEAD, (0.05, 0.11, 1.71, 1.92, -0.03, 0.03)])
+    assert over.top == over.top_within((0, 0), 0.15) == pytest.approx(1.92, abs=0.015)
+    assert over.head_top(None, 0.15, 0.2) == pytest.approx(1.71, abs=0.015)
+    # an arm straight up beside the head: the trunk's axis stays on the trunk
+    beside = _block_hull([_TRUNK, _HEAD, (0.18, 0.27, 1.2, 2.0, -0.05, 0.05)])
+    np.testing.assert_allclose(beside.trunk_axis(), [0.0, 0.0], atol=0.02)
+    assert beside.head_top(None, 0.15, 0.2) == pytest.approx(1.71, abs=0.015)
+    assert beside.top == pytest.approx(2.0, abs=0.015)
+    # nothing in the column
+    assert plain.head_top((1.0, 1.0), 0.15, 0.2) is None
+
+
+def test_start_up_grows_to_the_head_not_to_a_hand_over_it(model, rig):
+    """grow_to with ``head_fraction`` (stop 26): the hull's head top against the body's crown;
+    a hull whose head stands taller than the body grows it, a hand held over a head as tall
+    as the body grows nothing (the plain column grows it to the hand)."""
+    fitness = SilhouetteFitness(model, rig, working_scale=0.25)
+    est = AnthropometryEstimator(fitness, EstimationParams(n_particles=8, frames=1),
+                                 np.random.default_rng(0), room=room_bounds(rig))
+    skel = model.skeleton
+    g = skel.n_dofs + SHAPE_KEYS.index("global")
+    ty = int(skel.translation_dofs[1])
+    x = np.concatenate([np.zeros(skel.n_dofs), np.ones(len(SHAPE_KEYS))])
+    x[g] = 0.9
+    x[ty] = float(skel.joints_rest[0][1]) * 0.9
+
+    def reset():
+        est.hypotheses = [Hypothesis(heading=0.0, particles=np.tile(x, (8, 1)),
+                                     estimate=x.copy())]
+
+    reset()
+    e = est.hypotheses[0].estimate
+    crown = model.forward(e[None, :skel.n_dofs], shape_from_state(e[None, skel.n_dofs:])
+                          ).end_sites[0, model.end_site_names.index("head_top")]
+    hx, top, hz = (float(v) for v in crown)
+
+    def body(head_top, hand=False):
+        blocks = [(hx - 0.18, hx + 0.18, 0.0, head_top - 0.27, hz - 0.12, hz + 0.12),
+                  (hx - 0.09, hx + 0.09, head_top - 0.27, head_top, hz - 0.09, hz + 0.09)]
+        if hand:
+            blocks.append((hx + 0.05, hx + 0.11, head_top, head_top + 0.21, hz - 0.03, hz + 0.03))
+        return _block_hull(blocks)
+
+    taller = body(top + 0.12)
+    (f,) = est.grow_to(taller, margin=0.06, column=0.15, head_fraction=0.2)
+    assert f == pytest.approx(taller.head_top((hx, hz), 0.15, 0.2) / top)
+    assert f > 1.05
+    reset()
+    with_hand = body(top, hand=True)
+    assert est.grow_to(with_hand, margin=0.06, column=0.15, head_fraction=0.2) == [1.0]
+    np.testing.assert_array_equal(est.hypotheses[0].estimate, x)
+    (f_hand,) = est.grow_to(with_hand, margin=0.06, column=0.15)
+    assert f_hand > 1.1
+
+
 def test_heading_search_keeps_required_headings(model, rig):
     """search_headings / start(also=...): a required heading (the travel direction) is posed,
     kept and Powell-fitted in addition to the searched ones, whatever its cost."""
@@ -464,6 +545,10 @@ def test_tracker_params_are_described():
         TrackerParams(start_height_margin=-0.1)
     with pytest.raises(ValueError, match="start_height_column"):
         TrackerParams(start_height_column=-0.1)
+    with pytest.raises(ValueError, match="start_head_fraction"):
+        TrackerParams(start_head_fraction=0.2, start_height_column=0.0)
+    with pytest.raises(ValueError, match="start_head_fraction"):
+        TrackerParams(start_head_fraction=1.5)
 
 
 def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):

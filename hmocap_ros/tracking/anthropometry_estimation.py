@@ -189,6 +189,10 @@ class EstimationParams:
     scale_limits: tuple = (0.8, 1.2)
     shape_limits: tuple = (0.7, 1.4)
     proposal_fraction: float = 0.0
+    #: > 0 (stop 26): the first scale reads the head's top (:meth:`Hull.head_top` over the
+    #: trunk's axis, column ``head_column``, this layer fraction) instead of the hull's top
+    head_fraction: float = 0.0
+    head_column: float = 0.15
 
 
 @dataclass(eq=False)
@@ -506,7 +510,11 @@ class AnthropometryEstimator:
         p = self.params
         if self.fixed_shape is None:
             model_height = float(np.asarray(self.model.vertices)[:, 1].max())
-            scale0 = float(np.clip(hull.height / model_height, *p.scale_limits))
+            top = hull.height
+            if p.head_fraction > 0.0:
+                head = hull.head_top(None, p.head_column, p.head_fraction)
+                top = head if head is not None else top
+            scale0 = float(np.clip(top / model_height, *p.scale_limits))
             pelvis_y = float(self.skel.joints_rest[0][1]) * scale0
         else:
             scale0 = float(self.fixed_shape.global_scale)
@@ -584,7 +592,8 @@ class AnthropometryEstimator:
                 break
         return chosen + [(float(cands[i]), poses[i]) for i in range(searched, len(cands))]
 
-    def grow_to(self, hull: Hull, margin: float, column: float = 0.0) -> list:
+    def grow_to(self, hull: Hull, margin: float, column: float = 0.0,
+                head_fraction: float = 0.0) -> list:
         """Make each hypothesis whose body estimate stands more than ``margin`` metres below
         the visual hull's top on this frame taller by their ratio: the global scale and the
         pelvis height of its particles and estimate grow, clipped to ``scale_limits``.
@@ -600,7 +609,10 @@ class AnthropometryEstimator:
         the head then tops neither (stop 24's held-out laugh: the hull's highest voxel was
         the hand, and a body whose arm was still down grew by 10 %). A hypothesis whose
         column holds no hull voxel is left as it is. 0: the hull's and the body's highest
-        points (stop 23).
+        points (stop 23). ``head_fraction`` > 0 with a column (stop 26): the hull's top there
+        is its head's (:meth:`Hull.head_top`, a hand held over the head passed over) and the
+        body's is its crown (the ``head_top`` end site), not its highest vertex in the column,
+        which its own raised hand may be.
         Returns the factors applied (1.0 for hypotheses left as they were)."""
         if not self.estimate_shape or not self.hypotheses:
             return []
@@ -608,11 +620,16 @@ class AnthropometryEstimator:
         posed = self.model.forward(est[:, :self.n_pose], shape_from_state(est[:, self.n_pose:]))
         verts = posed.vertices
         if column > 0.0:
-            head = posed.end_sites[:, self.model.end_site_names.index("head_top")][:, [0, 2]]
-            d = verts[..., [0, 2]] - head[:, None]
-            near = np.einsum("bvk,bvk->bv", d, d) <= column * column
-            body_top = np.where(near, verts[..., 1], -np.inf).max(axis=1)
-            hull_top = [hull.top_within(c, column) for c in head]
+            crown = posed.end_sites[:, self.model.end_site_names.index("head_top")]
+            head = crown[:, [0, 2]]
+            if head_fraction > 0.0:
+                body_top = crown[:, 1]
+                hull_top = [hull.head_top(c, column, head_fraction) for c in head]
+            else:
+                d = verts[..., [0, 2]] - head[:, None]
+                near = np.einsum("bvk,bvk->bv", d, d) <= column * column
+                body_top = np.where(near, verts[..., 1], -np.inf).max(axis=1)
+                hull_top = [hull.top_within(c, column) for c in head]
         else:
             body_top = verts[..., 1].max(axis=1)
             hull_top = [hull.top] * len(self.hypotheses)

@@ -216,6 +216,16 @@ class TrackerParams:
                                               "24's held-out laugh grew by 10 % on its whole "
                                               "hull); 0: the hull's and the body's highest "
                                               "points (stops 23-24).")
+    start_head_fraction: float = _param(0.0, "> 0 (with start_height_column > 0): the "
+                                             "start-up reads the head's top, not the hull's "
+                                             "highest voxel, for the first frame's body "
+                                             "scale (over the trunk's axis) and for the "
+                                             "growth (over each hypothesis' head): from the "
+                                             "column's top down, the first voxel layer "
+                                             "holding this fraction of the voxels of its "
+                                             "fullest layer within 0.3 m of the top, so a "
+                                             "hand held over or beside the head is passed "
+                                             "over (stop 26); 0: the hull's top.")
     estimate_shape: bool = _param(True, "Estimate the anthropometry at start (sec. 2.3); "
                                         "False keeps the model's proportions, scaled to the "
                                         "visual hull.")
@@ -306,6 +316,9 @@ class TrackerParams:
             (self.min_views >= 1, "min_views must be >= 1"),
             (self.start_height_margin >= 0.0, "start_height_margin must be >= 0"),
             (self.start_height_column >= 0.0, "start_height_column must be >= 0"),
+            (0.0 <= self.start_head_fraction <= 1.0
+             and (self.start_head_fraction == 0.0 or self.start_height_column > 0.0),
+             "start_head_fraction must be in [0, 1] and needs start_height_column > 0"),
             (self.hull_max_misses >= 0 and self.hull_bridge_misses >= 0,
              "hull_max_misses and hull_bridge_misses must be >= 0"),
             (0.0 < self.rejection_tau <= 1.0, "rejection_tau must lie in (0, 1]"),
@@ -732,7 +745,8 @@ class BodyTracker:
             frames=p.shape_frames if (p.estimate_shape and self.shape is None) else 1,
             estimate_shape=p.estimate_shape, rejection_tau=p.rejection_tau,
             rejection_trials=p.rejection_trials, survival_rate=p.survival_rate,
-            proposal_fraction=p.proposal_fraction)
+            proposal_fraction=p.proposal_fraction, head_fraction=p.start_head_fraction,
+            head_column=p.start_height_column)
         self._estimator = AnthropometryEstimator(self.shape_fitness, est_params, self.rng,
                                                  room=self.room, fixed_shape=self.shape,
                                                  proposer=self.start_proposer if p.proposal_fraction > 0 else None)
@@ -794,11 +808,13 @@ class BodyTracker:
             hyp.estimate[t] += step
         if self.params.start_height_margin > 0.0:
             grown = self._estimator.grow_to(hull, self.params.start_height_margin,
-                                            self.params.start_height_column)
+                                            self.params.start_height_column,
+                                            self.params.start_head_fraction)
             if any(f != 1.0 for f in grown):
                 log.info("start-up: the visual hull's top stands above the body (%s; the "
                          "whole hull's top %.2f m); scale x %s",
-                         "over its head" if self.params.start_height_column > 0.0
+                         "its head's" if self.params.start_head_fraction > 0.0
+                         else "over its head" if self.params.start_height_column > 0.0
                          else "highest points", hull.top,
                          ", ".join(f"{f:.3f}" for f in grown))
 

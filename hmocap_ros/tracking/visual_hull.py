@@ -62,6 +62,37 @@ class Hull:
             return None
         return float(self.points[inside, 1].max() + 0.5 * self.voxel_size)
 
+    def trunk_axis(self, band: tuple = (0.35, 0.65)) -> np.ndarray:
+        """(x, z) of the trunk: the median of the voxels between ``band`` fractions of the
+        hull's top height (hips to chest of a standing person; a raised arm has few voxels
+        there, and the median ignores them), or of all voxels when that band is empty."""
+        y = self.points[:, 1]
+        inside = (y > band[0] * self.top) & (y < band[1] * self.top)
+        pts = self.points[inside] if inside.sum() >= 5 else self.points
+        return np.median(pts[:, [0, 2]], axis=0)
+
+    def head_top(self, centre_xz, radius: float, min_fraction: float,
+                 depth: float = 0.3) -> float | None:
+        """Top of the head in the column of ``radius`` around ``centre_xz`` (None: the trunk's
+        axis, :meth:`trunk_axis`): from the column's top down, the first horizontal voxel
+        layer holding at least ``min_fraction`` of the voxels of the column's fullest layer
+        within ``depth`` metres of its top. A hand or forearm held over the head is 1-6
+        voxels a layer (3-cm voxels), a head 20-35, so the hand is passed over where a plain
+        column top (:meth:`top_within`) takes it for the head (the ``arm_up`` tuning bags,
+        stop 26). None when the column holds no voxel."""
+        c = self.trunk_axis() if centre_xz is None else np.asarray(centre_xz, dtype=np.float64)
+        d = self.points[:, [0, 2]] - c
+        y = self.points[np.einsum("ij,ij->i", d, d) <= radius * radius, 1]
+        if len(y) == 0:
+            return None
+        layer = np.rint((y - y.min()) / self.voxel_size).astype(np.intp)
+        counts = np.bincount(layer)
+        top = len(counts) - 1
+        near = counts[max(top - int(round(depth / self.voxel_size)), 0):]
+        full = np.flatnonzero(counts >= min_fraction * near.max())
+        head = int(full[full >= top - len(near) + 1].max())
+        return float(y.min() + head * self.voxel_size + 0.5 * self.voxel_size)
+
     @property
     def height(self) -> float:
         """Standing height estimate: top of the hull above the floor (y = 0)."""
