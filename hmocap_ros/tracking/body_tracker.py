@@ -225,7 +225,10 @@ class TrackerParams:
                                              "holding this fraction of the voxels of its "
                                              "fullest layer within 0.3 m of the top, so a "
                                              "hand held over or beside the head is passed "
-                                             "over (stop 26); 0: the hull's top.")
+                                             "over (stop 26); 0: the hull's top, the "
+                                             "default (tuning rule E: it mends the "
+                                             "arm_up bags, but the scale falls on most "
+                                             "others).")
     estimate_shape: bool = _param(True, "Estimate the anthropometry at start (sec. 2.3); "
                                         "False keeps the model's proportions, scaled to the "
                                         "visual hull.")
