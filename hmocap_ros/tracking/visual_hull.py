@@ -77,7 +77,7 @@ class Hull:
         axis, :meth:`trunk_axis`): from the column's top down, the first horizontal voxel
         layer holding at least ``min_fraction`` of the voxels of the column's fullest layer
         within ``depth`` metres of its top. A hand or forearm held over the head is 1-6
-        voxels a layer (3-cm voxels), a head 20-35, so the hand is passed over where a plain
+        voxels a layer (3-cm voxels), a head 20-55, so the hand is passed over where a plain
         column top (:meth:`top_within`) takes it for the head (the ``arm_up`` tuning bags,
         stop 26). None when the column holds no voxel."""
         c = self.trunk_axis() if centre_xz is None else np.asarray(centre_xz, dtype=np.float64)
