@@ -317,22 +317,15 @@ def test_cli(tmp_path, capsys):
 
 def test_a_run_too_long_for_the_views_is_placed_inside_the_room(capsys):
     """The 4 m of the shipped run cannot stay in every view of the default room; the best
-    candidate once took it through a wall (seed 204: pelvis 0.23 m beyond it, out of every
-    view, where the ground truth went on). The placement now keeps the pelvis
-    ``MIN_PELVIS_CLEARANCE`` from walls and furniture first, and still says that the motion
-    leaves some view."""
-    from hmocap_ros.body import sample_shape
-
-    tracking = load_body_model("tracking")
-    streams = np.random.SeedSequence(204).spawn(8)
-    rng_room, rng_shape, _, rng_place = (np.random.default_rng(s) for s in streams[:4])
-    room = build_room(rng_room)
-    shape = sample_shape(rng_shape)
-    motion = mocap_dataset._retargeted(mocap_dataset.DATA_DIR / "bvh" / "09_01.bvh", tracking, shape, 25.0)
-    motion = mocap_dataset._motion_window(motion, 0.0, 1.2, 25.0)
-    placed = mocap_dataset._place(motion, make_rig(4, 640, 480), room, rng_place,
-                                  mocap_dataset._shaped_skeleton(tracking, shape))
-    root = placed.root_translation[:, [0, 2]]
-    assert np.linalg.norm(root[-1] - root[0]) > 3.5  # the run crosses the room
-    assert room.clearance(root).min() >= mocap_dataset.MIN_PELVIS_CLEARANCE
+    candidate once took it through a wall (seed 204, the held-out table's run with
+    distractors: pelvis 0.23 m beyond it, out of every view, where the ground truth went on).
+    The placement now keeps the pelvis ``MIN_PELVIS_CLEARANCE`` from walls and furniture
+    first, and still says that the motion leaves some view."""
+    cfg = MocapSimConfig(out="unused.mcap", bvh=mocap_dataset.DATA_DIR / "bvh" / "09_01.bvh",
+                         start=0.0, seconds=1.2, seed=204, distractors=True, progress=False)
+    r = mocap_dataset.placement_report(cfg)
+    assert r["frames"] == 30
+    assert max(r["x"][1] - r["x"][0], r["z"][1] - r["z"][0]) > 3.5  # the run crosses the room
+    assert r["min_clearance"] >= mocap_dataset.MIN_PELVIS_CLEARANCE
+    assert r["all_views"] < 1.0 and r["under_3_views"] > 0
     assert "leaves some camera's view" in capsys.readouterr().err

@@ -55,7 +55,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["MocapSimConfig", "SimResult", "make_rig", "generate", "add_arguments",
-           "main_from_args", "views_seeing", "DEFAULT_BVH", "BASE_STAMP_NS"]
+           "main_from_args", "views_seeing", "placement_report", "DEFAULT_BVH",
+           "BASE_STAMP_NS"]
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 DEFAULT_BVH = DATA_DIR / "bvh" / "13_26.bvh"
@@ -378,6 +379,56 @@ def _place(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int
     return best
 
 
+def _streams(seed: int) -> tuple:
+    """The recording's eight independent random streams (room, shape, look, place,
+    distractors, light, cameras, events), so that e.g. ``--distractors`` does not change the
+    subject."""
+    return tuple(np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(8))
+
+
+def _subject_in_room(config: "MocapSimConfig", rng_room, rng_shape, rng_place) -> tuple:
+    """``(rig, room, tracking model, subject shape, placed motion)`` of a recording."""
+    from hmocap_ros.body import load_body_model, sample_shape
+    from hmocap_ros.rig import load_rig
+    from hmocap_ros.sim.room import build_room
+
+    fps = float(config.fps)
+    rig = load_rig(config.rig) if config.rig is not None else make_rig(
+        config.cameras, config.width, config.height)
+    room = build_room(rng_room)
+    tracking = load_body_model("tracking")
+    shape = sample_shape(rng_shape)
+    motion = _retargeted(Path(config.bvh), tracking, shape, fps)
+    motion = _motion_window(motion, config.start, config.seconds, fps)
+    motion = _place(motion, rig, room, rng_place, _shaped_skeleton(tracking, shape))
+    return rig, room, tracking, shape, motion
+
+
+def placement_report(config: "MocapSimConfig") -> dict:
+    """Where :func:`generate` puts the subject of ``config`` (the same random streams,
+    nothing rendered): ``frames`` (motion frames), ``all_views`` (fraction of frames whose
+    joints and end sites are inside every image, 3 % margin), ``under_3_views`` (frames seen
+    whole by fewer than 3 cameras), ``min_views``, ``min_clearance`` (m, the pelvis to walls
+    and furniture, negative inside them), ``x`` and ``z`` (the pelvis' extent, m)."""
+    from hmocap_ros.body import end_site_positions, forward_kinematics
+
+    rng_room, rng_shape, _, rng_place = _streams(config.seed)[:4]
+    rig, room, tracking, shape, motion = _subject_in_room(config, rng_room, rng_shape,
+                                                          rng_place)
+    sk = _shaped_skeleton(tracking, shape)
+    transforms, pos = forward_kinematics(motion.local_rotations, motion.root_translation,
+                                         sk.joints_rest, sk.parents)
+    ends = end_site_positions(transforms, sk.end_sites_rest, sk.end_site_parents,
+                              sk.joints_rest)
+    seen = views_seeing(rig, np.concatenate([pos, ends], axis=1), 0.03).sum(axis=1)
+    root = motion.root_translation
+    return {"frames": int(len(seen)), "all_views": float(np.mean(seen == len(rig))),
+            "under_3_views": int(np.sum(seen < 3)), "min_views": int(seen.min()),
+            "min_clearance": float(room.clearance(root[:, [0, 2]]).min()),
+            "x": (float(root[:, 0].min()), float(root[:, 0].max())),
+            "z": (float(root[:, 2].min()), float(root[:, 2].max()))}
+
+
 def _place_distractor(motion, room, rig, subject_xz: np.ndarray, rng):
     """A spot at the side of the room, clear of furniture, 1.3 m from the subject and 1.8 m
     from every camera (nearer, a person fills the view), facing roughly the room centre."""
@@ -486,12 +537,11 @@ def generate(config: MocapSimConfig) -> SimResult:
     from hmocap_ros.io.conversions import make_joint_state, numpy_to_image
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.typestore import hmocap_typestore
-    from hmocap_ros.rig import load_rig, rig_to_msg, save_rig
+    from hmocap_ros.rig import rig_to_msg, save_rig
     from hmocap_ros.sim.appearance import dress, sample_appearance
     from hmocap_ros.sim.contact_sheet import Tile, contact_sheet, save_png
     from hmocap_ros.sim.mocap_render import (BALL_RADIUS, FrameState, MocapRenderer,
                                              RenderOptions)
-    from hmocap_ros.sim.room import build_room
 
     t_start = time.perf_counter()
     out = Path(config.out)
@@ -510,25 +560,13 @@ def generate(config: MocapSimConfig) -> SimResult:
         raise FileNotFoundError(f"BVH file {bvh} not found")
     fps = float(config.fps)
 
-    # Independent random streams, so that e.g. --distractors does not change the subject.
-    streams = np.random.SeedSequence(int(config.seed)).spawn(8)
-    rng_room, rng_shape, rng_look, rng_place, rng_dist, rng_light, rng_cam, rng_events = (
-        np.random.default_rng(s) for s in streams)
-
-    if config.rig is not None:
-        rig = load_rig(config.rig)
-    else:
-        rig = make_rig(config.cameras, config.width, config.height)
+    (rng_room, rng_shape, rng_look, rng_place, rng_dist, rng_light, rng_cam,
+     rng_events) = _streams(config.seed)
+    rig, room, tracking, shape, motion = _subject_in_room(config, rng_room, rng_shape,
+                                                          rng_place)
     width, height = rig[0].width, rig[0].height
-    room = build_room(rng_room)
-    tracking = load_body_model("tracking")
     full = load_body_model("hands", "full")
-
-    shape = sample_shape(rng_shape)
     look = dress(full, sample_appearance(rng_look))
-    motion = _retargeted(bvh, tracking, shape, fps)
-    motion = _motion_window(motion, config.start, config.seconds, fps)
-    motion = _place(motion, rig, room, rng_place, _shaped_skeleton(tracking, shape))
     subject = _performer(motion, tracking, full, shape, look)
     n_motion = len(subject.params)
     n_bg = int(round(config.background_seconds * fps))
