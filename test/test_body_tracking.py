@@ -331,11 +331,11 @@ def _column_hull(columns) -> Hull:
                 heading=0.0, elongation=1.0)
 
 
-def test_start_up_grows_to_a_taller_hull(model, rig):
-    """grow_to: a hypothesis whose body stands more than the margin below the hull's top (the
-    start frame's segmentation lost the head) grows to it; within the margin nothing moves.
-    With ``column``, only the hull over the body's head counts: a raised hand beside it
-    (stop 24's held-out laugh) grows nothing, and a column without voxels neither."""
+def _growth_estimator(model, rig):
+    """A start-up estimator for ``grow_to`` tests: ``(est, x, g, ty, reset)``, ``x`` one
+    hypothesis' state (rest pose at global scale 0.9, pelvis height to match), ``g`` and
+    ``ty`` the indices of its global scale and pelvis height, ``reset()`` puts that
+    hypothesis (8 equal particles) back."""
     fitness = SilhouetteFitness(model, rig, working_scale=0.25)
     est = AnthropometryEstimator(fitness, EstimationParams(n_particles=8, frames=1),
                                  np.random.default_rng(0), room=room_bounds(rig))
@@ -349,6 +349,17 @@ def test_start_up_grows_to_a_taller_hull(model, rig):
     def reset():
         est.hypotheses = [Hypothesis(heading=0.0, particles=np.tile(x, (8, 1)),
                                      estimate=x.copy())]
+
+    return est, x, g, ty, reset
+
+
+def test_start_up_grows_to_a_taller_hull(model, rig):
+    """grow_to: a hypothesis whose body stands more than the margin below the hull's top (the
+    start frame's segmentation lost the head) grows to it; within the margin nothing moves.
+    With ``column``, only the hull over the body's head counts: a raised hand beside it
+    (stop 24's held-out laugh) grows nothing, and a column without voxels neither."""
+    est, x, g, ty, reset = _growth_estimator(model, rig)
+    skel = model.skeleton
 
     def posed():
         e = est.hypotheses[0].estimate
@@ -429,19 +440,8 @@ def test_start_up_grows_to_the_head_not_to_a_hand_over_it(model, rig):
     """grow_to with ``head_fraction`` (stop 26): the hull's head top against the body's crown;
     a hull whose head stands taller than the body grows it, a hand held over a head as tall
     as the body grows nothing (the plain column grows it to the hand)."""
-    fitness = SilhouetteFitness(model, rig, working_scale=0.25)
-    est = AnthropometryEstimator(fitness, EstimationParams(n_particles=8, frames=1),
-                                 np.random.default_rng(0), room=room_bounds(rig))
+    est, x, _, _, reset = _growth_estimator(model, rig)
     skel = model.skeleton
-    g = skel.n_dofs + SHAPE_KEYS.index("global")
-    ty = int(skel.translation_dofs[1])
-    x = np.concatenate([np.zeros(skel.n_dofs), np.ones(len(SHAPE_KEYS))])
-    x[g] = 0.9
-    x[ty] = float(skel.joints_rest[0][1]) * 0.9
-
-    def reset():
-        est.hypotheses = [Hypothesis(heading=0.0, particles=np.tile(x, (8, 1)),
-                                     estimate=x.copy())]
 
     reset()
     e = est.hypotheses[0].estimate
