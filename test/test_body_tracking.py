@@ -26,8 +26,8 @@ from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARA
                                                           EstimationParams, shape_from_state,
                                                           shape_to_state)
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
-from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, body_sigma0, clip_body_pose,
-                                             make_schedule)
+from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, SWEEP_DECAY, body_sigma0,
+                                             clip_body_pose, make_schedule)
 from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.kernels import rejection_kernel
@@ -518,6 +518,28 @@ def test_schedules_spend_about_equal_evaluations(model):
         make_schedule("pso", skel)
 
 
+def test_a_second_sweep_weighs_every_block_again_at_a_finer_std(model):
+    skel = model.skeleton
+    sigma0 = body_sigma0(skel)
+    for method, block_layers in (("hpf", 6), ("hpf-apo", 7)):
+        one = make_schedule(method, skel, arm_chain=False)
+        two = make_schedule(method, skel, arm_chain=False, sweeps=2)
+        # the same evaluations per frame, spread over twice the block layers
+        assert abs(two.evaluations_per_frame - one.evaluations_per_frame) <= 15
+        assert two.n_weightings == one.n_weightings + len(BODY_BLOCKS)
+        assert [b[0] for b in two.layer_blocks if b] == list(BODY_BLOCKS) * 2
+        # the layer before the second sweep's torso diffuses the torso at half sigma0
+        torso = skel.group_dofs("torso")
+        np.testing.assert_allclose(two.filter.stds[len(BODY_BLOCKS) - 1][torso],
+                                   SWEEP_DECAY * sigma0[torso])
+        # the first sweep is the one-sweep schedule's (its kernels and boxes)
+        assert two.boxed[:block_layers] == one.boxed[:block_layers]
+        for l in range(len(BODY_BLOCKS) - 1):
+            np.testing.assert_allclose(two.filter.stds[l], one.filter.stds[l])
+    with pytest.raises(ValueError, match="sweeps"):
+        make_schedule("hpf", skel, sweeps=0)
+
+
 def test_pose_kernel_respects_joint_limits(model):
     skel = model.skeleton
     sched = make_schedule("apf", skel, n_particles=50, jump_fraction=0.5)
@@ -543,6 +565,8 @@ def test_tracker_params_are_described():
         TrackerParams(mesh="hands")
     with pytest.raises(ValueError, match="start_height_margin"):
         TrackerParams(start_height_margin=-0.1)
+    with pytest.raises(ValueError, match="hpf_sweeps"):
+        TrackerParams(hpf_sweeps=0)
     with pytest.raises(ValueError, match="start_height_column"):
         TrackerParams(start_height_column=-0.1)
     with pytest.raises(ValueError, match="start_head_fraction"):

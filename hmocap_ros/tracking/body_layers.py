@@ -59,7 +59,7 @@ from hmocap_ros.tracking.layered_filter import Layer, LayeredFilter, annealed_fi
 
 __all__ = [
     "BODY_BLOCKS", "DEFAULT_EVALUATIONS", "DEFAULT_SIGMA0", "METHODS", "SIGMA0_FACTOR",
-    "BodySchedule", "body_sigma0", "clip_body_pose", "make_schedule", "motion_sigma0",
+    "SWEEP_DECAY", "BodySchedule", "body_sigma0", "clip_body_pose", "make_schedule", "motion_sigma0",
     "pose_kernel",
 ]
 
@@ -70,6 +70,9 @@ BODY_BLOCKS = ("torso", "l_leg", "r_leg", "l_shoulder", "r_shoulder", "l_elbow",
 DEFAULT_EVALUATIONS = {"apf": (14, 250), "hpf": (7, 500), "hpf-apo": (8, 438),
                        "dd-hpf": (8, 438)}
 SIGMA0_FACTOR = 1.5
+#: Hierarchical schedules with several sweeps: std factor of a block's kernel per sweep after
+#: the first (the second sweep searches at half the first one's std).
+SWEEP_DECAY = 0.5
 
 #: RMS frame-to-frame change per DoF at 25 fps (metres, degrees) on the held-out clips (see
 #: the module docstring; ``motion_sigma0`` with the four clips, sides pooled, rounded; the
@@ -245,18 +248,33 @@ def _block_dims(skel: Skeleton, arm_chain: bool = False) -> list[np.ndarray]:
 
 def _hierarchical(skel: Skeleton, method: str, n_particles: int, sigma0: np.ndarray, *, boxed: bool,
                   survival_rate: float, refine_nu: float, kernel,
-                  arm_chain: bool = False) -> BodySchedule:
+                  arm_chain: bool = False, sweeps: int = 1,
+                  sweep_decay: float = SWEEP_DECAY) -> BodySchedule:
     blocks = _block_dims(skel, arm_chain)
     d = skel.n_dofs
-    n_block_layers = len(blocks) if boxed else len(blocks) - 1
+    # the blocks weighed in order, ``sweeps`` times over the kinematic tree; without boxes
+    # the final whole-image layer is the last block's weighting
+    order = [(s, b) for s in range(sweeps) for b in range(len(blocks))]
+    if not boxed:
+        order = order[:-1]
+
+    def block_std(s: int, b: int) -> np.ndarray:
+        return (sweep_decay ** s) * sigma0[blocks[b]]
+
     layers = []
-    for l in range(n_block_layers):
+    last_weighed: dict[int, tuple[int, int]] = {}  # block -> (layer, sweep) it was last weighed in
+    for j, (s, b) in enumerate(order):
+        last_weighed[b] = (j, s)
         std = np.zeros(d)
-        for m in range(l + 1):  # alg. 3 re-diffusion of the blocks filtered so far
-            std[blocks[m]] = (refine_nu ** (l + 1 - m)) * sigma0[blocks[m]] if refine_nu > 0 else 0.0
-        if l + 1 < len(blocks):
-            std[blocks[l + 1]] = sigma0[blocks[l + 1]]
-        layers.append(Layer(dims=blocks[l], survival_rate=survival_rate,
+        if refine_nu > 0:  # alg. 3 re-diffusion of the blocks filtered so far
+            for m, (k, sm) in last_weighed.items():
+                std[blocks[m]] = (refine_nu ** (j + 1 - k)) * block_std(sm, m)
+        if j + 1 < len(order):  # the kernel diffuses the next block right before it is weighed
+            s_next, b_next = order[j + 1]
+            std[blocks[b_next]] = block_std(s_next, b_next)
+        elif not boxed:
+            std[blocks[-1]] = block_std(sweeps - 1, len(blocks) - 1)
+        layers.append(Layer(dims=blocks[b], survival_rate=survival_rate,
                             n_particles=n_particles, std=std, kernel=kernel))
     final_std = np.zeros(d)
     final_std[blocks[0]] = sigma0[blocks[0]]
@@ -264,11 +282,11 @@ def _hierarchical(skel: Skeleton, method: str, n_particles: int, sigma0: np.ndar
                   kernel=kernel)
     lpf = LayeredFilter(layers=tuple(layers), sigma0=sigma0, nu=max(refine_nu, 1e-6),
                         final=final)
-    names = [(BODY_BLOCKS[l],) for l in range(n_block_layers)]
+    names = [(BODY_BLOCKS[b],) for _, b in order]
     final_blocks = () if boxed else (BODY_BLOCKS[-1],)
     return BodySchedule(method=method, filter=lpf,
                         layer_blocks=tuple(names) + (final_blocks,),
-                        boxed=tuple([boxed] * n_block_layers + [False]))
+                        boxed=tuple([boxed] * len(order) + [False]))
 
 
 def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None,
@@ -277,15 +295,24 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
                   jump_fraction: float = 0.0, jump_scale: float = 4.0,
                   reseed_fraction: float = 0.0, arm_chain: bool = False,
                   room_lo: np.ndarray | None = None,
-                  room_hi: np.ndarray | None = None) -> BodySchedule:
+                  room_hi: np.ndarray | None = None, sweeps: int = 1) -> BodySchedule:
     """The layer schedule of ``method`` (one of :data:`METHODS`); see the module table.
 
     n_particles / n_layers: None gives :data:`DEFAULT_EVALUATIONS`. ``n_layers`` only applies
-    to the APF (the hierarchical schedules have one layer per body block).
+    to the APF (the hierarchical schedules have one layer per body block and sweep).
+    sweeps: hierarchical schedules weigh the blocks this many times over the kinematic tree
+    per frame (alg. 5 with each partition repeated; later sweeps diffuse a block with
+    :data:`SWEEP_DECAY` times the std of the sweep before); with ``n_particles`` None the
+    particles per layer shrink so the evaluations per frame stay those of one sweep.
     """
+    if sweeps < 1:
+        raise ValueError("sweeps must be >= 1")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     default_layers, default_particles = DEFAULT_EVALUATIONS[method]
+    if method != "apf" and sweeps > 1:  # the same evaluations over more layers
+        layers_total = sweeps * len(BODY_BLOCKS) + default_layers - len(BODY_BLOCKS)
+        default_particles = int(round(default_layers * default_particles / layers_total))
     n = int(n_particles or default_particles)
     if n < 2:
         raise ValueError("need at least 2 particles")
@@ -303,4 +330,4 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
         return BodySchedule("apf", lpf, tuple(() for _ in range(k)), tuple(False for _ in range(k)))
     return _hierarchical(skel, method, n, sigma0, boxed=method != "hpf",
                          survival_rate=survival_rate, refine_nu=refine_nu, kernel=kernel,
-                         arm_chain=arm_chain)
+                         arm_chain=arm_chain, sweeps=sweeps)

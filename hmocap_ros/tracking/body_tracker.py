@@ -134,6 +134,11 @@ class TrackerParams:
     velocity_dofs: str = _param("root_position", "DoFs the velocity prediction moves: "
                                                  "'root_position' (pelvis), 'root' (pelvis "
                                                  "and its rotation) or 'all'.")
+    hpf_sweeps: int = _param(1, "Hierarchical methods: passes over the kinematic tree's "
+                                "blocks per frame (1: the thesis' one layer per block). 2 "
+                                "weighs every block again after the others were filtered, "
+                                "at half the kernel std, with the particles per layer cut "
+                                "so the evaluations per frame stay the same.")
     arm_chain: bool = _param(True, "Hierarchical methods: each shoulder layer samples its "
                                     "elbow too (the elbow layer then refines it).")
     box_reach: float = _param(1.05, "Observation boxes of the limb layers: half-size as a "
@@ -299,6 +304,7 @@ class TrackerParams:
         checks = [
             (self.method in METHODS, f"method must be one of {METHODS}"),
             (self.n_particles >= 0 and self.n_layers >= 0, "n_particles, n_layers must be >= 0"),
+            (self.hpf_sweeps >= 1, "hpf_sweeps must be >= 1"),
             (0.0 < self.working_scale <= 1.0, "working_scale must lie in (0, 1]"),
             (self.mesh in TRACKER_MESHES, f"mesh must be one of {TRACKER_MESHES}"),
             (0.0 < self.shape_working_scale <= 1.0, "shape_working_scale must lie in (0, 1]"),
@@ -417,7 +423,7 @@ class BodyTracker:
             sigma_scale=p.sigma_scale, survival_rate=p.survival_rate, apf_alpha=p.apf_alpha,
             refine_nu=p.refine_nu, jump_fraction=p.jump_fraction, jump_scale=p.jump_scale,
             reseed_fraction=p.reseed_fraction, arm_chain=p.arm_chain, room_lo=self.room[0],
-            room_hi=self.room[1])
+            room_hi=self.room[1], sweeps=p.hpf_sweeps)
         self._layer_vertices = [layer_vertex_indices(model, blocks) if boxed else None
                                 for blocks, boxed in zip(self.schedule.layer_blocks,
                                                          self.schedule.boxed)]
