@@ -331,7 +331,7 @@ def stored_params(method: str, overrides: dict | None = None) -> dict:
 #: Tracker settings added after reports were stored, with the value at which the tracker does
 #: what it did before the setting existed: a stored report without the key was made with it.
 INERT_SETTINGS = {"start_height_margin": 0.0, "ignore_other_people": False,
-                  "start_height_column": 0.0, "start_head_fraction": 0.0}
+                  "start_height_column": 0.0, "start_head_fraction": 0.0, "hpf_sweeps": 1}
 
 
 def settings_diff(stored: dict, wanted: dict) -> list[str]:
