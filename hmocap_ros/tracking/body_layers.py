@@ -23,6 +23,16 @@ dd-hpf     the hpf-apo schedule; the tracker adds IK particles from     8 x 438 
            layer of eq. 2.21 (sec. 2.5.2, :mod:`.ik_proposals`)
 =========  ==========================================================  ==========================
 
+The table is one sweep (``sweeps=1``). With ``sweeps=2`` the hierarchical schedules weigh
+the seven blocks twice per frame, torso to right elbow and again (sec. 2.2.4: a layered
+filter is several filtering runs over sub-state spaces, and nothing asks each partition to
+come once; the thesis' shape estimation repeats its first layers as an annealing scheme,
+table 2.2), the second sweep diffusing each block at :data:`SWEEP_DECAY` times its std,
+with fewer particles per layer for the same evaluations (hpf 14 x 250, hpf-apo and dd-hpf
+15 x 234). A block's first weighing sees the blocks after it at their predicted pose; the
+second sees them filtered, so a torso pulled aside by a wrongly predicted leg is weighed
+again once the leg is in place.
+
 Choices where the thesis is vague:
 
 * Kernels follow partitioned sampling (sec. 2.2.3, condition 1): the dynamics of a partition

@@ -134,11 +134,12 @@ class TrackerParams:
     velocity_dofs: str = _param("root_position", "DoFs the velocity prediction moves: "
                                                  "'root_position' (pelvis), 'root' (pelvis "
                                                  "and its rotation) or 'all'.")
-    hpf_sweeps: int = _param(1, "Hierarchical methods: passes over the kinematic tree's "
-                                "blocks per frame (1: the thesis' one layer per block). 2 "
-                                "weighs every block again after the others were filtered, "
-                                "at half the kernel std, with the particles per layer cut "
-                                "so the evaluations per frame stay the same.")
+    hpf_sweeps: int = _param(2, "Hierarchical methods: passes over the kinematic tree's "
+                                "blocks per frame. 2 (since stop 27, tuning rule F: -7.7 mm "
+                                "on 24 runner runs) weighs every block again after the others "
+                                "were filtered, at half the kernel std, with the particles "
+                                "per layer cut so the evaluations per frame stay the same "
+                                "(hpf-apo 15 x 234); 1: the thesis' one layer per block.")
     arm_chain: bool = _param(True, "Hierarchical methods: each shoulder layer samples its "
                                     "elbow too (the elbow layer then refines it).")
     box_reach: float = _param(1.05, "Observation boxes of the limb layers: half-size as a "
