@@ -6,7 +6,9 @@ rendered at 640x480 in the 4 cameras of ``config/rig_example.yaml`` (no segmenta
 measures the tracker). The tracker is started on the first frame (the start-up is not timed),
 then every method runs ``--frames`` frames of tracking at its default budget (about 3,500
 weight evaluations per frame: HPF 7 layers x 500 particles as in the thesis' comparison,
-HPF+APO and DD-HPF 8 x 438, APF 14 x 250), with 1 and 2 numba threads. DD-HPF gets ideal
+HPF+APO and DD-HPF 8 x 438, APF 14 x 250; with the default two sweeps over the kinematic
+tree, ``hpf_sweeps``, HPF 14 x 250 and HPF+APO and DD-HPF 15 x 234), with 1 and 2 numba
+threads. DD-HPF gets ideal
 hand-detector maps (1 where the hands are seen; the skin detector's own cost, 0.6 ms per
 640x480 image by ``bench_skin.py``, is the foreground node's). Printed per method: seconds per
 frame (median), evaluations per second, and where the time goes (skinning = eq. 2.11/2.12,
@@ -18,7 +20,7 @@ and what a second tracker slot costs while nobody else is in the room (``max_peo
 carves the coarse visual hull of each frame to look for a new person).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
-        [--mesh tracking_coarse]
+        [--mesh tracking_coarse] [--param hpf_sweeps=1]
 
 The scene is always rendered with the 2,400-triangle ``tracking`` body; ``--mesh`` picks what
 the tracker renders its particles with (``TrackerParams.mesh``).
@@ -35,6 +37,7 @@ import numpy as np
 
 from hmocap_ros.body import load_body_model, local_rotations_to_pose
 from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.eval.mocap_eval import tracker_overrides
 from hmocap_ros.render import project_batch, render_silhouettes
 from hmocap_ros.rig import load_rig
 from hmocap_ros.sim.retarget import load_motion, place_in_room
@@ -72,7 +75,13 @@ def main() -> None:
     ap.add_argument("--working-scale", type=float, default=0.25)
     ap.add_argument("--mesh", default=TrackerParams().mesh, choices=TRACKER_MESHES,
                     help="mesh the tracker renders its particles with (default %(default)s)")
+    ap.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                    help="other tracker setting (as hmocap eval mocap --param)")
     args = ap.parse_args()
+    try:
+        overrides = tracker_overrides(args.param)
+    except ValueError as err:
+        ap.error(str(err))
     model = load_body_model("tracking")
     rig = load_rig(ROOT / "config" / "rig_example.yaml")
     shape, masks, maps = scene(model, rig, args.frames + 1)
@@ -81,16 +90,16 @@ def main() -> None:
     print(f"4 views {rig[0].width}x{rig[0].height}, working scale {args.working_scale} "
           f"({int(rig[0].width * args.working_scale)}x{int(rig[0].height * args.working_scale)}), "
           f"scene mesh {model.n_vertices} vertices / {len(model.faces)} triangles, tracker mesh "
-          f"{args.mesh} ({len(model.with_mesh(args.mesh).faces)} triangles), {args.frames} frames")
+          f"{args.mesh} ({len(model.with_mesh(args.mesh).faces)} triangles), {args.frames} frames"
+          + "".join(f", {k}={v}" for k, v in overrides.items()))
     for threads in args.threads:
         numba.set_num_threads(threads)
         for method in args.methods:
             # the fresh search (research_every) runs on the frame after the timed ones
             # (the start-up and warm-up frames do not count, so it is tracked frame n + 2)
-            tracker = BodyTracker(model, rig, TrackerParams(method=method,
-                                                            working_scale=args.working_scale,
-                                                            mesh=args.mesh,
-                                                            research_every=args.frames + 2),
+            tracker = BodyTracker(model, rig, TrackerParams(**{
+                **overrides, "method": method, "working_scale": args.working_scale,
+                "mesh": args.mesh, "research_every": args.frames + 2}),
                                   np.random.default_rng(0), shape=shape)
             tracker.update(list(masks[0]), 0)  # start-up (hull, Powell): not timed
             tracker.update(list(masks[1 % len(masks)]), 1, list(maps[1 % len(masks)]))  # warm-up
@@ -117,9 +126,9 @@ def main() -> None:
             print(f"{'':18s}fresh search (research_every): {search:.2f} s on its frame, "
                   f"{search / every:.3f} s/frame at the default of one every {every} frames",
                   flush=True)
-        people = PeopleTracker(model, rig, TrackerParams(method="hpf-apo",
-                                                         working_scale=args.working_scale,
-                                                         mesh=args.mesh),
+        people = PeopleTracker(model, rig, TrackerParams(**{
+            **overrides, "method": "hpf-apo", "working_scale": args.working_scale,
+            "mesh": args.mesh}),
                                np.random.default_rng(0), shape=shape, max_people=2)
         people.update(list(masks[0]), 0)
         idle = [people.update(list(masks[f]), f)[1].timings["total"]
