@@ -69,8 +69,8 @@ from hmocap_ros.tracking.layered_filter import Layer, LayeredFilter, annealed_fi
 
 __all__ = [
     "BODY_BLOCKS", "DEFAULT_EVALUATIONS", "DEFAULT_SIGMA0", "METHODS", "SIGMA0_FACTOR",
-    "SWEEP_DECAY", "BodySchedule", "body_sigma0", "clip_body_pose", "make_schedule", "motion_sigma0",
-    "pose_kernel",
+    "SWEEP_DECAY", "BodySchedule", "body_sigma0", "clip_body_pose", "make_schedule",
+    "motion_sigma0", "pose_kernel",
 ]
 
 METHODS = ("apf", "hpf", "hpf-apo", "dd-hpf")

@@ -95,11 +95,12 @@ class TrackerParams:
     ROS node's parameter declarations). Defaults: 4 cameras at 640x480, 25 fps."""
 
     method: str = _param("dd-hpf", "Layered filter: 'apf' (annealing, 14 x 250), 'hpf' "
-                                    "(hierarchical, 7 x 500), 'hpf-apo' (hierarchical with "
-                                    "approximate partitioning of observations, 8 x 438) or "
-                                    "'dd-hpf' (hpf-apo driven by hand detections: IK "
-                                    "particles and the refinement layer, sec. 2.5; needs "
-                                    "detector maps).")
+                                    "(hierarchical, 7 x 500 in one sweep, 14 x 250 in two, "
+                                    "hpf_sweeps), 'hpf-apo' (hierarchical with approximate "
+                                    "partitioning of observations, 8 x 438 in one sweep, "
+                                    "15 x 234 in two) or 'dd-hpf' (hpf-apo driven by hand "
+                                    "detections: IK particles and the refinement layer, sec. "
+                                    "2.5; needs detector maps).")
     n_particles: int = _param(0, "Particles per layer; 0 uses the method's default (about 3500 "
                                  "weight evaluations per frame).")
     n_layers: int = _param(0, "Layers of the APF; 0 uses the default (14). The hierarchical "
