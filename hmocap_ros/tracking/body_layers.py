@@ -258,8 +258,7 @@ def _block_dims(skel: Skeleton, arm_chain: bool = False) -> list[np.ndarray]:
 
 def _hierarchical(skel: Skeleton, method: str, n_particles: int, sigma0: np.ndarray, *, boxed: bool,
                   survival_rate: float, refine_nu: float, kernel,
-                  arm_chain: bool = False, sweeps: int = 1,
-                  sweep_decay: float = SWEEP_DECAY) -> BodySchedule:
+                  arm_chain: bool = False, sweeps: int = 1) -> BodySchedule:
     blocks = _block_dims(skel, arm_chain)
     d = skel.n_dofs
     # the blocks weighed in order, ``sweeps`` times over the kinematic tree; without boxes
@@ -269,7 +268,7 @@ def _hierarchical(skel: Skeleton, method: str, n_particles: int, sigma0: np.ndar
         order = order[:-1]
 
     def block_std(s: int, b: int) -> np.ndarray:
-        return (sweep_decay ** s) * sigma0[blocks[b]]
+        return (SWEEP_DECAY ** s) * sigma0[blocks[b]]
 
     layers = []
     last_weighed: dict[int, tuple[int, int]] = {}  # block -> (layer, sweep) it was last weighed in
