@@ -27,6 +27,7 @@ to other processes on a shared machine) and the median wall-clock time are print
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -39,8 +40,10 @@ from hmocap_ros.eval.gesture_eval import DEFAULT_MODEL, read_gesture_bag
 from hmocap_ros.gestures import DetectorParams, ForestParams, GestureDetector, collect_samples, load_forest
 from hmocap_ros.gestures.forest import frames_to_metres, train_forest_on_samples
 from hmocap_ros.gestures.params import FeatureParams, PatchParams, TrainParams
-from hmocap_ros.gestures.synthetic import TOY_CLASSES, focal_scale, toy_sequence
-from hmocap_ros.sim.gesture_dataset import generate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # test fixtures
+from fixtures.toy_depth import TOY_CLASSES, focal_scale, toy_sequence  # noqa: E402
+from hmocap_ros.sim.gesture_dataset import generate  # noqa: E402
 
 
 def train(samples, params: TrainParams, rng, label: str):

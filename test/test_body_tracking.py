@@ -30,7 +30,7 @@ from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, SWEEP_DECAY, 
                                              clip_body_pose, make_schedule)
 from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
 from hmocap_ros.tracking.limb_proposals import LimbProposer
-from hmocap_ros.tracking.kernels import rejection_kernel
+from hmocap_ros.lpf.kernels import rejection_kernel
 from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d)
 from hmocap_ros.tracking.visual_hull import Hull, carve, room_bounds, visual_hull

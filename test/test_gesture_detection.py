@@ -12,7 +12,7 @@ from hmocap_ros.gestures import DetectorParams, FeatureParams, Forest, GestureDe
 from hmocap_ros.gestures.depth_features import depth_to_metres
 from hmocap_ros.gestures.detection import forest_grid_proba, forest_grid_votes, grid_shape, pad_for_forest
 from hmocap_ros.gestures.params import DepthFormat
-from hmocap_ros.gestures.synthetic import add_sensor_noise, toy_detector_params, toy_forest, toy_frame
+from fixtures.toy_depth import add_sensor_noise, toy_detector_params, toy_forest, toy_frame
 
 SHAPE = (240, 320)
 FRAME_NS = 33_333_333

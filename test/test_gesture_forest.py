@@ -19,7 +19,7 @@ from hmocap_ros.gestures import (
 )
 from hmocap_ros.gestures.forest import balanced_error, frames_to_metres, information_gain
 from hmocap_ros.gestures.patches import mine_hard_negatives
-from hmocap_ros.gestures.synthetic import TOY_CLASSES, toy_forest, toy_sequence, toy_train_params
+from fixtures.toy_depth import TOY_CLASSES, toy_forest, toy_sequence, toy_train_params
 from hmocap_ros.gestures.trees import apply_tree
 
 SHAPE = (240, 320)

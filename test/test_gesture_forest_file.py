@@ -20,7 +20,7 @@ from hmocap_ros.gestures import (
     save_forest,
 )
 from hmocap_ros.gestures.forest_file import FORMAT_NAME, FORMAT_VERSION
-from hmocap_ros.gestures.synthetic import toy_detector_params, toy_forest, toy_frame
+from fixtures.toy_depth import toy_detector_params, toy_forest, toy_frame
 
 SHAPE = (240, 320)
 TREE_ARRAYS = ("feature", "threshold", "left", "right", "counts", "depth")

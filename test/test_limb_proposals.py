@@ -11,7 +11,7 @@ import pytest
 from hmocap_ros.body import rest_pose, sample_pose
 from hmocap_ros.render import project_batch, render_silhouettes, xor_counts
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
-from hmocap_ros.tracking.fused_xor import xor_counts_from_vertices
+from hmocap_ros.render.fused_xor import xor_counts_from_vertices
 from hmocap_ros.tracking.limb_proposals import LIMBS, LimbProposer
 
 

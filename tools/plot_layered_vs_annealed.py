@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Layered (hierarchical) vs annealed particle filtering at equal numbers of evaluations.
 
-The 24-dim multimodal kinematic-tree objective of ``hmocap_ros.tracking.synthetic_chain``;
+The 24-dim multimodal kinematic-tree objective of ``fixtures.synthetic_chain``;
 every filter starts from the same particle cloud around a wrong pose. Left: final marker error
 against the evaluation budget (mean and standard deviation over the instances). Right: the error
 of each layer's weighted-mean estimate against the evaluations spent so far, at one budget.
@@ -20,8 +20,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hmocap_ros.tracking import annealed_filter, hierarchical_filter, lpf_run  # noqa: E402
-from hmocap_ros.tracking.synthetic_chain import BLOCK_DIMS, make_chain_problem  # noqa: E402
+from hmocap_ros.lpf import annealed_filter, hierarchical_filter, lpf_run  # noqa: E402
+import sys
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # test fixtures
+from fixtures.synthetic_chain import BLOCK_DIMS, make_chain_problem  # noqa: E402
 
 LAYERS_PER_BLOCK = 2
 N_LAYERS = len(BLOCK_DIMS) * LAYERS_PER_BLOCK + 1  # 15 weightings per run

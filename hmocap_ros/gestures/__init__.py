@@ -10,7 +10,6 @@
 - :mod:`~hmocap_ros.gestures.detection`: per-frame localization: votes, Parzen density,
   temporal smoothing (eq. 3.4), volume test (eq. 3.5).
 - :mod:`~hmocap_ros.gestures.forest_file`: the versioned ``.npz`` forest file format.
-- :mod:`~hmocap_ros.gestures.synthetic`: toy depth scenes for tests and benchmarks.
 
 Typical use::
 

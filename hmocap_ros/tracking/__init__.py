@@ -1,25 +1,7 @@
-"""Stochastic optimisation for tracking: layered particle filtering (thesis sec. 2.2).
+"""Markerless body tracking (thesis ch. 2): the body tracker, its methods and its parts.
 
-- :mod:`.layered_filter`: the generic run (alg. 1), annealing (eq. 2.9, 2.10, alg. 2), the
-  layered kernel covariance (alg. 3), layered systematic resampling (alg. 4) and the layered
-  run (alg. 5); independent of any body model.
-- :mod:`.kernels`: transition kernels ``kernel(particles, std, rng)`` and box limits.
-- :mod:`.synthetic_chain`: a 24-dim multimodal kinematic-tree objective for tests and plots.
+The generic layered particle filter it runs is :mod:`hmocap_ros.lpf`; this subpackage holds
+what is specific to the human body: the silhouette weighting, the layer schedules, the
+visual hull and start-up, anthropometry estimation, limb and IK proposals, and the extremity
+detector of detector-driven tracking.
 """
-from hmocap_ros.tracking.kernels import Kernel, clip_to_bounds, gaussian_kernel, identity_kernel
-from hmocap_ros.tracking.layered_filter import (Layer, LayerDiagnostics, LayeredFilter,
-                                                LayeredRunResult, WeightFn, annealed_filter,
-                                                annealed_weights, annealing_stds,
-                                                beta_for_survival_rate, effective_sample_size,
-                                                gpf_run, hierarchical_filter,
-                                                layer_diffusion_stds, layered_resample, lpf_run,
-                                                survival_rate, systematic_resample_indices,
-                                                weighted_std)
-
-__all__ = [
-    "Kernel", "clip_to_bounds", "gaussian_kernel", "identity_kernel", "Layer",
-    "LayerDiagnostics", "LayeredFilter", "LayeredRunResult", "WeightFn", "annealed_filter",
-    "annealed_weights", "annealing_stds", "beta_for_survival_rate", "effective_sample_size",
-    "gpf_run", "hierarchical_filter", "layer_diffusion_stds", "layered_resample", "lpf_run",
-    "survival_rate", "systematic_resample_indices", "weighted_std",
-]

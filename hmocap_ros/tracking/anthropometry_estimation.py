@@ -14,7 +14,7 @@ Pipeline, per person appearing in the room:
    rates 0.1, 0.3, 0.8, 1.0), then head and root, upper arms, lower arms, legs length and upper
    legs, lower legs, torso / legs / hip width, then a final layer over everything. The shape
    dimensions move with the rejection-sampling kernel of eq. 2.13
-   (:func:`~hmocap_ros.tracking.kernels.rejection_kernel`, tau = 0.7, table 2.1 priors via
+   (:func:`~hmocap_ros.lpf.kernels.rejection_kernel`, tau = 0.7, table 2.1 priors via
    :func:`~hmocap_ros.body.anthropometry.shape_log_prior`), the pose dimensions with a
    Gaussian kernel within the joint limits; the weighting is the silhouette XOR (eq. 2.8).
    It runs once per frame over the first ``frames`` frames (the subject moves, the shape does
@@ -55,9 +55,9 @@ from hmocap_ros.body.anthropometry import (ENTITY_NAMES, BodyShape, entity_sizes
                                            shape_log_prior)
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import body_sigma0, clip_body_pose, root_room_limits
-from hmocap_ros.tracking.kernels import rejection_kernel
+from hmocap_ros.lpf.kernels import rejection_kernel
 from hmocap_ros.tracking.limb_proposals import LimbProposalParams
-from hmocap_ros.tracking.layered_filter import (Layer, LayeredFilter, beta_for_survival_rate,
+from hmocap_ros.lpf.layered_filter import (Layer, LayeredFilter, beta_for_survival_rate,
                                                 lpf_run)
 from hmocap_ros.tracking.visual_hull import Hull
 

@@ -39,7 +39,7 @@ from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.render import project_batch, xor_counts
 from hmocap_ros.render.projection import distortion_valid_r2
 from hmocap_ros.rig import camera_arrays
-from hmocap_ros.tracking.fused_xor import xor_counts_from_vertices
+from hmocap_ros.render.fused_xor import xor_counts_from_vertices
 
 __all__ = ["Observation", "SilhouetteFitness", "StageTimes", "downsample_mask", "posed_mesh",
            "serial_below"]

@@ -64,8 +64,8 @@ from typing import Sequence
 import numpy as np
 
 from hmocap_ros.body.skeleton import SWING_NORM_MAX, Skeleton, local_rotations_to_pose
-from hmocap_ros.tracking.kernels import gaussian_kernel
-from hmocap_ros.tracking.layered_filter import Layer, LayeredFilter, annealed_filter
+from hmocap_ros.lpf.kernels import gaussian_kernel
+from hmocap_ros.lpf.layered_filter import Layer, LayeredFilter, annealed_filter
 
 __all__ = [
     "BODY_BLOCKS", "DEFAULT_EVALUATIONS", "DEFAULT_SIGMA0", "METHODS", "SIGMA0_FACTOR",

@@ -59,7 +59,7 @@ from hmocap_ros.tracking.body_layers import METHODS, BodySchedule, make_schedule
 from hmocap_ros.tracking.extremity_detection import (Extremities, ExtremityDetector,
                                                      ExtremityParams, detection_cost)
 from hmocap_ros.tracking.ik_proposals import IKProposer
-from hmocap_ros.tracking.layered_filter import LayerDiagnostics, lpf_run
+from hmocap_ros.lpf.layered_filter import LayerDiagnostics, lpf_run
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.body_layers import BODY_BLOCKS
 from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths, faces_of_blocks,
