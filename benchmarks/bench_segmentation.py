@@ -57,7 +57,7 @@ import numpy as np
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.param_overrides import field_overrides
+from hmocap_ros.params import field_overrides
 from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
-from hmocap_ros.param_overrides import field_overrides
+from hmocap_ros.params import field_overrides
 
 __all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames",
            "main_from_args", "plot_errors", "run_method", "tracker_overrides"]

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from hmocap_ros.params import param
+
 FEATURE_TYPES = ("clipped", "plain")
 OUTSIDE_MODES = ("border", "background")
 #: Focal length (px) of the camera the pixel sizes of the defaults are given for: a 640x480
@@ -25,8 +27,6 @@ OUTSIDE_MODES = ("border", "background")
 REFERENCE_FOCAL_PX = 525.0
 
 
-def _param(default, description: str):
-    return field(default=default, metadata={"description": description, "read_only": False})
 
 
 def _check(checks, name):
@@ -44,14 +44,14 @@ class DepthFormat:
     forest's ``background_depth_m`` when a test probes them (see ``depth_features``).
     """
 
-    unit_m: float = _param(
+    unit_m: float = param(
         0.0, "Metres per raw depth unit: 0.001 for millimetres (16UC1), 0.000125 for 1/8 mm, "
              "1.0 for metres (32FC1); 0 = REP 118: integer images in mm, float images in m.")
-    invalid_value: float = _param(
+    invalid_value: float = param(
         0.0, "Raw value that marks a pixel without depth (NaN and inf are always invalid).")
-    min_depth_m: float = _param(
+    min_depth_m: float = param(
         0.3, "Nearer depths are invalid (sensor minimum; bounds the test offsets in pixels).")
-    max_depth_m: float = _param(
+    max_depth_m: float = param(
         8.0, "Farther depths are invalid (sensor maximum; must be below the forest's "
              "background_depth_m).")
 
@@ -71,19 +71,19 @@ class DepthFormat:
 class FeatureParams:
     """The depth binary tests of the forest (thesis eq. 3.3 and 3.6); saved in the forest file."""
 
-    feature_type: str = _param(
+    feature_type: str = param(
         "clipped", "'clipped': depth-clipped pixel-pair tests (eq. 3.6); 'plain': eq. 3.3.")
-    kappa_m: float = _param(
+    kappa_m: float = param(
         0.15, "Clipping parameter kappa (eq. 3.6): probe depths are clipped to d(x) +- kappa "
               "(thesis best: 0.15 m). Ignored by plain tests.")
-    patch_half_size_px_m: float = _param(
+    patch_half_size_px_m: float = param(
         85.0, "Half side of the square of test offsets u, v in pixel*metres: at reference depth d "
               "the probes lie within +-value/d pixels (85 = the thesis' 85x85 px patch at 2 m).")
-    background_depth_m: float = _param(
+    background_depth_m: float = param(
         10.0, "Depth read by a probe that falls on an invalid pixel (or outside the image, with "
               "outside = 'background'): far background (with clipping it reads d(x) + kappa like "
               "any far clutter).")
-    outside: str = _param(
+    outside: str = param(
         "border", "What a probe outside the image reads: 'border' = the nearest image pixel (the "
                   "scene goes on beyond the frame), 'background' = background_depth_m.")
 
@@ -108,25 +108,25 @@ class FeatureParams:
 class PatchParams:
     """Patch collection from annotated frames (thesis sec. 3.2.3, "Patch collection")."""
 
-    n_positive: int = _param(
+    n_positive: int = param(
         64, "N+: positive samples per gesture frame, drawn in the box around the annotated point.")
-    n_negative: int = _param(
+    n_negative: int = param(
         256, "N-: negative samples per frame: outside the box in gesture frames, anywhere in "
              "negative frames.")
-    box_half_size_px_m: float = _param(
+    box_half_size_px_m: float = param(
         20.0, "Half side of the positive box in pixel*metres, scaled by the annotated point's "
               "depth (20 = +-10 px at 2 m).")
-    positive_depth_tolerance_m: float = _param(
+    positive_depth_tolerance_m: float = param(
         0.10, "Box pixels whose depth differs from the annotated point's by more are not "
               "positives (background seen through the box); 0 disables the check.")
-    negative_exclusion_scale: float = _param(
+    negative_exclusion_scale: float = param(
         1.0, "Negatives of gesture frames are drawn outside the box scaled by this factor "
              "(1 = just outside the box, as in the thesis).")
-    n_negative_near: int = _param(
+    n_negative_near: int = param(
         256, "Extra negatives per gesture frame drawn outside the (scaled) box but inside the "
            "square of half side near_half_size_px_m / d around the annotated point: the rest of "
            "the hand, the arm, the face, which a detector sees next to the gesture.")
-    near_half_size_px_m: float = _param(
+    near_half_size_px_m: float = param(
         85.0, "Half side of the near-negative square in pixel*metres (85 = the test patch).")
 
     def __post_init__(self):
@@ -143,31 +143,31 @@ class PatchParams:
 class ForestParams:
     """Offline forest growth (sec. 3.2.1) and boosted tree-by-tree learning (sec. 3.2.3)."""
 
-    n_trees: int = _param(15, "Trees M of the forest (thesis: 15).")
-    max_depth: int = _param(20, "Maximum depth D of a tree (root = 0; thesis: 20).")
-    n_tests: int = _param(
+    n_trees: int = param(15, "Trees M of the forest (thesis: 15).")
+    max_depth: int = param(20, "Maximum depth D of a tree (root = 0; thesis: 20).")
+    n_tests: int = param(
         100, "Random candidate tests (offset pairs u, v) drawn per node.")
-    n_thresholds: int = _param(
+    n_thresholds: int = param(
         16, "Random thresholds per candidate test, drawn among the node's feature values.")
-    min_samples_leaf: int = _param(5, "A split must leave at least this many samples on each side.")
-    min_gain: float = _param(1e-4, "Nodes whose best information gain (eq. 3.2, nats) is lower stay leaves.")
-    samples_per_class: int = _param(
+    min_samples_leaf: int = param(5, "A split must leave at least this many samples on each side.")
+    min_gain: float = param(1e-4, "Nodes whose best information gain (eq. 3.2, nats) is lower stay leaves.")
+    samples_per_class: int = param(
         10000, "Balanced bag: samples of each class drawn with replacement per tree (thesis: "
                "about 20000).")
-    boosted: bool = _param(
+    boosted: bool = param(
         True, "Boosted learning (sec. 3.2.3): the out-of-bag samples a tree misclassifies join "
               "the next tree's bag; false = independent balanced bags.")
-    max_boost_fraction: float = _param(
+    max_boost_fraction: float = param(
         0.5, "Cap on the misclassified out-of-bag samples carried to the next tree, as a "
              "fraction of the balanced bag size.")
-    mining_rounds: int = _param(
+    mining_rounds: int = param(
         1, "Rounds of hard negative mining: the trained forest votes on its training frames "
            "like the detector; pixels voting for a gesture away from the annotated one join "
            "the samples as background and the forest is trained again (0 = none).")
-    mining_per_frame: int = _param(256, "At most this many mined negatives per frame and round.")
-    mining_stride: int = _param(
+    mining_per_frame: int = param(256, "At most this many mined negatives per frame and round.")
+    mining_stride: int = param(
         4, "Grid step (pixels) of the mining votes, as the detector's stride.")
-    mining_exclusion_scale: float = _param(
+    mining_exclusion_scale: float = param(
         2.0, "Votes within this many positive boxes of the annotated point are not mined.")
 
     def __post_init__(self):
@@ -213,35 +213,35 @@ class TrainParams:
 class DetectorParams:
     """Per-frame gesture localization (thesis sec. 3.2.4) on one depth camera."""
 
-    depth_unit_m: float = _param(
+    depth_unit_m: float = param(
         0.0, "Metres per raw depth unit (0.001 = mm, 0.000125 = 1/8 mm, 1 = m); 0 = REP 118: "
              "16UC1 in mm, 32FC1 in m.")
-    invalid_value: float = _param(0.0, "Raw depth value of pixels without depth (NaN is always invalid).")
-    min_depth_m: float = _param(0.3, "Nearer depths are invalid and cast no vote.")
-    max_depth_m: float = _param(8.0, "Farther depths are invalid and cast no vote.")
-    stride: int = _param(
+    invalid_value: float = param(0.0, "Raw depth value of pixels without depth (NaN is always invalid).")
+    min_depth_m: float = param(0.3, "Nearer depths are invalid and cast no vote.")
+    max_depth_m: float = param(8.0, "Farther depths are invalid and cast no vote.")
+    stride: int = param(
         4, "Grid step in pixels: the forest is evaluated at every stride-th pixel of every "
            "stride-th row (4 = 160x120 votes at 640x480).")
-    parzen_sigma_px: float = _param(
+    parzen_sigma_px: float = param(
         6.0, "Standard deviation (pixels) of the Gaussian Parzen kernel over the vote image.")
-    alpha: float = _param(
+    alpha: float = param(
         0.8, "Adaptation rate of the temporal smoothing p' = alpha p + (1 - alpha) p'_prev (eq. 3.4).")
-    volume_radius_px_m: float = _param(
+    volume_radius_px_m: float = param(
         20.0, "Radius of the disk S of the volume test (eq. 3.5) in pixel*metres: value/d pixels "
               "at the maximum's depth d (20 = 10 px at 2 m, about 4 cm at f = 525 px; like the "
               "positive box of training).")
-    min_score: float = _param(
+    min_score: float = param(
         0.4, "A class is detected when its smoothed density at the maximum is at least this "
              "(0.4 and 0.3 below: the best F1 on a validation bag, docs/gestures.md).")
-    min_volume: float = _param(
+    min_volume: float = param(
         0.3, "... and the mean smoothed density over the disk S (eq. 3.5 / |S|) at least this.")
-    suppression_radius_px_m: float = _param(
+    suppression_radius_px_m: float = param(
         60.0, "A detection closer than value/d pixels (d its depth) to a higher-scoring detection "
               "of another class is dropped: one place shows one gesture. 0 keeps all.")
-    max_gap_s: float = _param(
+    max_gap_s: float = param(
         1.0, "The smoothing state restarts when consecutive stamps are further apart than this, "
              "or go back in time (a replayed bag looping), or the image size changes.")
-    reference_focal_px: float = _param(
+    reference_focal_px: float = param(
         REFERENCE_FOCAL_PX, "Focal length (px) the pixel sizes above (stride, parzen_sigma_px, "
                             "volume_radius_px_m, suppression_radius_px_m) are given for; they are "
                             "scaled by the camera's fx / this (525 = a 640x480 Kinect-like camera). "

@@ -1,7 +1,7 @@
 """What every hmocap_ros node shares: parameters from a frozen dataclass, config YAML, --help, start/stop.
 
 A node's tunables are one frozen dataclass whose fields carry a ``description`` in their
-metadata (see :func:`param`). :func:`declare_parameters` declares each as a ROS parameter
+metadata (:func:`hmocap_ros.params.param`; nested groups by :func:`hmocap_ros.params.group`). :func:`declare_parameters` declares each as a ROS parameter
 with that description and reads them back into the dataclass, which the algorithm takes.
 :func:`run_node` handles ``--help`` (printing the parameter table), loads
 ``config/<node_name>.yaml`` as the default parameter file, spins, and shuts down cleanly
@@ -10,7 +10,6 @@ on Ctrl-C or SIGTERM.
 
 from __future__ import annotations
 
-import dataclasses
 import signal
 import sys
 import typing
@@ -31,6 +30,7 @@ from rclpy.qos import (
 from rclpy.signals import SignalHandlerOptions
 
 from hmocap_ros.config_files import default_config_file
+from hmocap_ros.params import flat_fields, from_flat, param  # noqa: F401  (param: the nodes' configs)
 
 #: Images and other high-rate sensor data: best effort, keep last 5.
 SENSOR_QOS = qos_profile_sensor_data
@@ -59,54 +59,38 @@ LATCHED_QOS = QoSProfile(
 RESULT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 
-def param(default, description: str, read_only: bool = False):
-    """A dataclass field that becomes a described ROS parameter."""
-    if isinstance(default, list):
-        return dataclasses.field(
-            default_factory=lambda: list(default),
-            metadata={"description": description, "read_only": read_only},
-        )
-    return dataclasses.field(default=default, metadata={"description": description, "read_only": read_only})
-
-
-def _field_types(config_cls) -> dict[str, type]:
-    return typing.get_type_hints(config_cls)
-
-
 def declare_parameters(node: Node, config_cls):
-    """Declare every field of ``config_cls`` as a parameter of ``node``; return the filled dataclass."""
-    hints = _field_types(config_cls)
+    """Declare every leaf of ``config_cls`` as a parameter of ``node`` (groups by dotted
+    name, ``startup.height_margin``); return the filled dataclass."""
+    from rclpy.parameter import Parameter
+
     values = {}
-    for field in dataclasses.fields(config_cls):
-        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
+    for name, field, default, hint in flat_fields(config_cls):
         descriptor = ParameterDescriptor(
             description=field.metadata.get("description", ""),
             read_only=field.metadata.get("read_only", False),
         )
-        if isinstance(default, list) and not default:
+        if isinstance(default, (list, tuple)) and not default:
             # An empty list has no type for rclpy: declare it by its annotation.
-            from rclpy.parameter import Parameter
-
-            inner = typing.get_args(hints[field.name])
+            inner = typing.get_args(hint)
             ptype = {str: Parameter.Type.STRING_ARRAY, float: Parameter.Type.DOUBLE_ARRAY,
                      int: Parameter.Type.INTEGER_ARRAY, bool: Parameter.Type.BOOL_ARRAY}[inner[0]]
             # Declared by type with no value, it stays uninitialised unless YAML/-p set it.
-            value = node.declare_parameter(field.name, ptype, descriptor).value
-            values[field.name] = list(value) if value is not None else []
+            value = node.declare_parameter(name, ptype, descriptor).value
+            values[name] = list(value) if value is not None else []
         else:
-            value = node.declare_parameter(field.name, default, descriptor).value
-            values[field.name] = list(value) if isinstance(default, list) else value
-    return config_cls(**values)
+            value = node.declare_parameter(
+                name, list(default) if isinstance(default, tuple) else default, descriptor).value
+            values[name] = list(value) if isinstance(default, (list, tuple)) else value
+    return from_flat(config_cls, values)
 
 
 def parameter_table(config_cls) -> str:
-    """The parameters of a config dataclass as text: name, type, default, description."""
-    hints = _field_types(config_cls)
+    """The parameters of a config dataclass as text: dotted name, type, default, description."""
     rows = []
-    for field in dataclasses.fields(config_cls):
-        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
-        tname = getattr(hints[field.name], "__name__", str(hints[field.name]))
-        rows.append(f"  {field.name} ({tname}, default {default!r})\n      {field.metadata.get('description', '')}")
+    for name, field, default, hint in flat_fields(config_cls):
+        tname = getattr(hint, "__name__", str(hint))
+        rows.append(f"  {name} ({tname}, default {default!r})\n      {field.metadata.get('description', '')}")
     return "\n".join(rows)
 
 

@@ -7,12 +7,11 @@ this module importing rclpy. Defaults suit 640x480 colour cameras at 25 fps.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
+from hmocap_ros.params import param
 
-def _param(default, description: str):
-    return dataclasses.field(default=default, metadata={"description": description, "read_only": False})
+
 
 
 @dataclass(frozen=True)
@@ -22,59 +21,59 @@ class ForegroundParams:
     Colour values are in uint8 levels of the input image; rates are per frame.
     """
 
-    learn_frames: int = _param(
+    learn_frames: int = param(
         50, "Frames (from the first one, or after relearn) that learn the background mean and "
             "variance; no foreground is reported before they are done.")
-    k_sigma: float = _param(
+    k_sigma: float = param(
         3.5, "Foreground threshold: a pixel is foreground when its Mahalanobis distance to the "
              "background Gaussian (diagonal, 3 channels) exceeds k_sigma.")
-    min_sigma: float = _param(
+    min_sigma: float = param(
         3.0, "Floor of every channel's standard deviation (levels): covers sensor noise that the "
              "learning frames under-sample and noise-free (rendered) images.")
-    max_sigma: float = _param(
+    max_sigma: float = param(
         30.0, "Ceiling of every channel's standard deviation (levels), so that a flickering pixel "
               "does not become blind.")
-    learning_rate: float = _param(
+    learning_rate: float = param(
         0.005, "Running-average rate of mean and variance where the pixel is background "
                "(0.005 per frame = 8 s time constant at 25 fps); 0 freezes the model.")
-    absorb_frames: int = _param(
+    absorb_frames: int = param(
         500, "A pixel that differs from the background for this many consecutive frames "
              "(a moved chair, a new shadow) is absorbed into the background; 0 never absorbs.")
-    absorb_rate: float = _param(
+    absorb_rate: float = param(
         0.1, "Rate at which an absorbed pixel's mean moves to the new colour each frame.")
-    shadow_suppression: bool = _param(
+    shadow_suppression: bool = param(
         True, "Label darker pixels of the background's chromaticity as shadow, not foreground.")
-    shadow_min_brightness: float = _param(
+    shadow_min_brightness: float = param(
         0.5, "tau_low: the lowest brightness ratio (pixel / background, along the background colour) "
              "that can still be a shadow; darker pixels are foreground.")
-    shadow_max_brightness: float = _param(
+    shadow_max_brightness: float = param(
         1.0, "tau_high: shadows are strictly darker than this ratio of the background brightness.")
-    highlight_max_brightness: float = _param(
+    highlight_max_brightness: float = param(
         1.15, "Highest brightness ratio (pixel / gain-scaled background) at which a pixel of the "
              "background's chromaticity is still background: a surface lit by another source than "
              "the one that set the global gain (daylight through a window while a lamp dims); 1 "
              "or less disables it.")
-    shadow_max_chroma: float = _param(
+    shadow_max_chroma: float = param(
         0.03, "Largest chromaticity distortion of a shadow or highlight: colour distance "
              "perpendicular to the background colour, divided by the pixel's brightness (tan of "
              "the colour angle).")
-    shadow_chroma_sigma: float = _param(
+    shadow_chroma_sigma: float = param(
         2.0, "Extra tolerance of the chromaticity test for sensor noise, in standard deviations "
              "(matters for dark pixels, whose colour angle is noisy).")
-    illumination_compensation: bool = _param(
+    illumination_compensation: bool = param(
         True, "Estimate a global gain per frame (median brightness ratio over the last frame's "
               "background pixels) and compare each pixel with the gain-scaled background.")
-    gain_sample_step: int = _param(
+    gain_sample_step: int = param(
         4, "Pixel step (rows and columns) of the sample that estimates the global gain.")
-    opening_size: int = _param(
+    opening_size: int = param(
         3, "Side (pixels) of the elliptic structuring element of the opening that removes "
            "speckle; 0 or 1 disables it.")
-    closing_size: int = _param(
+    closing_size: int = param(
         5, "Side (pixels) of the elliptic structuring element of the closing that bridges "
            "small gaps; 0 or 1 disables it.")
-    min_blob_area: int = _param(
+    min_blob_area: int = param(
         100, "Connected foreground components smaller than this (pixels) are removed; 0 keeps all.")
-    max_hole_area: int = _param(
+    max_hole_area: int = param(
         300, "Background holes inside a blob up to this area (pixels) are filled; 0 fills none.")
 
     def __post_init__(self):

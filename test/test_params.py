@@ -2,7 +2,7 @@
 import pytest
 
 from hmocap_ros.eval.mocap_eval import tracker_overrides
-from hmocap_ros.param_overrides import field_overrides
+from hmocap_ros.params import field_overrides
 from hmocap_ros.segmentation import ForegroundParams
 
 
