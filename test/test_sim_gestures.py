@@ -18,7 +18,13 @@ from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.render import grid_quad
 from hmocap_ros.sim import gesture_dataset as gd
 from hmocap_ros.sim import gesture_set as gs
-from hmocap_ros.sim.depth_scene import box, depth_camera, make_layout, pixel_to_optical, render_depth
+from hmocap_ros.sim.depth_scene import (
+    box,
+    depth_camera,
+    make_layout,
+    pixel_to_optical,
+    render_depth,
+)
 
 DEMO = Path(gs.__file__).resolve().parents[1] / "data" / "demo" / "gestures_depth.mcap"
 
@@ -122,6 +128,8 @@ def test_class_list_is_fixed():
     assert gs.GESTURE_CLASSES == ("tee", "pause", "silence", "cross", "ok", "volume_up")
     assert [gs.class_id(n) for n in gs.GESTURE_CLASSES] == [1, 2, 3, 4, 5, 6]
     assert set(gs.REFERENCE_POINTS) == set(gs.GESTURE_CLASSES)
+    assert tuple(gs.GESTURES) == gs.GESTURE_CLASSES  # one builder per class, in class-id order
+    assert tuple(gs.NEGATIVE_BUILDERS) == gs.NEGATIVE_KINDS == tuple(gs.NEGATIVE_WEIGHTS)
 
 
 def test_subject_identity_depends_on_the_id_only(model):
@@ -165,8 +173,8 @@ def test_gesture_geometry(model, name, k):
         assert np.linalg.norm(P(f"{s}_hand_tip") - P(f"{s}_palm")) > 0.08  # open hand
     elif name == "cross":
         c = gs.forearm_crossing(kin, model)[0]
-        l_axis = gs._closest_on_segments(c[None], P("l_elbow")[None], P("l_wrist")[None])[0]
-        r_axis = gs._closest_on_segments(c[None], P("r_elbow")[None], P("r_wrist")[None])[0]
+        l_axis = gs.closest_on_segments(c[None], P("l_elbow")[None], P("l_wrist")[None])[0]
+        r_axis = gs.closest_on_segments(c[None], P("r_elbow")[None], P("r_wrist")[None])[0]
         assert np.linalg.norm(l_axis - r_axis) < 0.12  # the forearms touch (axes ~8 cm apart)
         assert (c - P("sternum"))[2] > 0.05  # in front of the chest
         assert P("spine")[1] < c[1] < P("neck")[1] + 0.05
@@ -205,7 +213,7 @@ def test_occluded_reference_is_marked_invalid(model):
     lay = make_layout(np.random.default_rng(4), 0, 320, 240, n_bystanders=0)
     actor = gd.Actor(gs.make_subject(model, 1))
     x, z = lay.zone[:2]
-    yaw = gd._facing_yaw(lay.camera.position, x, z)
+    yaw = gd.facing_yaw(lay.camera.position, x, z)
     spec = gs.gesture_spec(model, actor.subject, "pause", rng,
                            camera_body=gs.world_to_body(x, z, yaw, lay.camera.position))
     actor.params = gs.place(model, gs.solve_spec(model, actor.subject, spec), x, z, yaw)

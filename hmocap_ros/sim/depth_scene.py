@@ -28,7 +28,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hmocap_ros.camera_model import PinholeCamera, look_at
-from hmocap_ros.render import KinectNoise, concatenate_meshes, grid_quad, kinect_depth, rasterize
+from hmocap_ros.render import (
+    KinectNoise,
+    concatenate_meshes,
+    grid_quad,
+    kinect_depth,
+    rasterize,
+)
 from hmocap_ros.render.projection import project_points
 
 #: Kinect v1 depth intrinsics at 640x480 (focal length in pixels).
@@ -36,7 +42,6 @@ KINECT_FX = 575.0
 KINECT_SIZE = (640, 480)
 #: Name of the depth camera; its optical frame is ``depth_optical_frame``.
 CAMERA_NAME = "depth"
-FURNITURE_KINDS = ("table", "chair", "shelf", "cabinet", "sofa", "lamp", "plant", "tv_stand")
 
 
 def depth_camera(position, target, width: int = 640, height: int = 480) -> PinholeCamera:
@@ -93,68 +98,118 @@ def _place(parts, x: float, z: float, yaw: float):
     return (v.astype(np.float64) @ rot.T + [x, 0.0, z]).astype(np.float32), f
 
 
+def _table(rng):
+    """A table top on four legs."""
+    u = rng.uniform
+    w, d, h = u(0.8, 1.6), u(0.6, 0.9), u(0.7, 0.78)
+    parts = [box((0, h - 0.02, 0), (w, 0.04, d))]
+    parts += [box((sx * (w / 2 - 0.05), (h - 0.04) / 2, sz * (d / 2 - 0.05)), (0.05, h - 0.04, 0.05))
+              for sx in (-1, 1) for sz in (-1, 1)]
+    return parts, (w / 2, d / 2)
+
+
+def _chair(rng):
+    """A seat with a backrest on four legs."""
+    u = rng.uniform
+    w, seat = u(0.42, 0.5), u(0.43, 0.48)
+    parts = [box((0, seat, 0), (w, 0.05, w)), box((0, seat + 0.25, -w / 2 + 0.02), (w, 0.45, 0.04))]
+    parts += [box((sx * (w / 2 - 0.03), seat / 2, sz * (w / 2 - 0.03)), (0.035, seat, 0.035))
+              for sx in (-1, 1) for sz in (-1, 1)]
+    return parts, (w / 2, w / 2)
+
+
+def _shelf(rng):
+    """An open shelf with boards, books and boxes on them."""
+    u = rng.uniform
+    w, d, h = u(0.6, 1.2), u(0.28, 0.4), u(1.2, 2.1)
+    boards = int(rng.integers(3, 6))
+    parts = [box((-w / 2 + 0.01, h / 2, 0), (0.02, h, d)), box((w / 2 - 0.01, h / 2, 0), (0.02, h, d)),
+             box((0, h / 2, -d / 2 + 0.005), (w, h, 0.01))]
+    parts += [box((0, y, 0), (w, 0.02, d)) for y in np.linspace(0.05, h - 0.01, boards)]
+    for y0, y1 in zip(np.linspace(0.05, h - 0.01, boards)[:-1], np.linspace(0.05, h - 0.01, boards)[1:]):
+        x = -w / 2 + 0.05
+        while x < w / 2 - 0.1 and rng.random() < 0.8:
+            bw, bh = u(0.03, 0.15), u(0.4, 0.9) * (y1 - y0)
+            parts.append(box((x + bw / 2, y0 + 0.01 + bh / 2, u(-0.05, 0.05)), (bw, bh, u(0.15, d - 0.04))))
+            x += bw + u(0.0, 0.08)
+    return parts, (w / 2, d / 2)
+
+
+def _cabinet(rng):
+    """A closed cabinet, sometimes with a box or a monitor on top."""
+    u = rng.uniform
+    w, d, h = u(0.5, 1.2), u(0.4, 0.6), u(0.6, 1.1)
+    parts = [box((0, h / 2, 0), (w, h, d))]
+    if rng.random() < 0.5:
+        parts.append(box((u(-w / 4, w / 4), h + 0.15, 0), (u(0.2, 0.5), 0.3, u(0.05, 0.3))))
+    return parts, (w / 2, d / 2)
+
+
+def _sofa(rng):
+    """A sofa: seat, backrest and two armrests."""
+    u = rng.uniform
+    w, d = u(1.5, 2.2), u(0.8, 0.95)
+    parts = [box((0, 0.22, 0), (w, 0.44, d)), box((0, 0.62, -d / 2 + 0.1), (w, 0.4, 0.2)),
+             box((-w / 2 + 0.08, 0.55, 0), (0.16, 0.22, d)), box((w / 2 - 0.08, 0.55, 0), (0.16, 0.22, d))]
+    return parts, (w / 2, d / 2)
+
+
+def _lamp(rng):
+    """A floor lamp: base, pole and shade."""
+    u = rng.uniform
+    h = u(1.4, 1.8)
+    parts = [cylinder((0, 0, 0), 0.15, 0.03), cylinder((0, 0.03, 0), 0.015, h - 0.03, 6),
+             cylinder((0, h - 0.1, 0), u(0.15, 0.22), 0.25)]
+    return parts, (0.2, 0.2)
+
+
+def _plant(rng):
+    """A pot with leaves as thin tilted slabs."""
+    u = rng.uniform
+    pot_h = u(0.3, 0.5)
+    parts = [cylinder((0, 0, 0), u(0.15, 0.22), pot_h)]
+    for _ in range(int(rng.integers(4, 8))):
+        v, f = box((0, 0, 0), (u(0.05, 0.12), u(0.3, 0.7), 0.01))
+        a, t = u(0, 2 * np.pi), u(0.2, 0.7)
+        c, s = np.cos(a), np.sin(a)
+        tilt = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
+        yaw = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+        v = (v - [0, v[:, 1].min(), 0]) @ tilt.T @ yaw.T + [0, pot_h, 0]
+        parts.append((v.astype(np.float32), f))
+    return parts, (0.25, 0.25)
+
+
+def _tv_stand(rng):
+    """A low stand with a flat screen on it."""
+    u = rng.uniform
+    w = u(1.0, 1.8)
+    parts = [box((0, 0.25, 0), (w, 0.5, 0.45)), box((0, 0.5 + 0.35, -0.1), (w * 0.8, 0.6, 0.06))]
+    return parts, (w / 2, 0.23)
+
+
+#: Furniture builders by kind: rng -> (meshes around the origin, front towards +Z; footprint
+#: half-extents (x, z)).  The order of the kinds is the order :func:`make_layout` draws from.
+FURNITURE = {
+    "table": _table,
+    "chair": _chair,
+    "shelf": _shelf,
+    "cabinet": _cabinet,
+    "sofa": _sofa,
+    "lamp": _lamp,
+    "plant": _plant,
+    "tv_stand": _tv_stand,
+}
+FURNITURE_KINDS = tuple(FURNITURE)
+
+
 def furniture(kind: str, rng: np.random.Generator):
     """One piece of furniture around the origin (front towards +Z): (vertices, faces, footprint
     half-extents (x, z))."""
-    u = rng.uniform
-    if kind == "table":
-        w, d, h = u(0.8, 1.6), u(0.6, 0.9), u(0.7, 0.78)
-        parts = [box((0, h - 0.02, 0), (w, 0.04, d))]
-        parts += [box((sx * (w / 2 - 0.05), (h - 0.04) / 2, sz * (d / 2 - 0.05)), (0.05, h - 0.04, 0.05))
-                  for sx in (-1, 1) for sz in (-1, 1)]
-        return (*_merge(parts), (w / 2, d / 2))
-    if kind == "chair":
-        w, seat = u(0.42, 0.5), u(0.43, 0.48)
-        parts = [box((0, seat, 0), (w, 0.05, w)), box((0, seat + 0.25, -w / 2 + 0.02), (w, 0.45, 0.04))]
-        parts += [box((sx * (w / 2 - 0.03), seat / 2, sz * (w / 2 - 0.03)), (0.035, seat, 0.035))
-                  for sx in (-1, 1) for sz in (-1, 1)]
-        return (*_merge(parts), (w / 2, w / 2))
-    if kind == "shelf":
-        w, d, h = u(0.6, 1.2), u(0.28, 0.4), u(1.2, 2.1)
-        boards = int(rng.integers(3, 6))
-        parts = [box((-w / 2 + 0.01, h / 2, 0), (0.02, h, d)), box((w / 2 - 0.01, h / 2, 0), (0.02, h, d)),
-                 box((0, h / 2, -d / 2 + 0.005), (w, h, 0.01))]
-        parts += [box((0, y, 0), (w, 0.02, d)) for y in np.linspace(0.05, h - 0.01, boards)]
-        for y0, y1 in zip(np.linspace(0.05, h - 0.01, boards)[:-1], np.linspace(0.05, h - 0.01, boards)[1:]):
-            x = -w / 2 + 0.05
-            while x < w / 2 - 0.1 and rng.random() < 0.8:  # books and boxes on the boards
-                bw, bh = u(0.03, 0.15), u(0.4, 0.9) * (y1 - y0)
-                parts.append(box((x + bw / 2, y0 + 0.01 + bh / 2, u(-0.05, 0.05)), (bw, bh, u(0.15, d - 0.04))))
-                x += bw + u(0.0, 0.08)
-        return (*_merge(parts), (w / 2, d / 2))
-    if kind == "cabinet":
-        w, d, h = u(0.5, 1.2), u(0.4, 0.6), u(0.6, 1.1)
-        parts = [box((0, h / 2, 0), (w, h, d))]
-        if rng.random() < 0.5:  # something on top: a box or a monitor
-            parts.append(box((u(-w / 4, w / 4), h + 0.15, 0), (u(0.2, 0.5), 0.3, u(0.05, 0.3))))
-        return (*_merge(parts), (w / 2, d / 2))
-    if kind == "sofa":
-        w, d = u(1.5, 2.2), u(0.8, 0.95)
-        parts = [box((0, 0.22, 0), (w, 0.44, d)), box((0, 0.62, -d / 2 + 0.1), (w, 0.4, 0.2)),
-                 box((-w / 2 + 0.08, 0.55, 0), (0.16, 0.22, d)), box((w / 2 - 0.08, 0.55, 0), (0.16, 0.22, d))]
-        return (*_merge(parts), (w / 2, d / 2))
-    if kind == "lamp":
-        h = u(1.4, 1.8)
-        parts = [cylinder((0, 0, 0), 0.15, 0.03), cylinder((0, 0.03, 0), 0.015, h - 0.03, 6),
-                 cylinder((0, h - 0.1, 0), u(0.15, 0.22), 0.25)]
-        return (*_merge(parts), (0.2, 0.2))
-    if kind == "plant":
-        pot_h = u(0.3, 0.5)
-        parts = [cylinder((0, 0, 0), u(0.15, 0.22), pot_h)]
-        for _ in range(int(rng.integers(4, 8))):  # leaves as thin tilted slabs
-            v, f = box((0, 0, 0), (u(0.05, 0.12), u(0.3, 0.7), 0.01))
-            a, t = u(0, 2 * np.pi), u(0.2, 0.7)
-            c, s = np.cos(a), np.sin(a)
-            tilt = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
-            yaw = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-            v = (v - [0, v[:, 1].min(), 0]) @ tilt.T @ yaw.T + [0, pot_h, 0]
-            parts.append((v.astype(np.float32), f))
-        return (*_merge(parts), (0.25, 0.25))
-    if kind == "tv_stand":
-        w = u(1.0, 1.8)
-        parts = [box((0, 0.25, 0), (w, 0.5, 0.45)), box((0, 0.5 + 0.35, -0.1), (w * 0.8, 0.6, 0.06))]
-        return (*_merge(parts), (w / 2, 0.23))
-    raise ValueError(f"unknown furniture kind {kind!r}")
+    build = FURNITURE.get(kind)
+    if build is None:
+        raise ValueError(f"unknown furniture kind {kind!r}")
+    parts, half = build(rng)
+    return (*_merge(parts), half)
 
 
 # ---------------------------------------------------------------------------------------
@@ -225,6 +280,76 @@ def _in_view(x: float, z: float, radius: float, half_fov_tan: float = 0.55) -> b
     return z > 0.8 and abs(x) - radius < half_fov_tan * z
 
 
+def _furniture_spot(rng, half, back: float, left: float, right: float):
+    """One random try at a place for a footprint of half-size ``half``: against the back wall
+    or a side wall (where the camera sees it), or free-standing.  Returns (x, z, yaw,
+    (half x, half z) as placed), or None when the chosen side wall has no room for it."""
+    u = rng.uniform
+    against_wall = rng.random() < 0.6
+    if against_wall:
+        wall = rng.integers(0, 3)
+        if wall == 0:  # back wall, facing the camera
+            x, z, yaw = u(-right + half[0], left - half[0]), back - half[1] - 0.02, np.pi
+        else:
+            wall_x = left if wall == 1 else right
+            z_lo, z_hi = wall_x / 0.55 - 0.5, back - half[0]
+            if z_lo >= z_hi:
+                return None
+            sign = 1.0 if wall == 1 else -1.0
+            x, z, yaw = sign * (wall_x - half[1] - 0.02), u(z_lo, z_hi), -sign * np.pi / 2
+        hx, hz = (half[1], half[0]) if wall else half
+    else:
+        x, z, yaw = u(-right + 0.4, left - 0.4), u(0.9, back - 0.4), u(-np.pi, np.pi)
+        hx = hz = max(half)
+    return x, z, yaw, (hx, hz)
+
+
+def _furnish(rng, parts: list, zone, back: float, left: float, right: float) -> list:
+    """Draw 4-9 pieces of furniture and place each (up to 30 tries) in view, clear of the
+    person's zone and of the corridor to it; appends their meshes to ``parts`` and returns
+    their (kind, x, z, yaw)."""
+    items = []
+    n_items = int(rng.integers(4, 10))
+    kinds = rng.choice(FURNITURE_KINDS, size=n_items)
+    for kind in kinds:
+        v, f, half = furniture(str(kind), rng)
+        for _ in range(30):
+            spot = _furniture_spot(rng, half, back, left, right)
+            if spot is None:
+                continue
+            x, z, yaw, (hx, hz) = spot
+            if _in_view(x, z, max(hx, hz)) and not _blocked(x, z, (hx, hz), zone, (0.0, 0.0), 0.25):
+                parts.append(_place([(v, f)], x, z, yaw))
+                items.append((str(kind), float(x), float(z), float(yaw)))
+                break
+    return items
+
+
+def _place_bystanders(rng, n_people: int, background: str, zone, back: float, left: float,
+                      right: float, items) -> list:
+    """Floor spots (x, z, yaw) of up to ``n_people`` bystanders (30 tries each), behind or
+    beside the person, in view, apart from the furniture and from each other, roughly
+    facing the camera."""
+    u = rng.uniform
+    zone_z = zone[1]
+    bystanders = []
+    for _ in range(n_people):
+        for _ in range(30):
+            if background == "close":  # no room behind the person: beside them, before the wall
+                x, z = u(-right + 0.4, left - 0.4), u(zone_z - 0.5, back - 0.3)
+            else:
+                x, z = u(-right + 0.4, left - 0.4), u(zone_z + 0.6, back - 0.3)
+                if rng.random() < 0.3:  # beside the person instead of behind
+                    z = u(zone_z - 0.5, zone_z + 1.0)
+            blocked = not _in_view(x, z, 0.0) or _blocked(x, z, (0.3, 0.3), zone, (0.0, 0.0), 0.15)
+            blocked |= any(np.hypot(x - ix, z - iz) < 0.9 for _, ix, iz, _ in items)
+            blocked |= any(np.hypot(x - bx, z - bz) < 0.7 for bx, bz, _ in bystanders)
+            if not blocked:
+                bystanders.append((float(x), float(z), float(np.arctan2(-x, -z) + u(-1.2, 1.2))))
+                break
+    return bystanders
+
+
 #: Room kinds of :func:`make_layout`: the back wall 0.4-2.3 m behind the person ("room"), or
 #: close behind them, 0.15-0.85 m ("close": the background of a gesture lies within a few
 #: tens of centimetres, where depth clipping, eq. 3.6, matters most).
@@ -248,48 +373,9 @@ def make_layout(rng: np.random.Generator, layout_id: int = 0, width: int = 640, 
     left, right = u(1.3, 2.8), u(1.3, 2.8)
     ceiling = u(2.5, 3.0)
     parts = _walls(rng, back, left, right, ceiling)
-    items = []
-    n_items = int(rng.integers(4, 10))
-    kinds = rng.choice(FURNITURE_KINDS, size=n_items)
-    for kind in kinds:
-        v, f, half = furniture(str(kind), rng)
-        for _ in range(30):
-            against_wall = rng.random() < 0.6
-            if against_wall:
-                wall = rng.integers(0, 3)
-                if wall == 0:  # back wall, facing the camera
-                    x, z, yaw = u(-right + half[0], left - half[0]), back - half[1] - 0.02, np.pi
-                else:  # a side wall, where the camera sees it
-                    wall_x = left if wall == 1 else right
-                    z_lo, z_hi = wall_x / 0.55 - 0.5, back - half[0]
-                    if z_lo >= z_hi:
-                        continue
-                    sign = 1.0 if wall == 1 else -1.0
-                    x, z, yaw = sign * (wall_x - half[1] - 0.02), u(z_lo, z_hi), -sign * np.pi / 2
-                hx, hz = (half[1], half[0]) if wall else half
-            else:
-                x, z, yaw = u(-right + 0.4, left - 0.4), u(0.9, back - 0.4), u(-np.pi, np.pi)
-                hx = hz = max(half)
-            if _in_view(x, z, max(hx, hz)) and not _blocked(x, z, (hx, hz), zone, (0.0, 0.0), 0.25):
-                parts.append(_place([(v, f)], x, z, yaw))
-                items.append((str(kind), float(x), float(z), float(yaw)))
-                break
-    bystanders = []
+    items = _furnish(rng, parts, zone, back, left, right)
     n_people = int(rng.choice([0, 1, 1, 2])) if n_bystanders is None else n_bystanders
-    for _ in range(n_people):
-        for _ in range(30):
-            if background == "close":  # no room behind the person: beside them, before the wall
-                x, z = u(-right + 0.4, left - 0.4), u(zone_z - 0.5, back - 0.3)
-            else:
-                x, z = u(-right + 0.4, left - 0.4), u(zone_z + 0.6, back - 0.3)
-                if rng.random() < 0.3:  # beside the person instead of behind
-                    z = u(zone_z - 0.5, zone_z + 1.0)
-            blocked = not _in_view(x, z, 0.0) or _blocked(x, z, (0.3, 0.3), zone, (0.0, 0.0), 0.15)
-            blocked |= any(np.hypot(x - ix, z - iz) < 0.9 for _, ix, iz, _ in items)
-            blocked |= any(np.hypot(x - bx, z - bz) < 0.7 for bx, bz, _ in bystanders)
-            if not blocked:
-                bystanders.append((float(x), float(z), float(np.arctan2(-x, -z) + u(-1.2, 1.2))))
-                break
+    bystanders = _place_bystanders(rng, n_people, background, zone, back, left, right, items)
     v, f = _merge(parts)
     return Layout(layout_id, camera, zone, v, f, tuple(items), tuple(bystanders))
 

@@ -44,6 +44,9 @@ Side files next to the bag (``run.mcap`` -> ``run.labels.json``, ``run.contact.p
   (= position_valid), ``distance_m`` (camera to pelvis);
 * contact sheet PNG: a few frames per class, depth colour-mapped (0.5-4.5 m), with the GT
   point and class name drawn.
+
+The takes are drawn in ``gesture_takes``, the labels made in ``gesture_labels`` and the
+contact sheet in ``gesture_contact_sheet``; this module renders and writes the bag.
 """
 from __future__ import annotations
 
@@ -52,29 +55,78 @@ import json
 import shutil
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from hmocap_ros.body import load_body_model
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_writer import whole_bag
 from hmocap_ros.io.conversions import dict_to_camera_info, numpy_to_image
-from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
+from hmocap_ros.io.msg_factory import RosbagsFactory
 from hmocap_ros.sim import gesture_set as gs
-from hmocap_ros.sim.depth_scene import BACKGROUNDS, Layout, make_layout, pixel_to_optical, render_depth
+from hmocap_ros.sim.depth_scene import BACKGROUNDS, Layout, make_layout, render_depth
+from hmocap_ros.sim.gesture_contact_sheet import (
+    TILE,
+    colour_depth,
+    contact_tile,
+    select_sheet_frames,
+    write_contact_sheet,
+)
+from hmocap_ros.sim.gesture_labels import (
+    SURFACE_TOLERANCE_M,
+    GroundTruth,
+    frame_record,
+    gesture_array,
+    ground_truth,
+)
+from hmocap_ros.sim.gesture_takes import (
+    HOLD_FRAMES,
+    MAX_YAW_DEG,
+    NEGATIVES_PER_BLOCK,
+    TRANSITION_FRAMES,
+    WALK_STEP_M,
+    Actor,
+    FrameState,
+    bystander_pose,
+    facing_yaw,
+    lerp_pose,
+    take_frames,
+    take_schedule,
+)
+
+__all__ = [
+    "HOLD_FRAMES",
+    "LABELS_FORMAT",
+    "MAX_YAW_DEG",
+    "NEGATIVES_PER_BLOCK",
+    "START_NS",
+    "SURFACE_TOLERANCE_M",
+    "TAKES_PER_LAYOUT",
+    "TILE",
+    "TRANSITION_FRAMES",
+    "WALK_STEP_M",
+    "Actor",
+    "FrameState",
+    "GroundTruth",
+    "Summary",
+    "add_arguments",
+    "colour_depth",
+    "contact_tile",
+    "facing_yaw",
+    "generate",
+    "gesture_array",
+    "ground_truth",
+    "main_from_args",
+    "select_sheet_frames",
+    "sidecar_paths",
+    "write_contact_sheet",
+]
 
 START_NS = 1_700_000_000_000_000_000
 LABELS_FORMAT = "hmocap-gesture-labels/1"
 TAKES_PER_LAYOUT = 8
-NEGATIVES_PER_BLOCK = 3
-HOLD_FRAMES = (5, 10)
-TRANSITION_FRAMES = (1, 3)
-MAX_YAW_DEG = 30.0
-WALK_STEP_M = 0.11  # per frame at 10 fps: 1.1 m/s
-SURFACE_TOLERANCE_M = 0.12  # the surface at (u, v) must be this close to the reference point
 # Random streams: one per purpose, so e.g. the noise never shifts the poses.
 _STREAM_POSES, _STREAM_NOISE, _STREAM_LAYOUT = 1, 2, 3
 
@@ -86,251 +138,95 @@ def sidecar_paths(bag: str | Path) -> tuple:
     return stem.with_name(stem.name + ".labels.json"), stem.with_name(stem.name + ".contact.png")
 
 
-@dataclass
-class Actor:
-    """A person in the scene: subject, current world pose and cached mesh."""
+@dataclass(eq=False)
+class _Scene:
+    """One furnished layout with its bystanders and the random stream of their poses."""
 
-    subject: gs.Subject
-    params: np.ndarray | None = None
-    _cache: tuple = field(default=(None, None))
+    layout_id: int
+    layout: Layout
+    people: list
+    rng: np.random.Generator
 
-    def vertices(self, model) -> np.ndarray:
-        if self._cache[0] is None or not np.array_equal(self._cache[0], self.params):
-            verts = gs.posed_vertices(model, self.subject, self.params)
-            self._cache = (self.params.copy(), verts)
-        return self._cache[1]
+    @classmethod
+    def make(cls, model, seed: int, layout_id: int, width: int, height: int, background: str) -> _Scene:
+        layout = make_layout(np.random.default_rng([seed, _STREAM_LAYOUT, layout_id]),
+                             layout_id, width, height, background=background)
+        rng = np.random.default_rng([seed, _STREAM_LAYOUT, layout_id, 1])
+        # bystanders get identities >= 10^6, never a subject's
+        people = [Actor(gs.make_subject(model, int(rng.integers(10**6, 10**9))))
+                  for _ in layout.bystanders]
+        return cls(layout_id, layout, people, rng)
 
-
-@dataclass
-class FrameState:
-    params: np.ndarray
-    phase: str
-    kind: str
-    side: str
-    take: int
-
-
-def _lerp_pose(model, a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
-    out = (1.0 - t) * a + t * b
-    k = model.skeleton.dof_index("root_yaw")
-    out[k] = a[k] + t * ((b[k] - a[k] + np.pi) % (2 * np.pi) - np.pi)
-    return out
+    def info(self) -> dict:
+        """The layout's entry in the labels JSON."""
+        cam, layout = self.layout.camera, self.layout
+        return {"camera_position": np.round(cam.position, 4).tolist(),
+                "camera_quaternion_xyzw": np.round(cam.pose_quaternion(), 6).tolist(),
+                "zone_xz_radius": [round(float(x), 4) for x in layout.zone],
+                "furniture": [[kind, round(x, 3), round(z, 3)] for kind, x, z, _ in layout.items],
+                "bystanders": len(self.people)}
 
 
-def _schedule(rng: np.random.Generator):
-    """Endless take kinds: shuffled blocks of the six gestures plus negatives."""
-    kinds = list(gs.NEGATIVE_WEIGHTS)
-    w = np.array([gs.NEGATIVE_WEIGHTS[k] for k in kinds])
-    while True:
-        block = list(gs.GESTURE_CLASSES) + [str(k) for k in rng.choice(kinds, NEGATIVES_PER_BLOCK, p=w / w.sum())]
-        yield from (block[i] for i in rng.permutation(len(block)))
+def _subject_info(subject: gs.Subject) -> dict:
+    """A subject's entry in the labels JSON."""
+    return {"height_m": round(subject.height, 4),
+            "bone_scale": np.round(subject.shape.bone_scale, 4).tolist(),
+            "radial_scale": np.round(subject.shape.radial_scale, 4).tolist(),
+            "global_scale": round(float(subject.shape.global_scale), 4),
+            "entity_names": list(subject.shape.entity_names)}
 
 
-def _in_zone(rng, zone, radius_scale=1.0):
-    x0, z0, r = zone
-    a, rad = rng.uniform(0, 2 * np.pi), r * radius_scale * np.sqrt(rng.random())
-    return x0 + rad * np.cos(a), z0 + rad * np.sin(a)
+class _FrameWriter:
+    """Renders frames into the open bag (depth image, camera info and ground truth under one
+    stamp) and keeps the stamp, the frame index and the labels records."""
+
+    def __init__(self, bag, model, noise_rng: np.random.Generator, period: int, bar) -> None:
+        self.bag, self.model, self.noise_rng, self.period, self.bar = bag, model, noise_rng, period, bar
+        self.factory = RosbagsFactory()
+        self.stamp = START_NS
+        self.index = 0
+        self.records: list = []
+
+    def cut(self) -> None:
+        """A 1 s gap (at 10 fps) where the room changes; none before the first frame."""
+        if self.index:
+            self.stamp += 10 * self.period
+
+    def write(self, scene: _Scene, actor: Actor, state: FrameState, subject_id: int) -> None:
+        model, layout, cam, stamp, factory = self.model, scene.layout, scene.layout.camera, self.stamp, self.factory
+        meshes = [(layout.vertices, layout.faces)]
+        meshes += [(p.vertices(model), model.faces) for p in scene.people]
+        meshes.append((actor.vertices(model), model.faces))
+        render = render_depth(cam, meshes, self.noise_rng)
+        face_range = (int(render.face_offsets[-2]), int(render.face_offsets[-1]))
+        gt = ground_truth(model, actor, state, layout, render, face_range)
+        self.bag.write(topics.DEPTH_IMAGE, numpy_to_image(render.depth_mm, "16UC1", stamp, cam.frame_id, factory),
+                       stamp)
+        self.bag.write(topics.DEPTH_INFO, dict_to_camera_info(cam.to_camera_info_dict(), stamp, factory), stamp)
+        self.bag.write(topics.GT_GESTURES, gesture_array(factory, stamp, cam.frame_id, gt), stamp)
+        self.records.append(frame_record(model, self.index, stamp, subject_id, scene.layout_id, state, gt, cam))
+        self.index += 1
+        self.stamp += self.period
+        self.bar.update(1)
 
 
-def _facing_yaw(camera_pos, x, z):
-    return float(np.arctan2(camera_pos[0] - x, camera_pos[2] - z))
-
-
-def _take_frames(model, actor: Actor, kind: str, layout: Layout, rng, take: int,
-                 hold=HOLD_FRAMES) -> list:
-    """World poses of one take of ``actor``: a transition from its current pose (if any),
-    then ``hold`` (min, max) frames of the gesture or negative."""
-    cam = layout.camera.position
-    n = int(rng.integers(hold[0], hold[1] + 1))
-    subj = actor.subject
-    frames = []
-    if kind == "walk":
-        heading = float(rng.choice([-1, 1]) * np.pi / 2 + rng.uniform(-0.6, 0.6))
-        x, z = _in_zone(rng, layout.zone, 0.2)  # the path crosses the zone near its centre
-        step = WALK_STEP_M * np.array([np.sin(heading), np.cos(heading)])
-        x, z = np.array([x, z]) - step * n / 2
-        spec = gs.negative_spec(model, subj, "walk", rng)
-        standing = gs.solve_spec(model, subj, spec)
-        phase0 = rng.uniform(0, 2 * np.pi)
-        poses = []
-        for i in range(n):
-            p = gs.ground(model, subj, gs.walk_params(model, standing, phase0 + i * 2 * np.pi * WALK_STEP_M / 1.2))
-            poses.append(gs.place(model, p, x + i * step[0], z + i * step[1], heading))
-        side = ""
-    else:
-        x, z = _in_zone(rng, layout.zone)
-        yaw = _facing_yaw(cam, x, z) + np.deg2rad(rng.uniform(-MAX_YAW_DEG, MAX_YAW_DEG))
-        camera_body = gs.world_to_body(x, z, yaw, cam)
-        spec = gs.pose_spec(model, subj, kind, rng, camera_body=camera_body)
-        # only the gestures need their targets met exactly (restarts cost time)
-        a = gs.solve_spec(model, subj, gs.jitter_spec(spec, rng, model=model),
-                          restarts=None if kind in gs.GESTURE_CLASSES else 0)
-        b = gs.solve_spec(model, subj, gs.jitter_spec(spec, rng, model=model), start=a, iterations=15,
-                          restarts=0)
-        sway = rng.normal(0.0, 0.01, (2, 3))
-        poses = []
-        for i in range(n):
-            t = i / max(n - 1, 1)
-            dx, dz, dyaw = (1 - t) * sway[0] + t * sway[1]
-            poses.append(gs.place(model, _lerp_pose(model, a, b, t), x + dx, z + dz, yaw + dyaw))
-        side = spec.side if (kind in gs.GESTURE_CLASSES or spec.stages) else ""
-    if actor.params is not None:
-        m = int(rng.integers(TRANSITION_FRAMES[0], TRANSITION_FRAMES[1] + 1))
-        for i in range(m):
-            frames.append(FrameState(_lerp_pose(model, actor.params, poses[0], (i + 1) / (m + 1)),
-                                     "transition", kind, side, take))
-    phase = "hold" if kind in gs.GESTURE_CLASSES else "negative"
-    frames += [FrameState(p, phase, kind, side, take) for p in poses]
-    return frames
-
-
-def _bystander_pose(model, actor: Actor, spot, layout: Layout, rng) -> np.ndarray:
-    x, z, yaw = spot
-    kind = str(rng.choice([k for k in gs.NEGATIVE_KINDS if k != "walk"]))
-    cam = gs.world_to_body(x, z, yaw, layout.camera.position)
-    p = gs.solve_spec(model, actor.subject, gs.negative_spec(model, actor.subject, kind, rng, camera_body=cam),
-                      iterations=20, restarts=0)
-    return gs.place(model, p, x, z, yaw + rng.uniform(-0.3, 0.3))
-
-
-@dataclass
-class GroundTruth:
-    class_id: int = 0
-    name: str = "background"
-    u: float | None = None
-    v: float | None = None
-    position: list | None = None
-    visible: bool = False
-
-
-def ground_truth(model, actor: Actor, state: FrameState, layout: Layout, render,
-                 face_range: tuple) -> GroundTruth:
-    """Label of one frame: class, reference pixel, surface point and visibility."""
-    if state.phase != "hold":
-        return GroundTruth()
-    cam = layout.camera
-    kin = gs.kinematics(model, actor.subject, state.params)
-    ref = gs.reference_point(model, kin, state.kind, state.side)[0]
-    pix, depth = cam.project(ref)
-    u, v = float(pix[0]), float(pix[1])
-    gt = GroundTruth(gs.class_id(state.kind), state.kind, u, v)
-    col, row = int(round(u)), int(round(v))
-    if not (cam.in_image(pix) and depth > 0 and 0 <= col < cam.width and 0 <= row < cam.height):
-        gt.position = pixel_to_optical(cam, u, v, float(depth)).tolist()
-        return gt
-    z = float(render.zbuf[row, col])
-    fid = int(render.face_id[row, col])
-    parts = set(gs.reference_parts(model, state.kind, state.side))
-    on_person = face_range[0] <= fid < face_range[1]
-    if on_person:
-        tri = model.faces[fid - face_range[0]]
-        on_person = bool(parts.intersection(model.vertex_part[tri].tolist()))
-    gt.visible = bool(on_person and np.isfinite(z) and abs(z - depth) < SURFACE_TOLERANCE_M)
-    gt.position = pixel_to_optical(cam, u, v, z if gt.visible else float(depth)).tolist()
-    return gt
-
-
-def gesture_array(factory, stamp_ns: int, frame_id: str, gt: GroundTruth):
-    """The /ground_truth/gestures message of one frame."""
-    gestures = []
-    if gt.class_id:
-        x, y, z = gt.position
-        gestures.append(factory.make(
-            "hmocap_interfaces/msg/Gesture", name=gt.name, class_id=gt.class_id, score=1.0, volume=1.0,
-            u=gt.u, v=gt.v, position=factory.make("geometry_msgs/msg/Point", x=x, y=y, z=z),
-            position_valid=gt.visible))
-    return factory.make("hmocap_interfaces/msg/GestureArray",
-                        header=make_header(factory, stamp_ns, frame_id), gestures=gestures)
-
-
-# ---------------------------------------------------------------------------------------
-# Contact sheet
-# ---------------------------------------------------------------------------------------
-
-TILE = (320, 240)
-
-
-def colour_depth(depth_mm: np.ndarray, near_m: float = 0.5, far_m: float = 4.5) -> np.ndarray:
-    """BGR image of a depth map: turbo colour map from near (red) to far (blue), black = 0."""
-    d = depth_mm.astype(np.float32) / 1000.0
-    t = np.clip((far_m - d) / (far_m - near_m), 0, 1)
-    img = cv2.applyColorMap((t * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
-    img[depth_mm == 0] = 0
-    return img
-
-
-def contact_tile(depth_mm: np.ndarray, gt: GroundTruth, caption: str) -> np.ndarray:
-    """One annotated tile of the contact sheet."""
-    h, w = depth_mm.shape
-    img = cv2.resize(colour_depth(depth_mm), TILE, interpolation=cv2.INTER_NEAREST)
-    sx, sy = TILE[0] / w, TILE[1] / h
-    if gt.class_id:
-        c = (int(round((gt.u + 0.5) * sx - 0.5)), int(round((gt.v + 0.5) * sy - 0.5)))
-        colour = (255, 255, 255) if gt.visible else (128, 128, 128)
-        cv2.circle(img, c, 9, (0, 0, 0), 3)
-        cv2.circle(img, c, 9, colour, 2)
-        cv2.drawMarker(img, c, colour, cv2.MARKER_CROSS, 8, 1)
-    cv2.rectangle(img, (0, 0), (TILE[0], 18), (0, 0, 0), -1)
-    cv2.putText(img, caption, (4, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
-    return img
-
-
-def select_sheet_frames(records: list, per_class: int) -> dict:
-    """Frame indices for the contact sheet: per class (0 = background, from the negative
-    takes) up to ``per_class`` frames with a visible reference point, from takes spread
-    over the bag (the middle frame of each), then more frames of the same takes."""
-    groups: dict = {}
-    for r in records:
-        if (r["visible"] if r["class_id"] else r["phase"] == "negative"):
-            groups.setdefault(r["class_id"], {}).setdefault(r["take"], []).append(r["index"])
-    chosen = {}
-    for cid, takes in groups.items():
-        frames = [takes[t] for t in sorted(takes)]
-        order = np.unique(np.linspace(0, len(frames) - 1, min(per_class, len(frames))).round().astype(int))
-        picked: list = []
-        for frac in (0.5, 0.0, 1.0, 0.25, 0.75):
-            for g in order:
-                i = frames[g][int(round((len(frames[g]) - 1) * frac))]
-                if len(picked) < per_class and i not in picked:
-                    picked.append(i)
-        chosen[cid] = sorted(picked)
-    return chosen
-
-
-def write_contact_sheet(bag: Path, records: list, path: Path, per_class: int = 4) -> None:
-    """Read the chosen frames back from the bag and write the PNG: rows = the six classes
-    then background, columns = frames (:func:`select_sheet_frames`)."""
-    from hmocap_ros.io.bag_reader import BagReader
-    from hmocap_ros.io.conversions import image_to_numpy
-
-    chosen = select_sheet_frames(records, per_class)
-    by_stamp = {records[i]["stamp_ns"]: records[i] for ids in chosen.values() for i in ids}
-    tiles = {}
-    with BagReader(bag) as reader:
-        for m in reader.messages([topics.DEPTH_IMAGE]):
-            r = by_stamp.get(m.log_time_ns)
-            if r is None:
-                continue
-            gt = GroundTruth(r["class_id"], r["name"], r["u"], r["v"], r["position"], r["visible"])
-            caption = f"{r['class_id']} {r['name']}" if r["class_id"] else f"0 background: {r['kind']}"
-            tiles[r["index"]] = contact_tile(image_to_numpy(m.msg), gt, f"{caption}  #{r['index']}")
-    columns = max([len(v) for v in chosen.values()] + [1])
-    blank = np.zeros((TILE[1], TILE[0], 3), np.uint8)
-    rows = []
-    for cid in list(range(1, len(gs.GESTURE_CLASSES) + 1)) + [0]:
-        row = [tiles[i] for i in chosen.get(cid, [])]
-        rows.append(np.hstack(row + [blank] * (columns - len(row))))
-    sheet = np.vstack(rows)
-    for x in range(1, columns):
-        sheet[:, x * TILE[0]] = 255
-    for y in range(1, len(rows)):
-        sheet[y * TILE[1]] = 255
-    cv2.imwrite(str(path), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 9])
-
-
-# ---------------------------------------------------------------------------------------
-# Generation
-# ---------------------------------------------------------------------------------------
+def _write_take(writer: _FrameWriter, scene: _Scene, actor: Actor, states: list, limit: int,
+                subject_id: int) -> int:
+    """Write up to ``limit`` frames of a take while the bystanders move to new poses during
+    its transition; returns the number of frames written."""
+    model = writer.model
+    targets = [bystander_pose(model, person, spot, scene.layout, scene.rng)
+               for person, spot in zip(scene.people, scene.layout.bystanders)]
+    starts = [p.params if p.params is not None else t for p, t in zip(scene.people, targets)]
+    n_trans = sum(s.phase == "transition" for s in states)
+    states = states[:limit]
+    for i, state in enumerate(states):
+        t = min(1.0, (i + 1) / (n_trans + 1)) if n_trans else 1.0
+        for person, a, b in zip(scene.people, starts, targets):
+            person.params = lerp_pose(model, a, b, t)
+        actor.params = state.params
+        writer.write(scene, actor, state, subject_id)
+    return len(states)
 
 
 @dataclass
@@ -359,89 +255,40 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
     out = Path(out)
     labels_path, contact_path = sidecar_paths(out)
     model = load_body_model("hands")
-    factory = RosbagsFactory()
     rng = np.random.default_rng([seed, _STREAM_POSES])
     noise_rng = np.random.default_rng([seed, _STREAM_NOISE])
-    schedule = _schedule(rng)
-    period = int(round(1e9 / fps))
+    schedule = take_schedule(rng)
     splits = np.diff(np.linspace(0, frames, subjects + 1).round().astype(int))
-    records, layouts_info, subjects_info = [], {}, {}
-    stamp = START_NS
-    index = take = 0
+    layouts_info, subjects_info = {}, {}
+    take = 0
     layout_id = -1
     bar = tqdm(total=frames, file=sys.stderr, disable=not progress, unit="frame", desc="gestures")
     with whole_bag(out) as bag:
+        writer = _FrameWriter(bag, model, noise_rng, int(round(1e9 / fps)), bar)
         for k, n_frames in enumerate(splits):
             subject_id = subject_offset + k
             actor = Actor(gs.make_subject(model, subject_id))
-            subjects_info[str(subject_id)] = {
-                "height_m": round(actor.subject.height, 4),
-                "bone_scale": np.round(actor.subject.shape.bone_scale, 4).tolist(),
-                "radial_scale": np.round(actor.subject.shape.radial_scale, 4).tolist(),
-                "global_scale": round(float(actor.subject.shape.global_scale), 4),
-                "entity_names": list(actor.subject.shape.entity_names)}
+            subjects_info[str(subject_id)] = _subject_info(actor.subject)
             done = 0
             takes_here = TAKES_PER_LAYOUT
             while done < n_frames:
                 if takes_here >= TAKES_PER_LAYOUT:
                     layout_id += 1
-                    layout = make_layout(np.random.default_rng([seed, _STREAM_LAYOUT, layout_id]),
-                                         layout_id, width, height, background=background)
-                    layout_rng = np.random.default_rng([seed, _STREAM_LAYOUT, layout_id, 1])
-                    people = [Actor(gs.make_subject(model, int(layout_rng.integers(10**6, 10**9))))
-                              for _ in layout.bystanders]
-                    cam = layout.camera
-                    layouts_info[str(layout_id)] = {
-                        "camera_position": np.round(cam.position, 4).tolist(),
-                        "camera_quaternion_xyzw": np.round(cam.pose_quaternion(), 6).tolist(),
-                        "zone_xz_radius": [round(float(x), 4) for x in layout.zone],
-                        "furniture": [[kind, round(x, 3), round(z, 3)] for kind, x, z, _ in layout.items],
-                        "bystanders": len(people)}
+                    scene = _Scene.make(model, seed, layout_id, width, height, background)
+                    layouts_info[str(layout_id)] = scene.info()
                     actor.params = None
                     takes_here = 0
-                    if index:
-                        stamp += 10 * period  # a cut: 1 s gap at 10 fps
+                    writer.cut()
                 kind = next(schedule)
-                states = _take_frames(model, actor, kind, layout, rng, take, hold)
-                targets = [_bystander_pose(model, person, spot, layout, layout_rng)
-                           for person, spot in zip(people, layout.bystanders)]
-                starts = [p.params if p.params is not None else t for p, t in zip(people, targets)]
-                n_trans = sum(s.phase == "transition" for s in states)
-                for i, state in enumerate(states[: n_frames - done]):
-                    t = min(1.0, (i + 1) / (n_trans + 1)) if n_trans else 1.0
-                    for person, a, b in zip(people, starts, targets):
-                        person.params = _lerp_pose(model, a, b, t)
-                    actor.params = state.params
-                    meshes = [(layout.vertices, layout.faces)]
-                    meshes += [(p.vertices(model), model.faces) for p in people]
-                    meshes.append((actor.vertices(model), model.faces))
-                    render = render_depth(cam, meshes, noise_rng)
-                    face_range = (int(render.face_offsets[-2]), int(render.face_offsets[-1]))
-                    gt = ground_truth(model, actor, state, layout, render, face_range)
-                    bag.write(topics.DEPTH_IMAGE, numpy_to_image(render.depth_mm, "16UC1", stamp,
-                                                                 cam.frame_id, factory), stamp)
-                    bag.write(topics.DEPTH_INFO, dict_to_camera_info(cam.to_camera_info_dict(), stamp,
-                                                                     factory), stamp)
-                    bag.write(topics.GT_GESTURES, gesture_array(factory, stamp, cam.frame_id, gt), stamp)
-                    pelvis = state.params[model.skeleton.translation_dofs]
-                    records.append({
-                        "index": index, "stamp_ns": stamp, "subject": subject_id, "layout": layout_id,
-                        "take": take, "phase": state.phase, "kind": state.kind, "class_id": gt.class_id,
-                        "name": gt.name, "side": state.side if gt.class_id else "",
-                        "u": None if gt.u is None else round(gt.u, 3),
-                        "v": None if gt.v is None else round(gt.v, 3),
-                        "position": None if gt.position is None else [round(c, 4) for c in gt.position],
-                        "visible": gt.visible,
-                        "distance_m": round(float(np.linalg.norm(cam.world_to_camera(pelvis))), 3)})
-                    index += 1
-                    done += 1
-                    stamp += period
-                    bar.update(1)
+                states = take_frames(model, actor, kind, scene.layout, rng, take, hold)
+                done += _write_take(writer, scene, actor, states, n_frames - done, subject_id)
                 take += 1
                 takes_here += 1
     bar.close()
+    records = writer.records
     per_cls = {name: sum(r["class_id"] == i for r in records)
                for i, name in enumerate(("background",) + gs.GESTURE_CLASSES)}
+    cam = scene.layout.camera
     cam_info = {"frame_id": cam.frame_id, "width": width, "height": height,
                 "K": np.round(cam.K, 6).tolist(), "depth_unit": "mm", "invalid": 0}
     labels = {"format": LABELS_FORMAT, "bag": out.name, "seed": seed, "subject_offset": subject_offset,
