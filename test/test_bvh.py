@@ -14,7 +14,6 @@ from hmocap_ros.sim import retarget as rt
 DATA = Path(__file__).parent / "data"
 CLIPS = Path(hmocap_ros.__file__).parent / "data" / "bvh"
 PACKAGE_BODY = Path(hmocap_ros.__file__).parent / "data" / "body_tracking.npz"
-REFERENCE_BODY = Path("/work/shared/data/body_model_reference.npz")
 
 # Shipped clip -> (family, frames dropped as an added T-pose and its blend).
 SHIPPED = {
@@ -75,7 +74,7 @@ def synthetic_body() -> dict:
 
 
 def body_from_npz(path: Path) -> dict:
-    """The skeleton of a body asset (the package's own, or the shared reference)."""
+    """The skeleton of a body asset (joints, parents and end sites of the rest pose)."""
     data = np.load(path, allow_pickle=False)
     return dict(
         body_rest_joints=data["joints_rest"].astype(float),
@@ -87,14 +86,12 @@ def body_from_npz(path: Path) -> dict:
     )
 
 
-@pytest.fixture(params=["synthetic", "package", "reference"])
+@pytest.fixture(params=["synthetic", "package"])
 def body(request) -> dict:
+    """The hand-written body, and the package's tracking body (data/body_tracking.npz)."""
     if request.param == "synthetic":
         return synthetic_body()
-    path = PACKAGE_BODY if request.param == "package" else REFERENCE_BODY
-    if not path.exists():
-        pytest.skip(f"{path.name} not available")
-    return body_from_npz(path)
+    return body_from_npz(PACKAGE_BODY)
 
 
 _MOTIONS: dict = {}

@@ -21,10 +21,15 @@ from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.render.projection import project_batch
 from hmocap_ros.render.silhouette import render_silhouettes
 from hmocap_ros.rig import load_rig, rig_from_msg
-from hmocap_ros.sim import mocap_dataset
+from hmocap_ros.sim import mocap_dataset, mocap_lighting, mocap_subject
 from hmocap_ros.sim.appearance import PersonAppearance, dress, sample_appearance
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate, make_rig
-from hmocap_ros.sim.mocap_render import FrameState, MocapRenderer, RenderOptions, camera_arrays
+from hmocap_ros.sim.mocap_render import (
+    FrameState,
+    MocapRenderer,
+    RenderOptions,
+    camera_arrays,
+)
 from hmocap_ros.sim.room import build_room
 
 N_BG, N_MOTION = 2, 6
@@ -166,7 +171,7 @@ def test_silhouettes_match_the_tracking_body_posed_from_ground_truth(bag_data, m
         for k, cam in enumerate(rig.names):
             gt = [image_to_numpy(m) for s, _, m in data[topics.gt_silhouette(cam)] if s == stamp][0]
             a, b = model[k] > 0, gt > 0
-            assert (a & b).sum() / (a | b).sum() > 0.88  # 0.94-0.97 measured
+            assert (a & b).sum() / (a | b).sum() > 0.88  # 0.94-0.97 on this recording
 
 
 def _renderer_scene(seed=0, width=160, height=120, second=False):
@@ -218,7 +223,7 @@ def test_posed_body_stays_watertight(models):
     from hmocap_ros.body import sample_pose, sample_shape
 
     params = sample_pose(tracking.skeleton, rng, 3, scale=0.6)
-    full_params = mocap_dataset._full_parameters(params, tracking, full)
+    full_params = mocap_subject._full_parameters(params, tracking, full)
     shape = sample_shape(rng)
     res = full.forward(full_params, shape)
     # The finer rendered body and the tracking body share their joints exactly.
@@ -272,7 +277,7 @@ def test_same_seed_same_bytes_and_other_options(tmp_path):
 
 def test_lighting_events_dim_the_lamp_and_come_back():
     t = np.arange(150) / 25.0
-    lamp, exposure, window = mocap_dataset._lighting_events(np.random.default_rng(3), t, 1.0, 6.0)
+    lamp, exposure, window = mocap_lighting._lighting_events(np.random.default_rng(3), t, 1.0, 6.0)
     assert lamp[0] == 1.0 and lamp[-1] == 1.0 and 0.25 <= lamp.min() <= 0.35
     dim = np.flatnonzero(lamp < 0.5)
     assert 1.0 + 0.2 * 5 <= t[dim[0]] <= 1.0 + 0.31 * 5 and t[dim[-1]] <= 1.0 + 0.71 * 5
@@ -315,17 +320,16 @@ def test_cli(tmp_path, capsys):
     assert math.isfinite(out.stat().st_size)
 
 
-def test_a_run_too_long_for_the_views_is_placed_inside_the_room(capsys):
-    """The 4 m of the shipped run cannot stay in every view of the default room; the best
-    candidate once took it through a wall (seed 204, the held-out table's run with
-    distractors: pelvis 0.23 m beyond it, out of every view, where the ground truth went on).
-    The placement now keeps the pelvis ``MIN_PELVIS_CLEARANCE`` from walls and furniture
-    first, and still says that the motion leaves some view."""
+def test_a_run_too_long_for_the_views_stays_inside_the_room(capsys):
+    """The 4 m of the shipped run cannot stay in every view of the room: the placement keeps
+    the pelvis ``MIN_PELVIS_CLEARANCE`` from walls and furniture in every frame, and says that
+    the motion leaves some view."""
     cfg = MocapSimConfig(out="unused.mcap", bvh=mocap_dataset.DATA_DIR / "bvh" / "09_01.bvh",
-                         start=0.0, seconds=1.2, seed=204, distractors=True, progress=False)
-    r = mocap_dataset.placement_report(cfg)
-    assert r["frames"] == 30
-    assert max(r["x"][1] - r["x"][0], r["z"][1] - r["z"][0]) > 3.5  # the run crosses the room
-    assert r["min_clearance"] >= mocap_dataset.MIN_PELVIS_CLEARANCE
-    assert r["all_views"] < 1.0 and r["under_3_views"] > 0
+                         start=0.0, seconds=1.2, seed=204, progress=False)
+    rng_room, rng_shape, _, rng_place = mocap_subject._streams(cfg.seed)[:4]
+    _, room, _, _, motion = mocap_subject._subject_in_room(cfg, rng_room, rng_shape, rng_place)
+    root = motion.root_translation[:, [0, 2]]
+    assert len(root) == 30
+    assert np.ptp(root, axis=0).max() > 3.5  # the run crosses the room
+    assert room.clearance(root).min() >= mocap_subject.MIN_PELVIS_CLEARANCE
     assert "leaves some camera's view" in capsys.readouterr().err

@@ -28,19 +28,25 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import cv2
 import numpy as np
 
-from hmocap_ros.rig import camera_arrays  # noqa: F401 (re-exported)
 from hmocap_ros.render.meshes import vertex_normals
 from hmocap_ros.render.projection import look_at, project_batch
 from hmocap_ros.render.rasterize import rasterize
-from hmocap_ros.render.shading import (DirectionalLight, Lighting, Material, PointLight,
-                                       material_table, shade)
+from hmocap_ros.render.shading import (
+    DirectionalLight,
+    Lighting,
+    Material,
+    PointLight,
+    material_table,
+    shade,
+)
 from hmocap_ros.render.shadow import ShadowMap
+from hmocap_ros.rig import camera_arrays  # noqa: F401 (re-exported)
 from hmocap_ros.sim.appearance import PERSON_MATERIALS, PersonLook
 from hmocap_ros.sim.room import Room, ball_mesh
 
@@ -140,6 +146,34 @@ def sensor_image(rgb: np.ndarray, rng: np.random.Generator | None, *, gain_map=N
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
 
+def _scene_parts(room: Room, people: Sequence[tuple], person_base: int, ball_material: int,
+                 with_ball: bool) -> list:
+    """The scene's parts in mesh order: static room, door, people, ball (fixed topology).
+
+    Each is ``(name, n_vertices, faces, face_material, face_colours, vertex_colours, uv)``;
+    people's materials start at ``person_base``, the ball's is ``ball_material``.
+    """
+    st = room.static
+    parts = [("static", len(st.vertices), st.faces, st.face_material,
+              np.ones((len(st.faces), 3), np.float32), st.colours, st.uv)]
+    dm = room.door.mesh
+    parts.append(("door", len(dm.vertices), dm.faces, dm.face_material,
+                  np.ones((len(dm.faces), 3), np.float32), dm.colours, dm.uv))
+    for k, (faces, look) in enumerate(people):
+        faces = np.asarray(faces, np.int32)
+        if not isinstance(look, PersonLook):
+            raise TypeError("people must be (faces, PersonLook) pairs")
+        n_v = len(look.vertex_colours)
+        parts.append((f"person_{k}", n_v, faces, look.face_material + person_base,
+                      look.face_colours, look.vertex_colours, np.zeros((n_v, 2), np.float32)))
+    if with_ball:
+        bv, bf, seg = ball_mesh((0.0, 0.0, 0.0), BALL_RADIUS)
+        parts.append(("ball", len(bv), bf, np.full(len(bf), ball_material, np.int32),
+                      np.ones((len(bf), 3), np.float32), _BALL_COLOURS[seg % 8],
+                      np.zeros((len(bv), 2), np.float32)))
+    return parts
+
+
 class MocapRenderer:
     """Renders frames of one recording: fixed rig, room and people (module docstring).
 
@@ -177,47 +211,8 @@ class MocapRenderer:
                                   specular=0.35))
         self.materials = tuple(materials)
         self.material_table = material_table(materials)
-
-        # ---- scene layout: static room, door, people, ball (fixed topology)
-        parts = []  # (name, n_vertices, faces, face_material, face_colours, vertex_colours, uv)
+        self._assemble(_scene_parts(room, people, person_base, ball_material, with_ball))
         st = room.static
-        parts.append(("static", len(st.vertices), st.faces, st.face_material,
-                      np.ones((len(st.faces), 3), np.float32), st.colours, st.uv))
-        dm = room.door.mesh
-        parts.append(("door", len(dm.vertices), dm.faces, dm.face_material,
-                      np.ones((len(dm.faces), 3), np.float32), dm.colours, dm.uv))
-        self._people = []
-        for k, (faces, look) in enumerate(people):
-            faces = np.asarray(faces, np.int32)
-            if not isinstance(look, PersonLook):
-                raise TypeError("people must be (faces, PersonLook) pairs")
-            n_v = len(look.vertex_colours)
-            parts.append((f"person_{k}", n_v, faces, look.face_material + person_base,
-                          look.face_colours, look.vertex_colours,
-                          np.zeros((n_v, 2), np.float32)))
-        self._ball = None
-        if with_ball:
-            bv, bf, seg = ball_mesh((0.0, 0.0, 0.0), BALL_RADIUS)
-            parts.append(("ball", len(bv), bf, np.full(len(bf), ball_material, np.int32),
-                          np.ones((len(bf), 3), np.float32), _BALL_COLOURS[seg % 8],
-                          np.zeros((len(bv), 2), np.float32)))
-        v_off = np.concatenate([[0], np.cumsum([p[1] for p in parts])]).astype(np.int64)
-        f_off = np.concatenate([[0], np.cumsum([len(p[2]) for p in parts])]).astype(np.int64)
-        self.ranges = {p[0]: (int(v_off[i]), int(v_off[i + 1]), int(f_off[i]), int(f_off[i + 1]))
-                       for i, p in enumerate(parts)}
-        self.faces = np.ascontiguousarray(np.concatenate(
-            [p[2] + v_off[i] for i, p in enumerate(parts)]), dtype=np.int32)
-        self.face_material = np.ascontiguousarray(np.concatenate([p[3] for p in parts]),
-                                                  dtype=np.int32)
-        self.face_colours = np.ascontiguousarray(np.concatenate([p[4] for p in parts]),
-                                                 dtype=np.float32)
-        self.vertex_colours = np.ascontiguousarray(np.concatenate([p[5] for p in parts]),
-                                                   dtype=np.float32)
-        self.vertex_uv = np.ascontiguousarray(np.concatenate([p[6] for p in parts]),
-                                              dtype=np.float32)
-        self.n_vertices = int(v_off[-1])
-        self._vertices = np.zeros((self.n_vertices, 3), np.float32)
-        self._normals = np.zeros((self.n_vertices, 3), np.float32)
         s0, s1 = self.ranges["static"][:2]
         self._vertices[s0:s1] = st.vertices
         smooth = self.material_table[st.face_material, 11] > 0.5
@@ -239,6 +234,27 @@ class MocapRenderer:
         self._vignette = (_vignette_gain(self.width, self.height, options.vignette)
                           if options.vignette > 0 else None)
         self.last_timings: dict = {}
+
+    def _assemble(self, parts: list) -> None:
+        """Concatenate the scene's parts (``_scene_parts``) into one mesh; ``ranges`` maps each
+        part's name to its ``(first vertex, end vertex, first face, end face)``."""
+        v_off = np.concatenate([[0], np.cumsum([p[1] for p in parts])]).astype(np.int64)
+        f_off = np.concatenate([[0], np.cumsum([len(p[2]) for p in parts])]).astype(np.int64)
+        self.ranges = {p[0]: (int(v_off[i]), int(v_off[i + 1]), int(f_off[i]), int(f_off[i + 1]))
+                       for i, p in enumerate(parts)}
+        self.faces = np.ascontiguousarray(np.concatenate(
+            [p[2] + v_off[i] for i, p in enumerate(parts)]), dtype=np.int32)
+        self.face_material = np.ascontiguousarray(np.concatenate([p[3] for p in parts]),
+                                                  dtype=np.int32)
+        self.face_colours = np.ascontiguousarray(np.concatenate([p[4] for p in parts]),
+                                                 dtype=np.float32)
+        self.vertex_colours = np.ascontiguousarray(np.concatenate([p[5] for p in parts]),
+                                                   dtype=np.float32)
+        self.vertex_uv = np.ascontiguousarray(np.concatenate([p[6] for p in parts]),
+                                              dtype=np.float32)
+        self.n_vertices = int(v_off[-1])
+        self._vertices = np.zeros((self.n_vertices, 3), np.float32)
+        self._normals = np.zeros((self.n_vertices, 3), np.float32)
 
     # ------------------------------------------------------------------ shadow map
 

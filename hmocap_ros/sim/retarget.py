@@ -3,7 +3,7 @@
 The BVH skeletons (three families, see ``bvh.detect_family``) have other bone lengths, rest poses
 (T-pose against the body's MakeHuman A-pose) and bone rolls than the body, so Euler angles cannot
 be copied. Instead, for every body joint ``j`` the *global* rotation ``G_j`` is solved so that the
-body's bones point where the corresponding BVH bones point (notes/body-model.md, "Motion"):
+body's bones point where the corresponding BVH bones point (shared/notes/body-model.md, "Motion"):
 
 1. Landmarks. Each family maps the body's joints and end sites (``pelvis``, ``l_elbow``,
    ``head_top``, ...) to BVH points (a joint, an End Site, or a point fixed in a BVH joint's
@@ -33,17 +33,41 @@ body's bones point where the corresponding BVH bones point (notes/body-model.md,
 
 Bone lengths are the body's own (forward kinematics with the rest offsets), so ground truth for
 evaluation is the posed body, not the BVH positions.
+
+The family tables are in :mod:`~hmocap_ros.sim.retarget_landmarks`, the rotation helpers and the
+body's forward kinematics in :mod:`~hmocap_ros.sim.retarget_rotations`, :class:`Motion` with its
+resampling and placement in :mod:`~hmocap_ros.sim.retarget_motion`, and the bone-direction check
+in :mod:`~hmocap_ros.sim.retarget_diagnostics`; their public names are importable from here.
 """
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from hmocap_ros.sim.bvh import Bvh, BvhPose, detect_family, forward_kinematics, load_bvh
+from hmocap_ros.sim.bvh import Bvh, detect_family, forward_kinematics, load_bvh
+from hmocap_ros.sim.retarget_diagnostics import bone_direction_errors
+from hmocap_ros.sim.retarget_landmarks import (
+    FAMILY_LANDMARKS,
+    FAMILY_TWIST_SOURCES,
+    RestChain,
+    Virtual,
+    _bvh_point,
+    t_pose_frames,
+)
+from hmocap_ros.sim.retarget_motion import Motion, heading_of, place_in_room, resample
+from hmocap_ros.sim.retarget_rotations import (
+    _fk,
+    _fk_end_sites,
+    _nearest_rotation,
+    _topological_order,
+    _unit,
+    _up_axis_rotation,
+    kabsch,
+    swing,
+)
 
 __all__ = [
     "FAMILY_LANDMARKS",
@@ -62,118 +86,6 @@ __all__ = [
     "t_pose_frames",
 ]
 
-
-@dataclass(frozen=True)
-class Virtual:
-    """A BVH point fixed in a joint's frame: ``p_joint + R_joint @ offset`` (file units)."""
-
-    joint: str
-    offset: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class RestChain:
-    """Where ``target`` (a joint or End Site below ``joint``) would be if every joint between
-    them kept its zero rotation: a point rigid in ``joint``'s frame.
-
-    Used for hand and toe tips, so that finger and toe curls (and glitches in those channels,
-    e.g. a finger marker swap in CMU 13_26 near frame 2650) do not swing the whole hand or foot.
-    """
-
-    joint: str
-    target: str
-
-
-# A BVH point spec: a joint or End Site name ("<joint>_end"), a Virtual or RestChain point, or a
-# tuple of specs tried in order (the first one the file has).
-
-_SIDES = (("l_", "Left", "l", "L"), ("r_", "Right", "r", "R"))
-
-
-def _cmu_mb_landmarks() -> dict:
-    out = {
-        "pelvis": "Hips", "spine": "LowerBack", "chest": "Spine1", "neck": "Neck1",
-        "head": "Head", "head_top": "Head_end",
-    }
-    for body, mb, short, _ in _SIDES:
-        side = body[0]
-        out |= {
-            f"{side}_clavicle": f"{mb}Shoulder", f"{side}_shoulder": f"{mb}Arm",
-            f"{side}_elbow": f"{mb}ForeArm", f"{side}_wrist": f"{mb}Hand",
-            # 31-joint files name the finger chain LeftHandIndex1 or LFingers.
-            f"{side}_hand_tip": (RestChain(f"{mb}Hand", f"{mb}HandIndex1_end"),
-                                 RestChain(f"{mb}Hand", f"{short.upper()}Fingers_end")),
-            f"{side}_hip": f"{mb}UpLeg", f"{side}_knee": f"{mb}Leg",
-            f"{side}_ankle": f"{mb}Foot", f"{side}_toe": RestChain(f"{mb}Foot", f"{mb}ToeBase_end"),
-        }
-    return out
-
-
-def _daz_landmarks() -> dict:
-    out = {
-        "pelvis": "hip", "spine": "abdomen", "chest": "chest", "neck": "neck", "head": "head",
-        # Daz heads have no End Site on top; the head's local +Y is up in the Daz rest pose.
-        "head_top": Virtual("head", (0.0, 15.0, 0.0)),
-        "l_eye": "leftEye", "r_eye": "rightEye",
-    }
-    for body, _, s, _ in _SIDES:
-        side = body[0]
-        out |= {
-            f"{side}_clavicle": f"{s}Collar", f"{side}_shoulder": f"{s}Shldr",
-            f"{side}_elbow": f"{s}ForeArm", f"{side}_wrist": f"{s}Hand",
-            f"{side}_hand_tip": f"{s}Mid1",  # knuckle: rigid in the hand, unlike the finger tip
-            f"{side}_hip": f"{s}Thigh", f"{side}_knee": f"{s}Shin",
-            f"{side}_ankle": f"{s}Foot", f"{side}_toe": f"{s}Foot_end",
-        }
-    return out
-
-
-def _cc_base_landmarks() -> dict:
-    out = {
-        "pelvis": "CC_Base_Pelvis", "spine": "CC_Base_Waist", "chest": "CC_Base_Spine02",
-        "neck": "CC_Base_NeckTwist01", "head": "CC_Base_Head",
-        # CC_Base bones are Y-along-bone; the head bone's +Y points to the top of the head.
-        "head_top": Virtual("CC_Base_Head", (0.0, 15.0, 0.0)),
-        "l_eye": "CC_Base_L_Eye", "r_eye": "CC_Base_R_Eye",
-    }
-    for body, _, _, c in _SIDES:
-        side, p = body[0], f"CC_Base_{c}_"
-        # Twist bones (UpperarmTwist01/02, ForearmTwist01/02, ThighTwist, CalfTwist) and share
-        # bones sit on or along the main bones: only the main bones are used.
-        out |= {
-            f"{side}_clavicle": p + "Clavicle", f"{side}_shoulder": p + "Upperarm",
-            f"{side}_elbow": p + "Forearm", f"{side}_wrist": p + "Hand",
-            # Knuckle and ball of the foot: rigid in the hand and foot, unlike finger/toe tips.
-            f"{side}_hand_tip": p + "Mid1",
-            f"{side}_hip": p + "Thigh", f"{side}_knee": p + "Calf", f"{side}_ankle": p + "Foot",
-            f"{side}_toe": p + "ToeBase",
-        }
-    return out
-
-
-#: Per family: body landmark (joint or end site name, or l_eye/r_eye) -> BVH point spec: a joint
-#: or End Site name, a ``Virtual`` or ``RestChain`` point, or a tuple of specs (first present).
-FAMILY_LANDMARKS: dict[str, dict] = {
-    "cmu_mb": _cmu_mb_landmarks(),
-    "daz": _daz_landmarks(),
-    "cc_base": _cc_base_landmarks(),
-}
-
-
-def _twist_sources(landmarks: dict, overrides: dict) -> dict:
-    out = {
-        name: point for name, point in landmarks.items()
-        if isinstance(point, str) and not name.endswith(("_tip", "_toe", "_top", "_eye"))
-    }
-    return out | overrides
-
-
-#: Per family: body joint -> BVH joint whose world rotation moves the same body segment.
-FAMILY_TWIST_SOURCES: dict[str, dict[str, str]] = {
-    "cmu_mb": _twist_sources(FAMILY_LANDMARKS["cmu_mb"], {"spine": "Spine"}),
-    "daz": _twist_sources(FAMILY_LANDMARKS["daz"], {}),
-    "cc_base": _twist_sources(FAMILY_LANDMARKS["cc_base"], {"spine": "CC_Base_Spine01"}),
-}
 
 # Body-side frame vectors (step 2 of the module docstring). Each entry: (from landmarks, to
 # landmarks, weight); a landmark tuple means its mean. Pairs whose landmarks only the BVH has
@@ -200,161 +112,6 @@ _BODY_CONSTANT_VECTORS = {(("r_eye",), ("l_eye",)): np.array([1.0, 0.0, 0.0])}
 _PARENT_PULL = 0.05  # weight of the parent's axes in P_j: decides twist only when nothing else does
 
 
-@dataclass(frozen=True)
-class Motion:
-    """A body motion: per-frame local joint rotations and root position, body frame.
-
-    Forward kinematics (``_fk``): ``G_root = local[root]``, ``p_root = root_translation``,
-    ``G_j = G_parent @ local[j]``, ``p_j = p_parent + G_parent @ (rest_j - rest_parent)``; all
-    rotations identity gives the body's rest pose with the pelvis at ``root_translation``.
-
-    Attributes:
-        fps: frames per second.
-        local_rotations: (F, J, 3, 3) rotation of each joint relative to its parent and rest.
-        root_translation: (F, 3) world position of the root joint (pelvis), metres, +Y up.
-        joint_names: the body's joint names, in the order of axis 1 of ``local_rotations``.
-        source: where the motion came from (BVH path).
-        family: BVH skeleton family (``bvh.detect_family``), if any.
-        source_frames: (F,) BVH frame of each frame (None after ``resample``).
-        bvh_to_body: (3, 3) rotation from BVH world axes to body axes used by ``retarget``.
-        scale: body leg length / BVH leg length (in BVH units).
-    """
-
-    fps: float
-    local_rotations: np.ndarray
-    root_translation: np.ndarray
-    joint_names: tuple[str, ...]
-    source: str = ""
-    family: str | None = None
-    source_frames: np.ndarray | None = None
-    bvh_to_body: np.ndarray = field(default_factory=lambda: np.eye(3))
-    scale: float = 1.0
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.local_rotations.shape[0])
-
-    @property
-    def duration(self) -> float:
-        """Seconds from the first to the last frame."""
-        return (self.n_frames - 1) / self.fps
-
-
-# ------------------------------------------------------------------------- rotation helpers
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 1e-12, n, 1.0)
-
-
-def kabsch(
-    rest_dirs: np.ndarray, observed_dirs: np.ndarray, weights: np.ndarray | None = None
-) -> np.ndarray:
-    """Rotations R minimising ``sum_i w_i |R a_i - b_i|^2`` (Kabsch 1976, with weights).
-
-    Args:
-        rest_dirs: (..., N, 3) vectors ``a_i`` (broadcast against ``observed_dirs``).
-        observed_dirs: (..., N, 3) vectors ``b_i``.
-        weights: (N,) or (..., N) non-negative weights; ones by default.
-
-    Returns:
-        (..., 3, 3) proper rotations (det +1).
-    """
-    a = np.asarray(rest_dirs, dtype=np.float64)
-    b = np.asarray(observed_dirs, dtype=np.float64)
-    w = np.ones(a.shape[-2]) if weights is None else np.asarray(weights, dtype=np.float64)
-    h = np.einsum("...n,...ni,...nj->...ij", w, b, a)
-    return _nearest_rotation(h)
-
-
-def _nearest_rotation(m: np.ndarray) -> np.ndarray:
-    """Projection of (..., 3, 3) matrices onto SO(3) (polar decomposition with det fix)."""
-    u, _, vt = np.linalg.svd(m)
-    d = np.sign(np.linalg.det(u @ vt))
-    d = np.where(d == 0, 1.0, d)
-    u = u.copy()
-    u[..., :, 2] *= d[..., None]
-    return u @ vt
-
-
-def swing(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Minimal rotations taking directions ``u`` to ``v`` (..., 3) -> (..., 3, 3).
-
-    Rodrigues' formula with ``k = u x v``: ``R = I + [k]x + [k]x^2 / (1 + u.v)``; for opposite
-    directions a half turn about an axis perpendicular to ``u``.
-    """
-    u, v = np.broadcast_arrays(_unit(np.asarray(u, float)), _unit(np.asarray(v, float)))
-    k = np.cross(u, v)
-    c = np.einsum("...i,...i->...", u, v)
-    kx = np.zeros(k.shape + (3,))
-    kx[..., 0, 1], kx[..., 0, 2], kx[..., 1, 2] = -k[..., 2], k[..., 1], -k[..., 0]
-    kx[..., 1, 0], kx[..., 2, 0], kx[..., 2, 1] = k[..., 2], -k[..., 1], k[..., 0]
-    opposite = c < -1.0 + 1e-9
-    denom = np.where(opposite, 1.0, 1.0 + c)
-    r = np.eye(3) + kx + kx @ kx / denom[..., None, None]
-    if np.any(opposite):
-        helper = np.where(np.abs(u[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        n = _unit(np.cross(u, helper))
-        half_turn = 2.0 * n[..., :, None] * n[..., None, :] - np.eye(3)
-        r = np.where(opposite[..., None, None], half_turn, r)
-    return r
-
-
-def _rot_y(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-# --------------------------------------------------------------------------------- landmarks
-
-
-def _bvh_point(bvh: Bvh, pose: BvhPose, spec) -> np.ndarray | None:
-    """(F, 3) position of a BVH point spec, or None when the file lacks it."""
-    if isinstance(spec, str):
-        if spec in bvh.joint_names or spec in bvh.end_site_names:
-            return pose.point(bvh, spec)
-        return None
-    if isinstance(spec, Virtual):
-        if spec.joint not in bvh.joint_names:
-            return None
-        j = bvh.joint_names.index(spec.joint)
-        return pose.positions[:, j] + pose.rotations[:, j] @ np.asarray(spec.offset, float)
-    if isinstance(spec, RestChain):
-        offset = _rest_chain_offset(bvh, spec.joint, spec.target)
-        if offset is None:
-            return None
-        j = bvh.joint_names.index(spec.joint)
-        return pose.positions[:, j] + pose.rotations[:, j] @ offset
-    for alternative in spec:
-        point = _bvh_point(bvh, pose, alternative)
-        if point is not None:
-            return point
-    return None
-
-
-def _rest_chain_offset(bvh: Bvh, joint: str, target: str) -> np.ndarray | None:
-    """Sum of OFFSETs from ``joint`` (exclusive) down to ``target`` (inclusive), in
-    ``joint``'s frame and BVH units (rest-pose scale, see ``RestChain``), or None."""
-    if joint not in bvh.joint_names:
-        return None
-    top = bvh.joint_names.index(joint)
-    if target in bvh.end_site_names:
-        e = bvh.end_site_names.index(target)
-        total, j = bvh.end_site_offsets[e].copy(), int(bvh.end_site_parents[e])
-    elif target in bvh.joint_names:
-        j = bvh.joint_names.index(target)
-        total = np.zeros(3)
-    else:
-        return None
-    while j != top:
-        if j < 0:
-            return None  # target is not below joint
-        total += bvh.offsets[j]
-        j = int(bvh.parents[j])
-    return total
-
-
 def _body_landmarks(
     rest_joints: np.ndarray, joint_names: Sequence[str],
     end_sites_rest: np.ndarray | None, end_site_names: Sequence[str] | None,
@@ -369,73 +126,6 @@ def _mean_of(points: Mapping[str, np.ndarray], names: Sequence[str]) -> np.ndarr
     if not all(n in points for n in names):
         return None
     return np.mean([points[n] for n in names], axis=0)
-
-
-def _topological_order(parents: np.ndarray) -> list[int]:
-    depth = np.zeros(len(parents), dtype=int)
-    for j in range(len(parents)):
-        p, d = parents[j], 0
-        while p >= 0:
-            p, d = parents[p], d + 1
-            if d > len(parents):
-                raise ValueError("body parents contain a cycle")
-        depth[j] = d
-    return [int(j) for j in np.argsort(depth, kind="stable")]
-
-
-def _up_axis_rotation(up: np.ndarray) -> np.ndarray:
-    """Rotation taking the BVH axis nearest to ``up`` onto +Y, horizontal axes kept if possible."""
-    axis = np.zeros(3)
-    i = int(np.argmax(np.abs(up)))
-    axis[i] = np.sign(up[i])
-    if np.allclose(axis, [0, 1, 0]):
-        return np.eye(3)
-    if np.allclose(axis, [0, -1, 0]):
-        return np.diag([1.0, -1.0, -1.0])
-    return np.rint(swing(axis, np.array([0.0, 1.0, 0.0])))
-
-
-def t_pose_frames(landmarks: Mapping[str, np.ndarray]) -> int:
-    """Number of leading frames to drop because frame 0 is an added T-pose (0 if it is not).
-
-    cgspeed files (MotionBuilder- and Daz-friendly) start with a T-pose that is not part of the
-    motion, as do some iClone exports. Frame 0 is taken as such when both upper arms point
-    sideways (within ~30 deg of the shoulder line), both thighs point down, and the pose jumps
-    from frame 0 to frame 1 by more than five times the clip's median frame-to-frame change; the
-    following frames that still jump that much (a blend into the motion) are dropped with it.
-    """
-    need = ("l_shoulder", "r_shoulder", "l_elbow", "r_elbow", "l_hip", "r_hip", "l_knee",
-            "r_knee", "neck")
-    if not all(n in landmarks for n in need) or len(landmarks["neck"]) < 3:
-        return 0
-    lm = {n: np.asarray(landmarks[n], float) for n in need}
-    lateral = _unit(lm["l_shoulder"][0] - lm["r_shoulder"][0])
-    up = _unit(lm["neck"][0] - 0.5 * (lm["l_hip"][0] + lm["r_hip"][0]))
-    arms = (
-        _unit(lm["l_elbow"][0] - lm["l_shoulder"][0]) @ lateral > 0.85
-        and _unit(lm["r_elbow"][0] - lm["r_shoulder"][0]) @ -lateral > 0.85
-    )
-    legs = (
-        _unit(lm["l_knee"][0] - lm["l_hip"][0]) @ -up > 0.9
-        and _unit(lm["r_knee"][0] - lm["r_hip"][0]) @ -up > 0.9
-    )
-    if not (arms and legs):
-        return 0
-    root = 0.5 * (lm["l_hip"] + lm["r_hip"])
-    rel = np.stack([lm[n] - root for n in need], axis=1)
-    change = np.linalg.norm(np.diff(rel, axis=0), axis=2).max(axis=1)
-    jump = change > 5.0 * max(float(np.median(change)), 1e-9)
-    if not jump[0]:
-        return 0
-    # Daz-friendly files blend from the T-pose into the motion over a few frames: drop the blend
-    # too (every step up to the first ordinary one), but never more than a quarter second's worth.
-    n = 1
-    while n < min(len(jump), 30) and jump[n]:
-        n += 1
-    return n
-
-
-# ---------------------------------------------------------------------------- retargeting
 
 
 def retarget(
@@ -487,6 +177,40 @@ def retarget(
             f"body: {len(names)} joint names, rest joints {rest.shape}, parents {parents.shape}"
         )
     family = family or detect_family(bvh)
+    landmarks, twist_sources = _family_tables(bvh, family, landmarks, twist_sources)
+    site_names = tuple(str(n) for n in end_site_names) if end_site_names is not None else ()
+    site_parents = (
+        np.asarray(end_site_parents, dtype=np.int64) if end_site_parents is not None else None
+    )
+    body_pts = _body_landmarks(rest, names, end_sites_rest, site_names)
+    keep, to_body, obs, bvh_rot = _observed(
+        bvh, family, landmarks, twist_sources, body_pts, names, frames, drop_t_pose
+    )
+    glob = _global_rotations(names, parents, site_names, site_parents, body_pts, obs, bvh_rot)
+    local = glob.copy()
+    for j, p in enumerate(parents):
+        if p >= 0:
+            local[:, j] = np.swapaxes(glob[:, p], -1, -2) @ glob[:, j]
+
+    # Root translation: hip midpoint, scaled by leg length, plus the body's pelvis offset.
+    root = int(np.flatnonzero(parents < 0)[0])
+    scale = _leg_length(body_pts) / _leg_length(obs)
+    hips_body = _mean_of(body_pts, ("l_hip", "r_hip"))
+    hips_obs = _mean_of(obs, ("l_hip", "r_hip"))
+    root_t = scale * hips_obs + glob[:, root] @ (rest[root] - hips_body)
+    motion = Motion(
+        fps=bvh.fps, local_rotations=local, root_translation=root_t, joint_names=names,
+        source=bvh.source, family=family, source_frames=keep, bvh_to_body=to_body,
+        scale=float(scale),
+    )
+    return _feet_on_floor(motion, rest, parents, end_sites_rest, site_parents, floor_percentile)
+
+
+def _family_tables(
+    bvh: Bvh, family: str | None, landmarks: Mapping | None,
+    twist_sources: Mapping[str, str] | None,
+) -> tuple[Mapping, Mapping[str, str]]:
+    """The landmark and twist-source tables: those given, else the family's."""
     if landmarks is None:
         if family not in FAMILY_LANDMARKS:
             raise ValueError(
@@ -496,13 +220,25 @@ def retarget(
         landmarks = FAMILY_LANDMARKS[family]
     if twist_sources is None:
         twist_sources = FAMILY_TWIST_SOURCES.get(family, {})
-    site_names = tuple(str(n) for n in end_site_names) if end_site_names is not None else ()
-    site_parents = (
-        np.asarray(end_site_parents, dtype=np.int64) if end_site_parents is not None else None
-    )
-    body_pts = _body_landmarks(rest, names, end_sites_rest, site_names)
+    return landmarks, twist_sources
 
-    # ---- BVH landmarks and rotations in body axes
+
+def _observed(
+    bvh: Bvh,
+    family: str | None,
+    landmarks: Mapping,
+    twist_sources: Mapping[str, str],
+    body_pts: Mapping[str, np.ndarray],
+    names: tuple[str, ...],
+    frames: slice | np.ndarray | None,
+    drop_t_pose: bool,
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The BVH side in body axes (step 1 of the module docstring).
+
+    Returns the BVH frames kept (an added T-pose dropped, then ``frames`` applied), the
+    rotation from BVH to body axes, the landmark positions ``{name: (F, 3)}`` and the world
+    rotations ``{body joint: (F, 3, 3)}`` of the twist-source joints, in those frames.
+    """
     pose = forward_kinematics(bvh)
     bvh_pts = {name: p for name, spec in landmarks.items()
                if (p := _bvh_point(bvh, pose, spec)) is not None}
@@ -526,25 +262,7 @@ def retarget(
         j: to_body @ pose.rotations[keep, bvh.joint_names.index(k)]
         for j, k in twist_sources.items() if k in bvh.joint_names
     }
-
-    glob = _global_rotations(names, parents, site_names, site_parents, body_pts, obs, bvh_rot)
-    local = glob.copy()
-    for j, p in enumerate(parents):
-        if p >= 0:
-            local[:, j] = np.swapaxes(glob[:, p], -1, -2) @ glob[:, j]
-
-    # ---- root translation: hip midpoint, scaled by leg length, plus the body's pelvis offset
-    root = int(np.flatnonzero(parents < 0)[0])
-    scale = _leg_length(body_pts) / _leg_length(obs)
-    hips_body = _mean_of(body_pts, ("l_hip", "r_hip"))
-    hips_obs = _mean_of(obs, ("l_hip", "r_hip"))
-    root_t = scale * hips_obs + glob[:, root] @ (rest[root] - hips_body)
-    motion = Motion(
-        fps=bvh.fps, local_rotations=local, root_translation=root_t, joint_names=names,
-        source=bvh.source, family=family, source_frames=keep, bvh_to_body=to_body,
-        scale=float(scale),
-    )
-    return _feet_on_floor(motion, rest, parents, end_sites_rest, site_parents, floor_percentile)
+    return keep, to_body, obs, bvh_rot
 
 
 def _global_rotations(
@@ -697,183 +415,3 @@ def load_motion(
         end_sites_rest, end_site_parents, end_site_names, **options,
     )
     return motion if fps is None else resample(motion, fps)
-
-
-# ------------------------------------------------------------------------------ diagnostics
-
-
-def bone_direction_errors(
-    motion: Motion,
-    bvh: Bvh,
-    body_rest_joints: np.ndarray,
-    body_parents: Sequence[int],
-    end_sites_rest: np.ndarray | None = None,
-    end_site_parents: Sequence[int] | None = None,
-    end_site_names: Sequence[str] | None = None,
-    landmarks: Mapping | None = None,
-) -> dict[str, np.ndarray]:
-    """Angle (degrees, per frame) between each posed body bone and the BVH's bone.
-
-    For every body bone ``parent -> child`` (child a joint or an end site) whose two landmarks
-    the family maps, the body's bone direction from ``_fk`` is compared with the direction
-    between the BVH landmarks in the same source frame. Needs ``motion.source_frames`` (a motion
-    straight from ``retarget``, not resampled).
-
-    Returns:
-        ``{"parent->child": (F,) angles}``; NaN where the two BVH landmarks coincide.
-    """
-    if motion.source_frames is None:
-        raise ValueError("motion has no source frames (resampled?)")
-    rest = np.asarray(body_rest_joints, float)
-    parents = np.asarray(body_parents, int)
-    names = motion.joint_names
-    landmarks = FAMILY_LANDMARKS[motion.family] if landmarks is None else landmarks
-    positions, glob = _fk(motion.local_rotations, motion.root_translation, rest, parents)
-    body = {n: positions[:, i] for i, n in enumerate(names)}
-    bones = [(names[p], names[c]) for c, p in enumerate(parents) if p >= 0]
-    if end_sites_rest is not None and end_site_parents is not None and end_site_names is not None:
-        sites = _fk_end_sites(positions, glob, rest, end_sites_rest, end_site_parents)
-        body |= {n: sites[:, i] for i, n in enumerate(end_site_names)}
-        bones += [(names[p], str(n)) for n, p in zip(end_site_names, end_site_parents)]
-    pose = forward_kinematics(bvh, frames=motion.source_frames)
-    out = {}
-    for a, b in bones:
-        if a not in landmarks or b not in landmarks:
-            continue
-        pa, pb = _bvh_point(bvh, pose, landmarks[a]), _bvh_point(bvh, pose, landmarks[b])
-        if pa is None or pb is None:
-            continue
-        v_bvh = (pb - pa) @ motion.bvh_to_body.T
-        d_body = _unit(body[b] - body[a])
-        cos = np.clip(np.einsum("fi,fi->f", _unit(v_bvh), d_body), -1.0, 1.0)
-        angle = np.degrees(np.arccos(cos))
-        # Two landmarks on the same BVH point (cmu_mb: LowerBack at Hips) define no direction.
-        angle[np.linalg.norm(v_bvh, axis=-1) < 1e-9] = np.nan
-        out[f"{a}->{b}"] = angle
-    return out
-
-
-# ------------------------------------------------------------------- resampling, placement
-
-
-def resample(motion: Motion, fps_out: float) -> Motion:
-    """The motion at another frame rate: slerp for rotations, linear for the root.
-
-    The output has ``round(duration * fps_out) + 1`` frames spanning exactly the input's first
-    to last frame (so both are kept); the step is therefore ``1 / fps_out`` up to a stretch of at
-    most half an output frame over the whole clip.
-    """
-    if not fps_out > 0:
-        raise ValueError(f"fps_out must be > 0, got {fps_out}")
-    n_in = motion.n_frames
-    n_out = max(int(round((n_in - 1) * fps_out / motion.fps)) + 1, 1)
-    if n_in == 1 or n_out == 1:
-        return replace(motion, fps=float(fps_out), source_frames=None,
-                       local_rotations=motion.local_rotations[:1].copy(),
-                       root_translation=motion.root_translation[:1].copy())
-    t = np.linspace(0.0, n_in - 1, n_out)
-    i0 = np.minimum(np.floor(t).astype(int), n_in - 2)
-    alpha = t - i0
-    n_joints = motion.local_rotations.shape[1]
-    quats = Rotation.from_matrix(motion.local_rotations.reshape(-1, 3, 3)).as_quat()
-    quats = quats.reshape(n_in, n_joints, 4)
-    q0, q1 = quats[i0], quats[i0 + 1]
-    dot = np.einsum("fjk,fjk->fj", q0, q1)
-    q1 = np.where(dot[..., None] < 0, -q1, q1)  # shortest arc
-    dot = np.abs(dot)
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    small = theta < 1e-6
-    sin_t = np.where(small, 1.0, np.sin(theta))
-    a = alpha[:, None]
-    w0 = np.where(small, 1.0 - a, np.sin((1.0 - a) * theta) / sin_t)
-    w1 = np.where(small, a, np.sin(a * theta) / sin_t)
-    q = w0[..., None] * q0 + w1[..., None] * q1
-    rot = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(n_out, n_joints, 3, 3)
-    # Keep the end frames bit-exact.
-    rot[0], rot[-1] = motion.local_rotations[0], motion.local_rotations[-1]
-    trans = (1.0 - alpha)[:, None] * motion.root_translation[i0] + alpha[
-        :, None
-    ] * motion.root_translation[i0 + 1]
-    trans[0], trans[-1] = motion.root_translation[0], motion.root_translation[-1]
-    return replace(motion, fps=float(fps_out), local_rotations=rot, root_translation=trans,
-                   source_frames=None)
-
-
-def heading_of(motion: Motion, frame: int = 0, root: int = 0) -> float:
-    """Facing direction of the root in a frame: angle about +Y from +Z towards +X (radians)."""
-    forward = motion.local_rotations[frame, root] @ np.array([0.0, 0.0, 1.0])
-    return float(np.arctan2(forward[0], forward[2]))
-
-
-def place_in_room(
-    motion: Motion,
-    position_xz: Sequence[float],
-    heading: float,
-    *,
-    anchor: str = "mean",
-    root: int = 0,
-) -> Motion:
-    """Turn the motion about the vertical and move it so it plays at a place in the room.
-
-    Args:
-        motion: retargeted motion (feet already on y = 0, see ``retarget``).
-        position_xz: (x, z) in metres where the anchor of the root trajectory is put.
-        heading: direction the person faces in the first frame, radians about +Y from +Z
-            towards +X (0: facing +Z, pi/2: facing +X).
-        anchor: ``"mean"`` puts the mean of the root's horizontal trajectory at
-            ``position_xz`` (the clip is centred there), ``"first"`` puts the first frame there.
-        root: index of the root joint.
-
-    Returns:
-        The moved motion; heights are unchanged, so the feet stay on the floor.
-    """
-    if anchor not in ("mean", "first"):
-        raise ValueError(f"anchor must be 'mean' or 'first', got {anchor!r}")
-    turn = _rot_y(heading - heading_of(motion, 0, root))
-    trans = motion.root_translation
-    centre = trans.mean(axis=0) if anchor == "mean" else trans[0].copy()
-    centre[1] = 0.0
-    target = np.array([position_xz[0], 0.0, position_xz[1]], dtype=np.float64)
-    new_trans = (trans - centre) @ turn.T + target
-    local = motion.local_rotations.copy()
-    local[:, root] = turn @ local[:, root]
-    return replace(motion, local_rotations=local, root_translation=new_trans)
-
-
-# ------------------------------------------------------------------------------ kinematics
-
-
-def _fk(
-    local_rotations: np.ndarray, root_translation: np.ndarray, rest_joints: np.ndarray,
-    parents: Sequence[int],
-) -> tuple[np.ndarray, np.ndarray]:
-    """Body forward kinematics (convention in ``Motion``).
-
-    Returns positions (F, J, 3) and global rotations (F, J, 3, 3). A private stand-in with the
-    convention of ``hmocap_ros.body.kinematics.forward_kinematics`` (tested to agree), so this
-    module does not depend on the body package.
-    """
-    local = np.asarray(local_rotations, float)
-    rest = np.asarray(rest_joints, float)
-    parents = np.asarray(parents, int)
-    glob = np.empty_like(local)
-    pos = np.empty(local.shape[:2] + (3,))
-    for j in _topological_order(parents):
-        p = parents[j]
-        if p < 0:
-            glob[:, j] = local[:, j]
-            pos[:, j] = root_translation
-        else:
-            glob[:, j] = glob[:, p] @ local[:, j]
-            pos[:, j] = pos[:, p] + glob[:, p] @ (rest[j] - rest[p])
-    return pos, glob
-
-
-def _fk_end_sites(
-    positions: np.ndarray, glob: np.ndarray, rest_joints: np.ndarray,
-    end_sites_rest: np.ndarray, end_site_parents: Sequence[int],
-) -> np.ndarray:
-    """(F, E, 3) end-site positions from posed joints and their global rotations."""
-    par = np.asarray(end_site_parents, int)
-    offsets = np.asarray(end_sites_rest, float) - np.asarray(rest_joints, float)[par]
-    return positions[:, par] + np.einsum("feij,ej->fei", glob[:, par], offsets)
