@@ -144,11 +144,7 @@ def replay_through_nodes(
                                   env, log_dir)
     procs["record"] = recorder
     try:
-        for name, module, args, ready in nodes:
-            procs[name] = NodeProcess.module(name, module, list(args), env, log_dir)
-        for name, _module, _args, ready in nodes:
-            if not procs[name].wait_for_output(ready, ready_timeout):
-                raise RuntimeError(f"{name} did not start:\n{procs[name].output()}")
+        _start_nodes(procs, nodes, env, log_dir, ready_timeout)
         # Outputs are published only once the replay feeds the nodes: make sure the recorder's
         # subscriptions have matched their publishers first.
         for topic in record_topics:
@@ -164,23 +160,39 @@ def replay_through_nodes(
             raise RuntimeError(f"the replay did not finish in {replay_timeout:.0f} s")
         if replay.proc.returncode != 0:
             raise RuntimeError(f"the replay failed:\n{replay.output()}")
-        end = time.monotonic() + drain_timeout
-        expect = dict(expect or {})
-        while time.monotonic() < end:
-            counts = _written(recorder)
-            if all(counts.get(t, 0) >= n for t, n in expect.items()):
-                break
-            time.sleep(0.1)
-        last = sum(_written(recorder).get(t, 0) for t in drain_topics)
-        quiet_since = time.monotonic()
-        while time.monotonic() - quiet_since < settle and time.monotonic() < end:
-            time.sleep(0.1)
-            count = sum(_written(recorder).get(t, 0) for t in drain_topics)
-            if count != last:
-                last, quiet_since = count, time.monotonic()
+        _drain(recorder, dict(expect or {}), drain_topics, settle, drain_timeout)
     finally:
         for name, proc in procs.items():
             if name != "record":
                 proc.stop()
         recorder.stop()
     return procs
+
+
+def _start_nodes(procs: dict[str, NodeProcess], nodes: Sequence[tuple[str, str, Sequence[str], str]],
+                 env: Mapping[str, str], log_dir: Path, ready_timeout: float) -> None:
+    """Start every node (added to ``procs``), then wait for each one's ready text."""
+    for name, module, args, _ready in nodes:
+        procs[name] = NodeProcess.module(name, module, list(args), env, log_dir)
+    for name, _module, _args, ready in nodes:
+        if not procs[name].wait_for_output(ready, ready_timeout):
+            raise RuntimeError(f"{name} did not start:\n{procs[name].output()}")
+
+
+def _drain(recorder: NodeProcess, expect: Mapping[str, int], drain_topics: Sequence[str],
+           settle: float, drain_timeout: float) -> None:
+    """Wait until the recorder has ``expect``'s counts, then until ``drain_topics`` stay quiet
+    for ``settle`` seconds; ``drain_timeout`` bounds both."""
+    end = time.monotonic() + drain_timeout
+    while time.monotonic() < end:
+        counts = _written(recorder)
+        if all(counts.get(t, 0) >= n for t, n in expect.items()):
+            break
+        time.sleep(0.1)
+    last = sum(_written(recorder).get(t, 0) for t in drain_topics)
+    quiet_since = time.monotonic()
+    while time.monotonic() - quiet_since < settle and time.monotonic() < end:
+        time.sleep(0.1)
+        count = sum(_written(recorder).get(t, 0) for t in drain_topics)
+        if count != last:
+            last, quiet_since = count, time.monotonic()

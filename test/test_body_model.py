@@ -20,8 +20,8 @@ from hmocap_ros.body.rotations import axis_angle_matrix, rotvec_to_matrix
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "hmocap_ros" / "data"
 
-# /work/shared/data/body_model_reference.npz (feasibility reduction of the same CC0 data):
-# joint and end-site names, rest positions (m), height and volume, copied in.
+# body_model_reference.npz in the project's shared data folder (a reduction of the same CC0
+# data): joint and end-site names, rest positions (m), height and volume, copied in.
 REF_JOINT_NAMES = ("pelvis", "spine", "chest", "neck", "head", "l_clavicle", "l_shoulder",
                    "l_elbow", "l_wrist", "r_clavicle", "r_shoulder", "r_elbow", "r_wrist",
                    "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")

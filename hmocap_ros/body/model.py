@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .anthropometry import BodyShape, apply_shape
+from .shape_deformation import ShapeFactors, apply_shape
 from .kinematics import (SparseWeights, end_site_positions, forward_kinematics, skin_vertices,
                          skinning_matrices)
 from .skeleton import Skeleton, build_skeleton, pose_to_local_rotations, rest_pose
@@ -84,7 +84,7 @@ class BodyModel:
     def joint_index(self, name: str) -> int:
         return self.joint_names.index(name)
 
-    def rest_pose(self, shape: BodyShape | None = None) -> np.ndarray:
+    def rest_pose(self, shape: ShapeFactors | None = None) -> np.ndarray:
         """Parameters that reproduce the (shaped) rest mesh standing on the floor.
 
         The root translation is the world pelvis position, so a shape with longer legs
@@ -130,7 +130,7 @@ class BodyModel:
                              "a tracker can only swap meshes built on the same joints")
         return other
 
-    def forward(self, params: np.ndarray, shape: BodyShape | None = None,
+    def forward(self, params: np.ndarray, shape: ShapeFactors | None = None,
                 backend: str = "auto") -> PoseResult:
         """Pose B parameter vectors (B, D) with an optional shape (one, or a batch of B).
 
@@ -147,7 +147,7 @@ class BodyModel:
         ends = end_site_positions(transforms, rest.end_sites, self.end_site_parents, rest.joints)
         return PoseResult(verts, joints, ends, transforms)
 
-    def pose(self, params: np.ndarray, shape: BodyShape | None = None,
+    def pose(self, params: np.ndarray, shape: ShapeFactors | None = None,
              backend: str = "auto") -> tuple:
         """(vertices (B, V, 3) float32, joints (B, J, 3)); a (D,) vector gives (V, 3), (J, 3)."""
         single = np.ndim(params) == 1

@@ -69,110 +69,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .dof_table import master_dof_table
 from .rotations import (axis_angle_matrix, euler2_angles, euler3_angles, hinge_angle,
                         rotvec_to_matrix, swing_twist_angles)
 
 DOF_SETS = ("tracking", "full")
 SWING_NORM_MAX = np.deg2rad(170.0)  # swing cone kept away from the antipodal singularity
-FINGERS = ("thumb", "index", "middle", "ring", "pinky")
-
-
-@dataclass(frozen=True)
-class DofSpec:
-    """One degree of freedom of the master table.
-
-    kind: "translation" (axis index in ``target``), "toward" (turns the joint's bone
-    towards the direction ``target``), "swing" (same, as one component of a swing-twist
-    joint) or "twist" (turns ``ref`` about the bone towards ``target``).  Directions are
-    symbolic (see ``_direction``).  Limits in degrees (metres for translations).
-    """
-
-    name: str
-    joint: str
-    kind: str
-    target: str
-    lo: float
-    hi: float
-    group: str
-    tracking: bool
-    ref: str = ""
-
-
-def _side_dofs(s: str) -> list:
-    t = True
-    return [
-        DofSpec(f"{s}_clavicle_elev", f"{s}_clavicle", "toward", "up", -15, 35, f"{s}_shoulder", False),
-        DofSpec(f"{s}_clavicle_prot", f"{s}_clavicle", "toward", "forward", -20, 25, f"{s}_shoulder", False),
-        DofSpec(f"{s}_shoulder_flex", f"{s}_shoulder", "swing", "forward", -70, 170, f"{s}_shoulder", t),
-        DofSpec(f"{s}_shoulder_abd", f"{s}_shoulder", "swing", "up", -60, 140, f"{s}_shoulder", t),
-        DofSpec(f"{s}_shoulder_twist", f"{s}_shoulder", "twist", "medial", -90, 90, f"{s}_shoulder", t,
-                ref="forward"),
-        DofSpec(f"{s}_elbow_flex", f"{s}_elbow", "toward", "to_parent", -50, 105, f"{s}_elbow", t),
-        DofSpec(f"{s}_elbow_twist", f"{s}_elbow", "twist", "medial", -80, 80, f"{s}_elbow", False,
-                ref="forward"),
-        DofSpec(f"{s}_wrist_flex", f"{s}_wrist", "toward", "volar", -70, 80, f"{s}_elbow", False),
-        DofSpec(f"{s}_wrist_dev", f"{s}_wrist", "toward", "radial", -35, 20, f"{s}_elbow", False),
-    ]
-
-
-def _leg_dofs(s: str) -> list:
-    t = True
-    return [
-        DofSpec(f"{s}_hip_flex", f"{s}_hip", "swing", "forward", -30, 125, f"{s}_leg", t),
-        DofSpec(f"{s}_hip_abd", f"{s}_hip", "swing", "lateral", -30, 50, f"{s}_leg", t),
-        DofSpec(f"{s}_hip_twist", f"{s}_hip", "twist", "medial", -45, 45, f"{s}_leg", t, ref="forward"),
-        DofSpec(f"{s}_knee_flex", f"{s}_knee", "toward", "back", -10, 140, f"{s}_leg", t),
-        DofSpec(f"{s}_ankle_flex", f"{s}_ankle", "toward", "up", -50, 30, f"{s}_leg", t),
-        DofSpec(f"{s}_ankle_inv", f"{s}_ankle", "twist", "medial", -25, 35, f"{s}_leg", False, ref="down"),
-    ]
-
-
-def _finger_dofs(s: str) -> list:
-    """Per hand: thumb CMC 2 + MCP/IP 1 + 1; other fingers MCP 2 (flex, spread) + PIP + DIP."""
-    g = f"{s}_hand"
-    out = [
-        DofSpec(f"{s}_thumb1_flex", f"{s}_thumb1", "toward", "ulnar", -30, 50, g, False),
-        DofSpec(f"{s}_thumb1_abd", f"{s}_thumb1", "toward", "volar", -30, 60, g, False),
-        DofSpec(f"{s}_thumb2_flex", f"{s}_thumb2", "toward", "thumb_curl", -20, 60, g, False),
-        DofSpec(f"{s}_thumb3_flex", f"{s}_thumb3", "toward", "thumb_curl", -20, 85, g, False),
-    ]
-    for f in FINGERS[1:]:
-        out += [
-            DofSpec(f"{s}_{f}1_flex", f"{s}_{f}1", "toward", "volar", -20, 95, g, False),
-            DofSpec(f"{s}_{f}1_spread", f"{s}_{f}1", "toward", "radial", -25, 25, g, False),
-            DofSpec(f"{s}_{f}2_flex", f"{s}_{f}2", "toward", "volar", -10, 110, g, False),
-            DofSpec(f"{s}_{f}3_flex", f"{s}_{f}3", "toward", "volar", -10, 80, g, False),
-        ]
-    return out
-
-
-def master_dof_table() -> tuple:
-    """All DoFs any model may have, in parameter-vector order."""
-    t = True
-    table = [
-        DofSpec("root_tx", "pelvis", "translation", "0", -50, 50, "torso", t),
-        DofSpec("root_ty", "pelvis", "translation", "1", -1, 3, "torso", t),
-        DofSpec("root_tz", "pelvis", "translation", "2", -50, 50, "torso", t),
-        DofSpec("root_yaw", "pelvis", "twist", "left", -180, 180, "torso", t, ref="forward"),
-        DofSpec("root_pitch", "pelvis", "toward", "forward", -90, 90, "torso", t),
-        DofSpec("root_roll", "pelvis", "toward", "left", -90, 90, "torso", t),
-        DofSpec("spine_flex", "spine", "toward", "forward", -30, 80, "torso", t),
-        DofSpec("spine_bend", "spine", "toward", "left", -35, 35, "torso", t),
-        DofSpec("spine_twist", "spine", "twist", "left", -45, 45, "torso", t, ref="forward"),
-        DofSpec("chest_flex", "chest", "toward", "forward", -20, 40, "torso", False),
-        DofSpec("chest_bend", "chest", "toward", "left", -20, 20, "torso", False),
-        DofSpec("chest_twist", "chest", "twist", "left", -30, 30, "torso", False, ref="forward"),
-        DofSpec("neck_flex", "neck", "toward", "forward", -50, 60, "torso", t),
-        DofSpec("neck_bend", "neck", "toward", "left", -40, 40, "torso", t),
-        DofSpec("neck_twist", "neck", "twist", "left", -70, 70, "torso", t, ref="forward"),
-        DofSpec("head_flex", "head", "toward", "forward", -30, 30, "torso", False),
-        DofSpec("head_bend", "head", "toward", "left", -20, 20, "torso", False),
-        DofSpec("head_twist", "head", "twist", "left", -20, 20, "torso", False, ref="forward"),
-    ]
-    table += _side_dofs("l") + _side_dofs("r") + _leg_dofs("l") + _leg_dofs("r")
-    table += _finger_dofs("l") + _finger_dofs("r")
-    return tuple(table)
-
 
 # Bone direction of a joint = towards this child (joint or end site); joints not listed
 # use their only child joint, or else their only end site.
@@ -287,71 +189,23 @@ def build_skeleton(joint_names, parents, joints_rest, end_site_names, end_site_p
     if parents[0] != -1 or np.any(parents[1:] >= np.arange(1, len(parents))):
         raise ValueError("joints must be ordered parents first with the root at index 0")
     joints_rest = np.asarray(joints_rest, dtype=np.float64)
-    points = {n: joints_rest[i] for i, n in enumerate(joint_names)}
-    end_children: dict = {}
-    for n, p, x in zip(end_site_names, end_site_parents, np.asarray(end_sites_rest, np.float64)):
-        points[str(n)] = x
-        end_children.setdefault(joint_names[int(p)], []).append(str(n))
-    for n, x in (landmarks or {}).items():
-        points[str(n)] = np.asarray(x, dtype=np.float64)
+    points, end_children = _rest_points(joint_names, joints_rest, end_site_names,
+                                        end_site_parents, end_sites_rest, landmarks)
     children: dict = {}
     parent_of = {}
     for j, p in enumerate(parents):
         if p >= 0:
             children.setdefault(joint_names[p], []).append(joint_names[j])
             parent_of[joint_names[j]] = joint_names[p]
-
-    specs = [d for d in master_dof_table()
-             if d.joint in points and (dof_set == "full" or d.tracking)
-             and not (d.kind != "translation" and d.target in ("volar", "radial", "ulnar", "thumb_curl")
-                      and f"{d.joint[0]}_index_knuckle" not in points)]
-    bone_dirs = np.zeros((len(joint_names), 3))
-    for j, name in enumerate(joint_names):
-        if name == "pelvis":
-            bone_dirs[j] = (0.0, 1.0, 0.0)  # the root's yaw axis is the world vertical
-        else:
-            try:
-                bone_dirs[j] = _bone_dir(name, children, end_children, points)
-            except ValueError:
-                if any(d.joint == name for d in specs):
-                    raise
+    specs = _model_dofs(points, dof_set)
+    bone_dirs = _bone_directions(joint_names, children, end_children, points, specs)
     kinds, dofs_of, axes_of = [], [], []
     for j, name in enumerate(joint_names):
         idx = [i for i, d in enumerate(specs) if d.joint == name and d.kind != "translation"]
         mine = [specs[i] for i in idx]
-        d = bone_dirs[j]
-        axes = np.zeros((len(mine), 3))
-        done: list = []
-        for k in sorted(range(len(mine)), key=lambda k: mine[k].kind != "twist"):
-            spec = mine[k]
-            target = _direction(spec.target, name, points, parent_of)
-            if spec.kind == "twist":
-                ref = _direction(spec.ref, name, points, parent_of)
-                s = d @ np.cross(ref, target)
-                if abs(s) < 1e-3:
-                    raise ValueError(f"twist {spec.name}: reference and target parallel to the bone")
-                a = np.sign(s) * d
-            else:
-                a = np.cross(d, target - (target @ d) * d)
-                for b in done:
-                    a = a - (a @ b) * b
-                a = _unit(a)
-            axes[k] = a
-            done.append(a)
-        n = len(mine)
-        if name == "pelvis":
-            kind = "root"
-        elif n == 0:
-            kind = "fixed"
-        elif any(m.kind == "swing" for m in mine):
-            if [m.kind for m in mine] != ["swing", "swing", "twist"]:
-                raise ValueError(f"swing-twist joint {name} needs (swing, swing, twist) DoFs")
-            kind = "swing_twist"
-        else:
-            kind = {1: "hinge", 2: "euler2", 3: "euler3"}[n]
-        kinds.append(kind)
+        kinds.append(_joint_kind(name, mine))
         dofs_of.append(tuple(idx))
-        axes_of.append(axes)
+        axes_of.append(_joint_axes(name, bone_dirs[j], mine, points, parent_of))
     trans = np.array([i for i, d in enumerate(specs) if d.kind == "translation"], dtype=np.intp)
     if len(trans) != 3 or [specs[i].target for i in trans] != ["0", "1", "2"]:
         raise ValueError("the root needs translation DoFs x, y, z")
@@ -370,6 +224,86 @@ def build_skeleton(joint_names, parents, joints_rest, end_site_names, end_site_p
                     lower=lower, upper=upper, joint_kind=tuple(kinds),
                     joint_dofs=tuple(dofs_of), joint_axes=tuple(axes_of),
                     translation_dofs=trans, wrap_dofs=wrap, dof_set=dof_set)
+
+
+def _rest_points(joint_names: tuple, joints_rest: np.ndarray, end_site_names, end_site_parents,
+                 end_sites_rest, landmarks: dict | None) -> tuple:
+    """Rest positions of joints, end sites and landmarks by name, and each joint's end sites."""
+    points = {n: joints_rest[i] for i, n in enumerate(joint_names)}
+    end_children: dict = {}
+    for n, p, x in zip(end_site_names, end_site_parents, np.asarray(end_sites_rest, np.float64)):
+        points[str(n)] = x
+        end_children.setdefault(joint_names[int(p)], []).append(str(n))
+    for n, x in (landmarks or {}).items():
+        points[str(n)] = np.asarray(x, dtype=np.float64)
+    return points, end_children
+
+
+def _model_dofs(points: dict, dof_set: str) -> list:
+    """The master table's DoFs of ``dof_set`` whose joint (and, for hand directions, knuckle
+    landmarks) the model has."""
+    return [d for d in master_dof_table()
+            if d.joint in points and (dof_set == "full" or d.tracking)
+            and not (d.kind != "translation" and d.target in ("volar", "radial", "ulnar", "thumb_curl")
+                     and f"{d.joint[0]}_index_knuckle" not in points)]
+
+
+def _bone_directions(joint_names: tuple, children: dict, end_children: dict, points: dict,
+                     specs: list) -> np.ndarray:
+    """Unit rest bone direction (J, 3) of every joint; zero for a joint without DoFs and
+    without a defined bone."""
+    bone_dirs = np.zeros((len(joint_names), 3))
+    for j, name in enumerate(joint_names):
+        if name == "pelvis":
+            bone_dirs[j] = (0.0, 1.0, 0.0)  # the root's yaw axis is the world vertical
+        else:
+            try:
+                bone_dirs[j] = _bone_dir(name, children, end_children, points)
+            except ValueError:
+                if any(d.joint == name for d in specs):
+                    raise
+    return bone_dirs
+
+
+def _joint_axes(name: str, d: np.ndarray, mine: list, points: dict, parent_of: dict) -> np.ndarray:
+    """Unit axes (n, 3) of one joint's DoFs ``mine`` about its bone direction ``d``.
+
+    A twist DoF turns about ``±d``; any other turns the bone towards its target,
+    ``axis = normalise(d × target⊥)``. Gram-Schmidt makes the axes orthonormal, twist first.
+    """
+    axes = np.zeros((len(mine), 3))
+    done: list = []
+    for k in sorted(range(len(mine)), key=lambda k: mine[k].kind != "twist"):
+        spec = mine[k]
+        target = _direction(spec.target, name, points, parent_of)
+        if spec.kind == "twist":
+            ref = _direction(spec.ref, name, points, parent_of)
+            s = d @ np.cross(ref, target)
+            if abs(s) < 1e-3:
+                raise ValueError(f"twist {spec.name}: reference and target parallel to the bone")
+            a = np.sign(s) * d
+        else:
+            a = np.cross(d, target - (target @ d) * d)
+            for b in done:
+                a = a - (a @ b) * b
+            a = _unit(a)
+        axes[k] = a
+        done.append(a)
+    return axes
+
+
+def _joint_kind(name: str, mine: list) -> str:
+    """:attr:`Skeleton.joint_kind` of a joint with the DoFs ``mine``."""
+    n = len(mine)
+    if name == "pelvis":
+        return "root"
+    if n == 0:
+        return "fixed"
+    if any(m.kind == "swing" for m in mine):
+        if [m.kind for m in mine] != ["swing", "swing", "twist"]:
+            raise ValueError(f"swing-twist joint {name} needs (swing, swing, twist) DoFs")
+        return "swing_twist"
+    return {1: "hinge", 2: "euler2", 3: "euler3"}[n]
 
 
 def rest_pose(skel: Skeleton) -> np.ndarray:

@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "DEFAULT_FACTORY",
     "RclpyFactory",
     "RosbagsFactory",
     "MessageFactoryError",
@@ -420,7 +419,8 @@ def default_factory() -> RosbagsFactory:
 
 
 def __getattr__(name: str) -> Any:
-    # DEFAULT_FACTORY is created lazily: building the Jazzy typestore takes ~60 ms.
+    # ``DEFAULT_FACTORY``, the shared factory as a module attribute, is created on first
+    # access (building the Jazzy typestore takes ~60 ms); ``default_factory()`` is the API.
     if name == "DEFAULT_FACTORY":
         return default_factory()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -3,8 +3,9 @@
 - :mod:`.silhouette`: batched binary silhouettes and the fused silhouette XOR cost
   (eq. 2.8, 2.15) for the particle filter's hot path.
 - :mod:`.rasterize`: z-buffer with face ids and perspective-correct barycentrics.
-- :mod:`.shading`, :mod:`.textures`, :mod:`.shadow`: RGB frames with procedural textures,
-  Lambert lighting and soft shadow maps; :mod:`.sensor`: noise, illumination, anti-aliasing.
+- :mod:`.shading`, :mod:`.materials`, :mod:`.lights`, :mod:`.textures`, :mod:`.shadow`: RGB
+  frames with procedural textures, Lambert lighting and soft shadow maps; :mod:`.sensor`:
+  noise, illumination, anti-aliasing.
 - :mod:`.depth`: Kinect-like uint16 depth images.
 - :mod:`.projection`: OpenCV-model projection on plain (K, R, t, dist) arrays.
 - :mod:`.reference`: slow exact numpy rasteriser that the fast ones are tested against.
@@ -12,11 +13,12 @@ All coverage follows :mod:`.scanline`: pixel centres at integer coordinates, top
 """
 
 from hmocap_ros.render.depth import KinectNoise, depth_to_millimetres, kinect_depth
+from hmocap_ros.render.lights import DirectionalLight, Lighting, PointLight
+from hmocap_ros.render.materials import Material, material_table
 from hmocap_ros.render.meshes import concatenate_meshes, face_normals, grid_quad, vertex_normals
 from hmocap_ros.render.projection import look_at, project_batch, project_points
 from hmocap_ros.render.rasterize import face_range_mask, interpolate, rasterize
-from hmocap_ros.render.shading import (DirectionalLight, Lighting, Material, PointLight,
-                                       material_table, shade)
+from hmocap_ros.render.shading import shade
 from hmocap_ros.render.shadow import ShadowMap, render_shadow_map
 from hmocap_ros.render.silhouette import observed_counts, render_silhouettes, xor_counts
 

@@ -8,24 +8,28 @@ world position, optionally times per-vertex / per-face colours, or an image atla
 per-vertex UVs); light is a hemispheric ambient term plus Lambert (and optional Blinn-Phong
 highlight) from point and directional lights, each optionally attenuated by a soft shadow map
 (:mod:`hmocap_ros.render.shadow`). Shading runs in linear light; the output is sRGB uint8.
-Sensor noise, illumination changes and anti-aliasing are in :mod:`hmocap_ros.render.sensor`.
+Materials and lights are described in :mod:`hmocap_ros.render.materials` and
+:mod:`hmocap_ros.render.lights`; sensor noise, illumination changes and anti-aliasing are in
+:mod:`hmocap_ros.render.sensor`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 
+from hmocap_ros.render.lights import DirectionalLight, Lighting, PointLight
+from hmocap_ros.render.materials import MATERIAL_FIELDS, Material, material_table
 from hmocap_ros.render.meshes import face_normals
-from hmocap_ros.render.shadow import ShadowMap, shadow_visibility
+from hmocap_ros.render.shadow import shadow_visibility
 from hmocap_ros.render.textures import (KIND_FABRIC, KIND_IMAGE, KIND_PLASTER, KIND_TILES,
-                                        KIND_WOOD, KINDS, atlas_bilinear, fabric, fbm3, plaster,
-                                        tiles, wood_planks)
+                                        KIND_WOOD, atlas_bilinear, fabric, fbm3, plaster, tiles,
+                                        wood_planks)
 
-MATERIAL_FIELDS = 14  # kind, colour (3), colour2 (3), scale, noise, angle, vc, smooth, spec, seed
+__all__ = ["DirectionalLight", "Lighting", "MATERIAL_FIELDS", "Material", "PointLight",
+           "material_table", "shade"]
 
 GAMMA = 2.2
 # Look-up tables instead of a pow() per channel and pixel (half the shading time otherwise):
@@ -34,86 +38,6 @@ GAMMA = 2.2
 _TO_LINEAR_MAX = 2.0
 _TO_LINEAR = (np.linspace(0.0, _TO_LINEAR_MAX, 2049) ** GAMMA).astype(np.float64)
 _ENCODE = np.rint(np.linspace(0.0, 1.0, 4097) ** (2.0 / GAMMA) * 255.0).astype(np.uint8)
-
-
-@dataclass(frozen=True)
-class Material:
-    """Surface appearance. ``kind``: 'plain', 'wood', 'tiles', 'plaster', 'fabric' or 'image'.
-
-    colour / colour2: sRGB in [0, 1] (wood: light and dark tone; tiles: tile and grout;
-        plaster: the two mottling tones; plain / fabric: colour2 unused; image: tint).
-    scale: pattern size in metres (plank width, tile side, blotch or fold size).
-    noise: relative amplitude of fine noise (plain, tiles, plaster grain, fabric folds).
-    angle: rotation of the planar texture coordinates (radians), e.g. vertical grain on doors.
-    vertex_colour: multiply by the interpolated per-vertex colours (clothes, skin).
-    smooth: use interpolated vertex normals (curved surfaces) instead of the face normal.
-    specular: strength of a Blinn-Phong highlight (0 = matte).
-    seed: pattern seed, so two walls of the same material differ.
-    """
-
-    kind: str = "plain"
-    colour: tuple = (0.8, 0.8, 0.8)
-    colour2: tuple = (0.5, 0.5, 0.5)
-    scale: float = 0.1
-    noise: float = 0.0
-    angle: float = 0.0
-    vertex_colour: bool = False
-    smooth: bool = False
-    specular: float = 0.0
-    seed: int = 0
-
-    def to_row(self) -> np.ndarray:
-        if self.kind not in KINDS:
-            raise ValueError(f"unknown material kind {self.kind!r}; one of {sorted(KINDS)}")
-        return np.array([KINDS[self.kind], *self.colour, *self.colour2, self.scale, self.noise,
-                         self.angle, float(self.vertex_colour), float(self.smooth),
-                         self.specular, self.seed], dtype=np.float32)
-
-
-def material_table(materials) -> np.ndarray:
-    """Stack :class:`Material` objects into the ``(n, MATERIAL_FIELDS)`` float32 table."""
-    return np.stack([m.to_row() for m in materials]).astype(np.float32)
-
-
-@dataclass(frozen=True, eq=False)
-class PointLight:
-    """Isotropic point light at ``position``; ``colour`` is linear RGB intensity (the
-    irradiance at 1 m). ``radius`` (m) softens the inverse-square falloff to
-    ``1 / (d^2 + radius^2)``, like a lamp of that size (no hot spot on a nearby ceiling).
-    ``shadow``: a shadow map rendered from this position, or None."""
-
-    position: tuple
-    colour: tuple = (1.0, 1.0, 1.0)
-    shadow: ShadowMap | None = None
-    radius: float = 0.0
-
-
-@dataclass(frozen=True, eq=False)
-class DirectionalLight:
-    """Light travelling along ``direction`` (e.g. (0, -1, 0) from above) with linear RGB
-    irradiance ``colour``; ``shadow`` from :func:`render_shadow_map` with light_direction."""
-
-    direction: tuple
-    colour: tuple = (1.0, 1.0, 1.0)
-    shadow: ShadowMap | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class Lighting:
-    """Scene lighting. Ambient light is hemispheric: ``ambient_sky`` on surfaces facing up
-    (+Y), ``ambient_ground`` facing down, blended by the normal. ``exposure`` scales the
-    linear result before sRGB encoding. ``shadow_bias`` (m) avoids self-shadowing acne;
-    ``shadow_softness_px`` is the PCF radius in shadow-map pixels, sampled with
-    ``shadow_taps`` x ``shadow_taps`` taps. ``background``: sRGB colour of empty pixels."""
-
-    lights: tuple = ()
-    ambient_sky: tuple = (0.35, 0.35, 0.37)
-    ambient_ground: tuple = (0.18, 0.16, 0.15)
-    exposure: float = 1.0
-    shadow_bias: float = 0.03
-    shadow_softness_px: float = 3.0
-    shadow_taps: int = 5
-    background: tuple = (0.0, 0.0, 0.0)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -182,6 +106,140 @@ def _albedo(mat, px, py, pz, gnx, gny, gnz, s_uv, t_uv, atlas, has_uv):
     return r1, g1, b1
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _interpolate3(values, i0, i1, i2, w0, w1, w2):
+    """Barycentric interpolation of a per-vertex 3-vector at one pixel."""
+    x = w0 * values[i0, 0] + w1 * values[i1, 0] + w2 * values[i2, 0]
+    y = w0 * values[i0, 1] + w1 * values[i1, 1] + w2 * values[i2, 1]
+    z = w0 * values[i0, 2] + w1 * values[i1, 2] + w2 * values[i2, 2]
+    return x, y, z
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _shading_normal(smooth, vnormals, i0, i1, i2, w0, w1, w2, gnx, gny, gnz):
+    """The interpolated vertex normal for smooth materials (``smooth``), else (or where it
+    vanishes) the face normal ``gn``."""
+    if smooth:
+        nx, ny, nz = _interpolate3(vnormals, i0, i1, i2, w0, w1, w2)
+        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if norm > 0.0:
+            nx /= norm
+            ny /= norm
+            nz /= norm
+        else:
+            nx = gnx
+            ny = gny
+            nz = gnz
+    else:
+        nx = gnx
+        ny = gny
+        nz = gnz
+    return nx, ny, nz
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _towards_camera(cam, px, py, pz, gnx, gny, gnz, nx, ny, nz):
+    """Unit direction to the camera, and the face and shading normals turned to the side the
+    camera sees (surfaces are two-sided)."""
+    vx = cam[0] - px
+    vy = cam[1] - py
+    vz = cam[2] - pz
+    vlen = math.sqrt(vx * vx + vy * vy + vz * vz)
+    vx /= vlen
+    vy /= vlen
+    vz /= vlen
+    if gnx * vx + gny * vy + gnz * vz < 0.0:
+        gnx = -gnx
+        gny = -gny
+        gnz = -gnz
+    if nx * gnx + ny * gny + nz * gnz < 0.0:
+        nx = -nx
+        ny = -ny
+        nz = -nz
+    return vx, vy, vz, gnx, gny, gnz, nx, ny, nz
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _linear_albedo(mat, f, i0, i1, i2, w0, w1, w2, px, py, pz, gnx, gny, gnz, vcolours,
+                   fcolours, vuv, atlas, lut_linear):
+    """Linear-light albedo of face ``f`` at one pixel: the material's texture, times the
+    interpolated vertex colour (materials with ``vertex_colour``) and the face colour."""
+    has_vc = vcolours.shape[0] > 0
+    has_fc = fcolours.shape[0] > 0
+    has_uv = vuv.shape[0] > 0
+    s_uv = 0.0
+    t_uv = 0.0
+    if has_uv:
+        s_uv = w0 * vuv[i0, 0] + w1 * vuv[i1, 0] + w2 * vuv[i2, 0]
+        t_uv = w0 * vuv[i0, 1] + w1 * vuv[i1, 1] + w2 * vuv[i2, 1]
+    ar, ag, ab = _albedo(mat, px, py, pz, gnx, gny, gnz, s_uv, t_uv, atlas, has_uv)
+    if mat[10] > 0.5 and has_vc:
+        cr, cg, cb = _interpolate3(vcolours, i0, i1, i2, w0, w1, w2)
+        ar *= cr
+        ag *= cg
+        ab *= cb
+    if has_fc:
+        ar *= fcolours[f, 0]
+        ag *= fcolours[f, 1]
+        ab *= fcolours[f, 2]
+    return _to_linear(ar, lut_linear), _to_linear(ag, lut_linear), _to_linear(ab, lut_linear)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _irradiance(px, py, pz, nx, ny, nz, vx, vy, vz, spec, lights, sm_depth, sm_K, sm_R, sm_t,
+                sm_ortho, amb_sky, amb_ground, bias, softness, taps):
+    """Diffuse irradiance (hemispheric ambient + Lambert) and Blinn-Phong highlight (strength
+    ``spec``) at a surface point, each light attenuated by its soft shadow map."""
+    h = 0.5 + 0.5 * ny
+    lr = amb_ground[0] + h * (amb_sky[0] - amb_ground[0])
+    lg = amb_ground[1] + h * (amb_sky[1] - amb_ground[1])
+    lb = amb_ground[2] + h * (amb_sky[2] - amb_ground[2])
+    sr = 0.0
+    sg = 0.0
+    sb = 0.0
+    for k in range(lights.shape[0]):
+        if lights[k, 0] < 0.5:  # directional: xyz is the travel direction
+            lx = -lights[k, 1]
+            ly = -lights[k, 2]
+            lz = -lights[k, 3]
+            llen = math.sqrt(lx * lx + ly * ly + lz * lz)
+            atten = 1.0
+        else:
+            lx = lights[k, 1] - px
+            ly = lights[k, 2] - py
+            lz = lights[k, 3] - pz
+            llen = math.sqrt(lx * lx + ly * ly + lz * lz)
+            atten = 1.0 / max(llen * llen + lights[k, 8] * lights[k, 8], 1e-4)
+        lx /= llen
+        ly /= llen
+        lz /= llen
+        ndl = nx * lx + ny * ly + nz * lz
+        if ndl <= 0.0:
+            continue
+        vis = 1.0
+        si = int(lights[k, 7])
+        if si >= 0:
+            vis = shadow_visibility(px, py, pz, sm_depth[si], sm_K[si], sm_R[si],
+                                    sm_t[si], sm_ortho[si], bias, softness, taps)
+            if vis <= 0.0:
+                continue
+        e = atten * vis
+        lr += lights[k, 4] * e * ndl
+        lg += lights[k, 5] * e * ndl
+        lb += lights[k, 6] * e * ndl
+        if spec > 0.0:
+            hx = lx + vx
+            hy = ly + vy
+            hz = lz + vz
+            hl = math.sqrt(hx * hx + hy * hy + hz * hz)
+            ndh = max((nx * hx + ny * hy + nz * hz) / max(hl, 1e-12), 0.0)
+            s = spec * e * ndh ** 32
+            sr += lights[k, 4] * s
+            sg += lights[k, 5] * s
+            sb += lights[k, 6] * s
+    return lr, lg, lb, sr, sg, sb
+
+
 @nb.njit(cache=True, nogil=True, parallel=True)
 def _shade_kernel(face_id, bary, vertices, faces, fnormals, vnormals, vcolours, fcolours, vuv,
                   atlas, face_material, materials, cam, lights, sm_depth, sm_K, sm_R, sm_t,
@@ -190,9 +248,6 @@ def _shade_kernel(face_id, bary, vertices, faces, fnormals, vnormals, vcolours, 
     height = face_id.shape[0]
     width = face_id.shape[1]
     has_vn = vnormals.shape[0] > 0
-    has_vc = vcolours.shape[0] > 0
-    has_fc = fcolours.shape[0] > 0
-    has_uv = vuv.shape[0] > 0
     bg0 = np.uint8(min(max(background[0], 0.0), 1.0) * 255.0 + 0.5)
     bg1 = np.uint8(min(max(background[1], 0.0), 1.0) * 255.0 + 0.5)
     bg2 = np.uint8(min(max(background[2], 0.0), 1.0) * 255.0 + 0.5)
@@ -210,117 +265,23 @@ def _shade_kernel(face_id, bary, vertices, faces, fnormals, vnormals, vcolours, 
             i0 = faces[f, 0]
             i1 = faces[f, 1]
             i2 = faces[f, 2]
-            px = w0 * vertices[i0, 0] + w1 * vertices[i1, 0] + w2 * vertices[i2, 0]
-            py = w0 * vertices[i0, 1] + w1 * vertices[i1, 1] + w2 * vertices[i2, 1]
-            pz = w0 * vertices[i0, 2] + w1 * vertices[i1, 2] + w2 * vertices[i2, 2]
+            px, py, pz = _interpolate3(vertices, i0, i1, i2, w0, w1, w2)
             mat = materials[face_material[f]]
             gnx = np.float64(fnormals[f, 0])
             gny = np.float64(fnormals[f, 1])
             gnz = np.float64(fnormals[f, 2])
-            if mat[11] > 0.5 and has_vn:
-                nx = w0 * vnormals[i0, 0] + w1 * vnormals[i1, 0] + w2 * vnormals[i2, 0]
-                ny = w0 * vnormals[i0, 1] + w1 * vnormals[i1, 1] + w2 * vnormals[i2, 1]
-                nz = w0 * vnormals[i0, 2] + w1 * vnormals[i1, 2] + w2 * vnormals[i2, 2]
-                norm = math.sqrt(nx * nx + ny * ny + nz * nz)
-                if norm > 0.0:
-                    nx /= norm
-                    ny /= norm
-                    nz /= norm
-                else:
-                    nx = gnx
-                    ny = gny
-                    nz = gnz
-            else:
-                nx = gnx
-                ny = gny
-                nz = gnz
-            vx = cam[0] - px
-            vy = cam[1] - py
-            vz = cam[2] - pz
-            vlen = math.sqrt(vx * vx + vy * vy + vz * vz)
-            vx /= vlen
-            vy /= vlen
-            vz /= vlen
-            # Two-sided: light the side the camera sees.
-            if gnx * vx + gny * vy + gnz * vz < 0.0:
-                gnx = -gnx
-                gny = -gny
-                gnz = -gnz
-            if nx * gnx + ny * gny + nz * gnz < 0.0:
-                nx = -nx
-                ny = -ny
-                nz = -nz
-            s_uv = 0.0
-            t_uv = 0.0
-            if has_uv:
-                s_uv = w0 * vuv[i0, 0] + w1 * vuv[i1, 0] + w2 * vuv[i2, 0]
-                t_uv = w0 * vuv[i0, 1] + w1 * vuv[i1, 1] + w2 * vuv[i2, 1]
-            ar, ag, ab = _albedo(mat, px, py, pz, gnx, gny, gnz, s_uv, t_uv, atlas, has_uv)
-            if mat[10] > 0.5 and has_vc:
-                ar *= w0 * vcolours[i0, 0] + w1 * vcolours[i1, 0] + w2 * vcolours[i2, 0]
-                ag *= w0 * vcolours[i0, 1] + w1 * vcolours[i1, 1] + w2 * vcolours[i2, 1]
-                ab *= w0 * vcolours[i0, 2] + w1 * vcolours[i1, 2] + w2 * vcolours[i2, 2]
-            if has_fc:
-                ar *= fcolours[f, 0]
-                ag *= fcolours[f, 1]
-                ab *= fcolours[f, 2]
-            ar = _to_linear(ar, lut_linear)
-            ag = _to_linear(ag, lut_linear)
-            ab = _to_linear(ab, lut_linear)
-            h = 0.5 + 0.5 * ny
-            lr = amb_ground[0] + h * (amb_sky[0] - amb_ground[0])
-            lg = amb_ground[1] + h * (amb_sky[1] - amb_ground[1])
-            lb = amb_ground[2] + h * (amb_sky[2] - amb_ground[2])
-            sr = 0.0
-            sg = 0.0
-            sb = 0.0
-            spec = mat[12]
-            for k in range(lights.shape[0]):
-                if lights[k, 0] < 0.5:  # directional: xyz is the travel direction
-                    lx = -lights[k, 1]
-                    ly = -lights[k, 2]
-                    lz = -lights[k, 3]
-                    llen = math.sqrt(lx * lx + ly * ly + lz * lz)
-                    atten = 1.0
-                else:
-                    lx = lights[k, 1] - px
-                    ly = lights[k, 2] - py
-                    lz = lights[k, 3] - pz
-                    llen = math.sqrt(lx * lx + ly * ly + lz * lz)
-                    atten = 1.0 / max(llen * llen + lights[k, 8] * lights[k, 8], 1e-4)
-                lx /= llen
-                ly /= llen
-                lz /= llen
-                ndl = nx * lx + ny * ly + nz * lz
-                if ndl <= 0.0:
-                    continue
-                vis = 1.0
-                si = int(lights[k, 7])
-                if si >= 0:
-                    vis = shadow_visibility(px, py, pz, sm_depth[si], sm_K[si], sm_R[si],
-                                            sm_t[si], sm_ortho[si], bias, softness, taps)
-                    if vis <= 0.0:
-                        continue
-                e = atten * vis
-                lr += lights[k, 4] * e * ndl
-                lg += lights[k, 5] * e * ndl
-                lb += lights[k, 6] * e * ndl
-                if spec > 0.0:
-                    hx = lx + vx
-                    hy = ly + vy
-                    hz = lz + vz
-                    hl = math.sqrt(hx * hx + hy * hy + hz * hz)
-                    ndh = max((nx * hx + ny * hy + nz * hz) / max(hl, 1e-12), 0.0)
-                    s = spec * e * ndh ** 32
-                    sr += lights[k, 4] * s
-                    sg += lights[k, 5] * s
-                    sb += lights[k, 6] * s
-            r = (ar * lr + sr) * exposure
-            g = (ag * lg + sg) * exposure
-            b = (ab * lb + sb) * exposure
-            out[y, x, 0] = _encode(r, lut_encode)
-            out[y, x, 1] = _encode(g, lut_encode)
-            out[y, x, 2] = _encode(b, lut_encode)
+            nx, ny, nz = _shading_normal(mat[11] > 0.5 and has_vn, vnormals, i0, i1, i2,
+                                         w0, w1, w2, gnx, gny, gnz)
+            vx, vy, vz, gnx, gny, gnz, nx, ny, nz = _towards_camera(cam, px, py, pz, gnx, gny,
+                                                                    gnz, nx, ny, nz)
+            ar, ag, ab = _linear_albedo(mat, f, i0, i1, i2, w0, w1, w2, px, py, pz, gnx, gny,
+                                        gnz, vcolours, fcolours, vuv, atlas, lut_linear)
+            lr, lg, lb, sr, sg, sb = _irradiance(px, py, pz, nx, ny, nz, vx, vy, vz, mat[12],
+                                                 lights, sm_depth, sm_K, sm_R, sm_t, sm_ortho,
+                                                 amb_sky, amb_ground, bias, softness, taps)
+            out[y, x, 0] = _encode((ar * lr + sr) * exposure, lut_encode)
+            out[y, x, 1] = _encode((ag * lg + sg) * exposure, lut_encode)
+            out[y, x, 2] = _encode((ab * lb + sb) * exposure, lut_encode)
 
 
 def _f32(a, shape_tail, name, n=None):
@@ -374,43 +335,8 @@ def shade(raster, vertices: np.ndarray, faces: np.ndarray, face_material: np.nda
         raise ValueError("face_material indexes outside the material table")
     if table.ndim != 2 or table.shape[1] != MATERIAL_FIELDS:
         raise ValueError(f"material table must be (n, {MATERIAL_FIELDS})")
-    if texture_atlas is None:
-        atlas = np.zeros((1, 1, 3), dtype=np.float32)
-    else:
-        atlas = np.asarray(texture_atlas)
-        atlas = np.ascontiguousarray(atlas / 255.0 if atlas.dtype == np.uint8 else atlas,
-                                     dtype=np.float32)
-    # Per light: type (0 directional, 1 point), xyz, rgb, shadow map index, radius.
-    lights = np.zeros((len(lighting.lights), 9), dtype=np.float64)
-    maps = []
-    for k, light in enumerate(lighting.lights):
-        if isinstance(light, PointLight):
-            lights[k, :4] = (1.0, *light.position)
-            lights[k, 8] = light.radius
-        elif isinstance(light, DirectionalLight):
-            lights[k, :4] = (0.0, *light.direction)
-        else:
-            raise TypeError(f"unknown light {light!r}")
-        lights[k, 4:7] = light.colour
-        lights[k, 7] = -1
-        if light.shadow is not None:
-            lights[k, 7] = len(maps)
-            maps.append(light.shadow)
-    if maps:
-        shape = maps[0].depth.shape
-        if any(m.depth.shape != shape for m in maps):
-            raise ValueError("all shadow maps must have the same size")
-        sm_depth = np.stack([m.depth for m in maps]).astype(np.float32)
-        sm_K = np.stack([m.K for m in maps]).astype(np.float64)
-        sm_R = np.stack([m.R for m in maps]).astype(np.float64)
-        sm_t = np.stack([m.t for m in maps]).astype(np.float64)
-        sm_ortho = np.array([m.orthographic for m in maps], dtype=np.bool_)
-    else:
-        sm_depth = np.zeros((1, 1, 1), np.float32)
-        sm_K = np.zeros((1, 3, 3))
-        sm_R = np.zeros((1, 3, 3))
-        sm_t = np.zeros((1, 3))
-        sm_ortho = np.zeros(1, dtype=np.bool_)
+    atlas = _atlas(texture_atlas)
+    lights, (sm_depth, sm_K, sm_R, sm_t, sm_ortho) = _light_table(lighting.lights)
     out = np.empty(face_id.shape + (3,), dtype=np.uint8)
     _shade_kernel(np.ascontiguousarray(face_id, dtype=np.int32),
                   np.ascontiguousarray(bary, dtype=np.float32), vertices, faces,
@@ -425,3 +351,47 @@ def shade(raster, vertices: np.ndarray, faces: np.ndarray, face_material: np.nda
                   int(max(lighting.shadow_taps, 1)),
                   np.asarray(lighting.background, dtype=np.float64), _TO_LINEAR, _ENCODE, out)
     return out
+
+
+def _atlas(texture_atlas) -> np.ndarray:
+    """The texture atlas as float32 in [0, 1] (a 1x1 black one if None)."""
+    if texture_atlas is None:
+        return np.zeros((1, 1, 3), dtype=np.float32)
+    atlas = np.asarray(texture_atlas)
+    return np.ascontiguousarray(atlas / 255.0 if atlas.dtype == np.uint8 else atlas,
+                                dtype=np.float32)
+
+
+def _light_table(scene_lights) -> tuple:
+    """The kernel's light rows and stacked shadow maps.
+
+    One row of 9 per light: type (0 directional, 1 point), xyz (position or travel
+    direction), rgb, shadow map index (-1 for none), radius. Shadow maps are stacked as
+    (depth, K, R, t, orthographic), a single empty map when no light has one.
+    """
+    lights = np.zeros((len(scene_lights), 9), dtype=np.float64)
+    maps = []
+    for k, light in enumerate(scene_lights):
+        if isinstance(light, PointLight):
+            lights[k, :4] = (1.0, *light.position)
+            lights[k, 8] = light.radius
+        elif isinstance(light, DirectionalLight):
+            lights[k, :4] = (0.0, *light.direction)
+        else:
+            raise TypeError(f"unknown light {light!r}")
+        lights[k, 4:7] = light.colour
+        lights[k, 7] = -1
+        if light.shadow is not None:
+            lights[k, 7] = len(maps)
+            maps.append(light.shadow)
+    if not maps:
+        return lights, (np.zeros((1, 1, 1), np.float32), np.zeros((1, 3, 3)), np.zeros((1, 3, 3)),
+                        np.zeros((1, 3)), np.zeros(1, dtype=np.bool_))
+    shape = maps[0].depth.shape
+    if any(m.depth.shape != shape for m in maps):
+        raise ValueError("all shadow maps must have the same size")
+    return lights, (np.stack([m.depth for m in maps]).astype(np.float32),
+                    np.stack([m.K for m in maps]).astype(np.float64),
+                    np.stack([m.R for m in maps]).astype(np.float64),
+                    np.stack([m.t for m in maps]).astype(np.float64),
+                    np.array([m.orthographic for m in maps], dtype=np.bool_))
