@@ -205,7 +205,7 @@ def test_lpf_keeps_unfiltered_dims_of_each_particle():
     assert not np.array_equal(seen[2][:, 2:4], x0[:, 2:4])
 
 
-def test_lpf_particle_counts_bounds_and_estimator():
+def test_lpf_particle_counts_bounds_and_estimate():
     shapes = []
 
     def weight_fn(particles, layer_index):
@@ -216,13 +216,13 @@ def test_lpf_particle_counts_bounds_and_estimator():
     lpf = LayeredFilter(layers=(Layer(n_particles=100), Layer(n_particles=30),
                                 Layer(n_particles=80)),
                         sigma0=np.full(3, 0.5), final=Layer(n_particles=60),
-                        lower=np.full(3, -0.5), upper=np.full(3, 0.5), estimator="max")
+                        lower=np.full(3, -0.5), upper=np.full(3, 0.5))
     x0 = np.random.default_rng(10).uniform(-1.0, 1.0, (100, 3))
     r = lpf_run(x0, lpf, weight_fn, np.random.default_rng(0))
     assert shapes == [100, 30, 80, 60]
     assert r.particles.shape == (100, 3)  # ready for the first layer of the next frame
     assert r.particles.min() >= -0.5 and r.particles.max() <= 0.5
-    assert any(np.array_equal(r.estimate, p) for p in r.weighted_particles)
+    assert np.allclose(r.estimate, r.weights @ r.weighted_particles)
     with pytest.raises(ValueError, match="first layer weighs 100"):
         lpf_run(x0[:50], lpf, weight_fn, np.random.default_rng(0))
 

@@ -114,27 +114,6 @@ def test_xor_counts_equal_numpy_xor(body):
     assert (xor_counts(uv, faces, observed, front_only=True) == expected).all()
 
 
-def test_xor_counts_leave_ignored_pixels_out(body):
-    uv, faces, rendered, observed, _ = _jittered_scene(body, 4, 5)
-    observed[:, 20:90, 100:140] = 1  # another person's foreground
-    ignore = np.zeros(observed.shape, bool)
-    ignore[:, 15:95, 95:145] = True  # where that person's body is rendered
-    ignore[:, 60:70, :] = True       # and a band across the subject
-    kept = ~ignore[None]
-    for boxes in (None, np.array([[40, 10, 150, 100]] * 4)):
-        x0, y0, x1, y1 = (0, 0, 160, 120) if boxes is None else boxes[0]
-        diff = ((rendered != observed[None]) & kept)[..., y0:y1, x0:x1]
-        expected = diff.sum(axis=(2, 3))
-        got = xor_counts(uv, faces, observed, boxes, ignore=ignore)
-        np.testing.assert_array_equal(got, expected)
-        assert (got != xor_counts(uv, faces, observed, boxes)).any()
-    # nothing ignored: the plain count
-    np.testing.assert_array_equal(xor_counts(uv, faces, observed, ignore=np.zeros_like(ignore)),
-                                  xor_counts(uv, faces, observed))
-    with pytest.raises(ValueError, match="ignore"):
-        xor_counts(uv, faces, observed, ignore=ignore[:2])
-
-
 def test_xor_counts_only_inside_box(body):
     verts, faces = body
     rng = np.random.default_rng(3)

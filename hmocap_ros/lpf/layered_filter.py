@@ -30,7 +30,7 @@ Choices where the thesis is vague (each one also stated where it is implemented)
   calibrated likelihood, so the bound is ``Layer.beta_max`` (infinite by default).
 - Alg. 3: see :func:`layer_diffusion_stds`. Alg. 4: see :func:`layered_resample`.
 - Estimate: the weighted mean ``sum(pi x)`` of the set weighed by the last layer (the
-  "sample mean" of sec. 2.4.1), or the particle of largest weight (``estimator="max"``).
+  "sample mean" of sec. 2.4.1).
 - Particle counts may differ per layer: ``Layer.n_particles`` is how many particles the layer
   weighs, so the previous layer's resampling draws that many (systematic resampling handles
   any count). The final layer's resampling draws the first layer's count, ready for the next
@@ -287,7 +287,6 @@ class LayeredFilter:
     final: the last run; its kernel is ``K_t``. ``Layer(std=np.zeros(D))`` returns the
         resampled set without propagation.
     lower, upper: box limits (D,) applied after every kernel (joint limits); None: unbounded.
-    estimator: "mean" (weighted mean of the last weighted set) or "max" (its best particle).
     stds: (L + 1, D) the kernel std of every run, computed once here (alg. 3 or overrides).
     """
 
@@ -297,7 +296,6 @@ class LayeredFilter:
     final: Layer = field(default_factory=lambda: Layer(beta=1.0))
     lower: np.ndarray | None = None
     upper: np.ndarray | None = None
-    estimator: str = "mean"
     stds: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -309,8 +307,6 @@ class LayeredFilter:
         object.__setattr__(self, "layers", tuple(self.layers))
         if not 0.0 < self.nu <= 1.0:
             raise ValueError(f"nu must lie in (0, 1], got {self.nu}")
-        if self.estimator not in ("mean", "max"):
-            raise ValueError(f"estimator must be 'mean' or 'max', got {self.estimator!r}")
         for name in ("lower", "upper"):
             v = getattr(self, name)
             if v is not None:
@@ -381,17 +377,11 @@ class LayeredRunResult:
 # ----------------------------------------------------------------------------- runs
 
 
-def _estimate(particles: np.ndarray, weights: np.ndarray, estimator: str) -> np.ndarray:
-    if estimator == "max":
-        return particles[int(np.argmax(weights))].copy()
-    return weights @ particles
-
-
 def gpf_run(particles: np.ndarray, weight_fn: WeightFn, std: np.ndarray, rng: np.random.Generator,
             layer: Layer = Layer(beta=1.0), layer_index: int = 0,
             filtered: np.ndarray | None = None, n_out: int | None = None,
-            lower: np.ndarray | None = None, upper: np.ndarray | None = None,
-            estimator: str = "mean") -> tuple[np.ndarray, np.ndarray, LayerDiagnostics]:
+            lower: np.ndarray | None = None,
+            upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, LayerDiagnostics]:
     """Generic particle filtering run, alg. 1 (with layered resampling when ``filtered`` is set).
 
     1. Update: ``pi = exp(-beta cost)``, normalised (eq. 2.8, 2.9), one ``weight_fn`` call.
@@ -414,7 +404,7 @@ def gpf_run(particles: np.ndarray, weight_fn: WeightFn, std: np.ndarray, rng: np
         costs, layer.survival_rate, layer.beta_max)
     weights = annealed_weights(costs, beta)
     ess = effective_sample_size(weights)
-    estimate = _estimate(particles, weights, estimator)
+    estimate = weights @ particles  # the sample mean (sec. 2.4.1)
 
     if filtered is None:
         filtered = np.ones(particles.shape[1], dtype=bool)
@@ -459,7 +449,7 @@ def lpf_run(particles: np.ndarray, lpf: LayeredFilter, weight_fn: WeightFn,
             n_out = steps[l + 1].n_particles
         weighted = x
         x, weights, diag = gpf_run(weighted, weight_fn, lpf.stds[l], rng, layer, l, filtered,
-                                   n_out, lpf.lower, lpf.upper, lpf.estimator)
+                                   n_out, lpf.lower, lpf.upper)
         diags.append(diag)
     return LayeredRunResult(estimate=diags[-1].estimate, particles=x, weighted_particles=weighted,
                             weights=weights, layers=tuple(diags))

@@ -15,8 +15,8 @@ import numba as nb
 import numpy as np
 
 from hmocap_ros.render.projection import _dist8, _project_one, distortion_valid_r2
-from hmocap_ros.render.silhouette import (_fill_silhouette, clip_boxes, count_xor_and_clear,
-                                          encode_observed, observed_counts)
+from hmocap_ros.render.silhouette import (_fill_silhouette, binary_observed, clip_boxes,
+                                          count_xor_and_clear, observed_counts)
 
 __all__ = ["xor_counts_from_vertices"]
 
@@ -38,8 +38,8 @@ def _fused_body(verts, K, R, t, d, near, max_r2, faces, observed, rects, observe
         _project_one(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
         x0, y0, x1, y1 = _fill_silhouette(
             buf, uv, faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3], front_only)
-        rendered, coded = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
-        out[b, m] = observed_in_rect[m] + rendered - coded
+        rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
+        out[b, m] = observed_in_rect[m] + rendered - 2 * both
 
 
 _fused_chunk = nb.njit(cache=True, nogil=True)(_fused_body)
@@ -68,12 +68,11 @@ PARALLEL_MIN_ITEMS = 64
 def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
                              dist, faces: np.ndarray, observed: np.ndarray,
                              boxes: np.ndarray | None = None, *, front_only: bool = False,
-                             near: float = 1e-3, max_r2: np.ndarray | None = None,
-                             ignore: np.ndarray | None = None) -> np.ndarray:
+                             near: float = 1e-3, max_r2: np.ndarray | None = None) -> np.ndarray:
     """XOR counts (B, M) of posed meshes ``verts (B, V, 3)`` against masks ``(M, H, W)``.
 
     Cameras: ``K, R (M, 3, 3)``, ``t (M, 3)``, ``dist (M, k)`` OpenCV coefficients or None, at
-    the masks' resolution. ``faces``, ``boxes``, ``front_only`` and ``ignore`` as in
+    the masks' resolution. ``faces``, ``boxes`` and ``front_only`` as in
     :func:`hmocap_ros.render.xor_counts`. ``max_r2`` (M,): the cameras'
     :func:`~hmocap_ros.render.projection.distortion_valid_r2`, if the caller keeps them.
     Parallel over poses x views (serial below :data:`PARALLEL_MIN_ITEMS` pairs).
@@ -101,18 +100,18 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     if max_r2 is None:
         max_r2 = np.array([distortion_valid_r2(x) for x in d])
     max_r2 = np.ascontiguousarray(max_r2, dtype=np.float64)
-    code = encode_observed(observed, ignore)
-    _, height, width = code.shape
+    obs01 = binary_observed(observed)
+    _, height, width = obs01.shape
     rects = clip_boxes(boxes, n_views, height, width)
-    counts = observed_counts(code == 2, rects)
+    counts = observed_counts(obs01, rects)
     out = np.empty((verts.shape[0], n_views), dtype=np.int64)
     if out.size == 0:
         return out
     if out.size < PARALLEL_MIN_ITEMS or nb.get_num_threads() == 1:
-        _fused_serial(verts, K, R, t, d, float(near), max_r2, faces, code, rects, counts,
+        _fused_serial(verts, K, R, t, d, float(near), max_r2, faces, obs01, rects, counts,
                       bool(front_only), out)
     else:
         n_chunks = min(out.size, 4 * nb.get_num_threads())
-        _fused_parallel(verts, K, R, t, d, float(near), max_r2, faces, code, rects, counts,
+        _fused_parallel(verts, K, R, t, d, float(near), max_r2, faces, obs01, rects, counts,
                         bool(front_only), n_chunks, out)
     return out

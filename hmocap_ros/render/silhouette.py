@@ -8,15 +8,6 @@ compared with the observation only inside the rendered bounding box, and cleared
 
     XOR(M, S) = |S| + |M| - 2 |M and S|       (all counted inside the optional box).
 
-Pixels can also be left out of the count (``ignore``: where another tracked person stands,
-:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`). The kernels read the observation
-encoded as 2 (foreground), 1 (ignored) or 0 (background), :func:`encode_observed`, and count
-
-    XOR over the kept pixels = |S| + |M| - sum over M of the code
-
-(a rendered pixel costs 1 on background, -1 on foreground and 0 where ignored; ``|S|`` counts
-only kept foreground), which without ignored pixels is the formula above, count for count.
-
 A silhouette needs no depth test: it is the union of the triangles. Coverage follows
 :mod:`hmocap_ros.render.scanline` (pixel centres at integer coordinates, top-left rule).
 Vertices are projected beforehand (with lens distortion; the meshes are dense enough for
@@ -79,16 +70,15 @@ def _fill_silhouette(buf, proj, faces, x_min, y_min, x_max, y_max, front_only):
 
 @nb.njit(cache=True, nogil=True, inline="always")
 def count_xor_and_clear(buf, observed, x0, y0, x1, y1):
-    """Over ``[x0, x1) x [y0, y1)``: the rendered pixels of ``buf`` and the sum of the encoded
-    observation (:func:`encode_observed`) under them (``|M|``, ``2 |M and S|`` plus the
-    ignored pixels of ``M``), clearing ``buf`` for its next use."""
+    """Over ``[x0, x1) x [y0, y1)``: the rendered pixels of ``buf`` and those also set in
+    ``observed`` (``|M|``, ``|M and S|``), clearing ``buf`` for its next use."""
     rendered = 0
     both = 0
     for y in range(y0, y1):
         for x in range(x0, x1):
             v = buf[y, x]
             rendered += v
-            both += v * observed[y, x]
+            both += v & observed[y, x]
             buf[y, x] = 0
     return rendered, both
 
@@ -119,8 +109,8 @@ def _xor_kernel(proj, faces, observed, rects, observed_in_rect, front_only, n_ch
             x0, y0, x1, y1 = _fill_silhouette(
                 buf, proj[b, m], faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3],
                 front_only)
-            rendered, coded = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
-            out[b, m] = observed_in_rect[m] + rendered - coded
+            rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
+            out[b, m] = observed_in_rect[m] + rendered - 2 * both
 
 
 def _check_proj_faces(proj, faces, n_vertices_axis=-2):
@@ -153,19 +143,10 @@ def clip_boxes(boxes, n_views: int, height: int, width: int) -> np.ndarray:
     return rects.astype(np.int64)
 
 
-def encode_observed(observed: np.ndarray, ignore: np.ndarray | None = None) -> np.ndarray:
-    """Masks ``(M, H, W)`` (non-zero = foreground) as the XOR kernels read them: uint8 2 on
-    foreground, 0 on background and 1 where ``ignore`` (bool, same shape, or None) is set,
-    whatever the mask says there (those pixels count neither way)."""
-    observed = np.asarray(observed)
-    code = np.ascontiguousarray(observed != 0, dtype=np.uint8) * np.uint8(2)
-    if ignore is not None:
-        ignore = np.asarray(ignore, dtype=bool)
-        if ignore.shape != observed.shape:
-            raise ValueError(f"ignore must have the masks' shape {observed.shape}, "
-                             f"got {ignore.shape}")
-        code[ignore] = 1
-    return code
+def binary_observed(observed: np.ndarray) -> np.ndarray:
+    """Masks ``(M, H, W)`` (non-zero = foreground) as the XOR kernels read them: C-contiguous
+    uint8 {0, 1}."""
+    return np.ascontiguousarray(np.asarray(observed) != 0, dtype=np.uint8)
 
 
 def observed_counts(observed: np.ndarray, boxes: np.ndarray | None = None) -> np.ndarray:
@@ -209,8 +190,7 @@ def render_silhouettes(proj: np.ndarray, faces: np.ndarray, height: int, width: 
 
 
 def xor_counts(proj: np.ndarray, faces: np.ndarray, observed: np.ndarray,
-               boxes: np.ndarray | None = None, *, front_only: bool = False,
-               ignore: np.ndarray | None = None) -> np.ndarray:
+               boxes: np.ndarray | None = None, *, front_only: bool = False) -> np.ndarray:
     """Silhouette XOR counts of B poses against M observed foreground masks (eq. 2.8 / 2.15).
 
     Args:
@@ -221,11 +201,10 @@ def xor_counts(proj: np.ndarray, faces: np.ndarray, observed: np.ndarray,
             only pixels inside the box count (the approximate partitioning of observations,
             eq. 2.15). ``None`` counts the whole image.
         front_only: see :func:`render_silhouettes`.
-        ignore: optional bool ``(M, H, W)``: pixels counted neither way (another person).
 
     Returns:
-        int64 ``(B, M)``: number of pixels (inside the box, not ignored) where the rendered
-        silhouette and the observed mask differ. Runs in parallel over poses x views
+        int64 ``(B, M)``: number of pixels (inside the box) where the rendered silhouette and
+        the observed mask differ. Runs in parallel over poses x views
         (``numba.set_num_threads`` sets the thread count).
     """
     proj, faces = _check_proj_faces(proj, faces)
@@ -235,14 +214,14 @@ def xor_counts(proj: np.ndarray, faces: np.ndarray, observed: np.ndarray,
     if observed.ndim != 3 or observed.shape[0] != proj.shape[1]:
         raise ValueError(f"observed must have shape (M={proj.shape[1]}, H, W), "
                          f"got {observed.shape}")
-    code = encode_observed(observed, ignore)
-    n_views, height, width = code.shape
+    obs01 = binary_observed(observed)
+    n_views, height, width = obs01.shape
     rects = clip_boxes(boxes, n_views, height, width)
-    counts = observed_counts(code == 2, rects)
+    counts = observed_counts(obs01, rects)
     out = np.empty(proj.shape[:2], dtype=np.int64)
     n = out.size
     if n == 0:
         return out
     n_chunks = min(n, 4 * nb.get_num_threads())
-    _xor_kernel(proj, faces, code, rects, counts, bool(front_only), n_chunks, out)
+    _xor_kernel(proj, faces, obs01, rects, counts, bool(front_only), n_chunks, out)
     return out

@@ -9,7 +9,7 @@ particles in Python. The cost of a particle is
     eq. 2.8 / 2.14:  c = sum_v XOR(M_v, S_v) / C(S_v)               (whole image)
     eq. 2.15:        c = sum_v XOR(M_v, S_v, Omega_v) / |Omega_v|   (inside a box per view)
 
-and its weight ``w = exp(-beta c)`` (:mod:`.layered_filter`).
+and its weight ``w = exp(-beta c)`` (:mod:`hmocap_ros.lpf.layered_filter`).
 
 Working resolution: the foreground masks (full camera resolution, any non-zero value is
 foreground) are reduced by area averaging to ``working_scale`` of their size and thresholded
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import cv2
@@ -128,8 +128,6 @@ class Observation:
     counts: C(S_v), foreground pixels per view (int64, (M,)).
     max_r2: per view, the squared normalised radius where the distortion stays monotonic.
     stamp_ns: the frame set's stamp.
-    ignore: (M, h, w) bool or None: foreground pixels the XOR counts neither way (where
-    another tracked person stands, :meth:`without`); ``counts`` then leaves them out.
     """
 
     masks: np.ndarray
@@ -142,18 +140,6 @@ class Observation:
     counts: np.ndarray
     stamp_ns: int = 0
     max_r2: np.ndarray | None = None
-    ignore: np.ndarray | None = None
-
-    def without(self, others: np.ndarray) -> "Observation":
-        """This observation with the foreground under ``others`` ((M, h, w), non-zero where
-        other people's bodies are rendered) left out of the XOR and of ``counts``."""
-        others = np.asarray(others)
-        if others.shape != self.masks.shape:
-            raise ValueError(f"others must have the masks' shape {self.masks.shape}, "
-                             f"got {others.shape}")
-        ignore = (others != 0) & (self.masks != 0)
-        return replace(self, ignore=ignore,
-                       counts=self.counts - ignore.sum(axis=(1, 2), dtype=np.int64))
 
     @property
     def n_views(self) -> int:
@@ -262,13 +248,11 @@ class SilhouetteFitness:
 
     # ------------------------------------------------------------------ costs
 
-    def view_xor(self, uv: np.ndarray, obs: Observation, boxes: np.ndarray | None = None,
-                 faces: np.ndarray | None = None) -> np.ndarray:
-        """XOR pixel counts (N, M) of projected particles, inside ``boxes`` (M, 4) if given,
-        rendering ``faces`` (a subset of the mesh's triangles; default all)."""
+    def view_xor(self, uv: np.ndarray, obs: Observation,
+                 boxes: np.ndarray | None = None) -> np.ndarray:
+        """XOR pixel counts (N, M) of projected particles, inside ``boxes`` (M, 4) if given."""
         t0 = time.perf_counter()
-        out = xor_counts(uv, self.faces if faces is None else faces, obs.masks, boxes,
-                         front_only=self.front_only, ignore=obs.ignore)
+        out = xor_counts(uv, self.faces, obs.masks, boxes, front_only=self.front_only)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += uv.shape[0]
         return out
@@ -283,38 +267,32 @@ class SilhouetteFitness:
         return np.maximum(w * h, float(self.min_count))
 
     def costs_from_uv(self, uv: np.ndarray, obs: Observation,
-                      boxes: np.ndarray | None = None,
-                      faces: np.ndarray | None = None) -> np.ndarray:
-        """Eq. 2.8 (``boxes`` None) or eq. 2.15 cost (N,) of projected particles; ``faces``
-        renders only part of the body (the parts a hierarchical layer has filtered)."""
+                      boxes: np.ndarray | None = None) -> np.ndarray:
+        """Eq. 2.8 (``boxes`` None) or eq. 2.15 cost (N,) of projected particles."""
         if obs.n_views == 0:
             return np.zeros(uv.shape[0])
-        xor = self.view_xor(uv, obs, boxes, faces)
+        xor = self.view_xor(uv, obs, boxes)
         return (xor / self.normalisers(obs, boxes)).sum(axis=1)
 
     def view_xor_from_verts(self, verts: np.ndarray, obs: Observation,
-                            boxes: np.ndarray | None = None,
-                            faces: np.ndarray | None = None) -> np.ndarray:
+                            boxes: np.ndarray | None = None) -> np.ndarray:
         """XOR pixel counts (N, M) of posed meshes (N, V, 3), inside ``boxes`` if given
         (projection and scan-fill fused), timed as "xor"."""
         t0 = time.perf_counter()
-        xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D,
-                                       self.faces if faces is None else faces, obs.masks, boxes,
-                                       front_only=self.front_only, max_r2=obs.max_r2,
-                                       ignore=obs.ignore)
+        xor = xor_counts_from_vertices(verts, obs.K, obs.R, obs.t, obs.D, self.faces, obs.masks,
+                                       boxes, front_only=self.front_only, max_r2=obs.max_r2)
         self.times.xor += time.perf_counter() - t0
         self.times.evaluations += verts.shape[0]
         return xor
 
     def costs_from_verts(self, verts: np.ndarray, obs: Observation,
-                         boxes: np.ndarray | None = None,
-                         faces: np.ndarray | None = None) -> np.ndarray:
+                         boxes: np.ndarray | None = None) -> np.ndarray:
         """Eq. 2.8 / 2.15 cost (N,) of posed meshes (N, V, 3): projection and scan-fill fused
-        (:func:`~.fused_xor.xor_counts_from_vertices`; the same counts as
+        (:func:`~hmocap_ros.render.fused_xor.xor_counts_from_vertices`; the same counts as
         :meth:`costs_from_uv` of :meth:`project`), timed as "xor"."""
         if obs.n_views == 0:
             return np.zeros(verts.shape[0])
-        xor = self.view_xor_from_verts(verts, obs, boxes, faces)
+        xor = self.view_xor_from_verts(verts, obs, boxes)
         return (xor / self.normalisers(obs, boxes)).sum(axis=1)
 
     def costs(self, params: np.ndarray, obs: Observation,

@@ -19,11 +19,10 @@ Choices where the thesis is vague:
 
 - End-effectors: a hand is the midpoint of wrist and hand tip (the detector returns the end
   of a skin blob, see ``extremity_detection``), a foot its toe end site (where the hull's
-  geodesic extremum, averaged over 8 cm, lands: 2 cm on the tuning bags, against 7 cm for the
-  ankle-toe midpoint); the
-  head is the midpoint of head joint and head top. IK drives the arms and legs; the head
-  detection serves the classification (it keeps the face from being taken for a hand) and
-  not the torso layer, whose 6 root DoFs the silhouettes fix well.
+  geodesic extremum, averaged over 8 cm, lands: about 2 cm from it, against 7 cm from the
+  ankle-toe midpoint); the head is the midpoint of head joint and head top. IK drives the
+  arms and legs; the head detection serves the classification (it keeps the face from being
+  taken for a hand) and not the torso layer, whose 6 root DoFs the silhouettes fix well.
 - IK survival rate: the weighted share of the final layer's particles whose hand lies within
   ``survival_radius`` of the detection (the particles the filter kept where the detector
   said), measured per arm; the IK fraction moves by ``fraction_step`` per frame within

@@ -128,8 +128,6 @@ class LimbProposer:
         else:
             support = obs.masks > 0
         residual = (obs.masks > 0) & (model_sil == 0)
-        if obs.ignore is not None:  # another person's body, not a limb of this one
-            residual &= ~obs.ignore
         return support, residual
 
     def _points(self, params: np.ndarray, rest, chain) -> np.ndarray:

@@ -32,8 +32,8 @@ from functools import lru_cache
 
 from hmocap_ros.render.projection import _project_one, distortion_valid_r2
 
-__all__ = ["LAYER_ANCHORS", "LAYER_PARTS", "box_corners", "chain_lengths", "faces_of_blocks",
-           "layer_boxes", "layer_vertex_indices", "part_boxes_3d", "reach_box"]
+__all__ = ["LAYER_ANCHORS", "LAYER_PARTS", "box_corners", "chain_lengths", "layer_boxes",
+           "layer_vertex_indices", "part_boxes_3d", "reach_box"]
 
 LAYER_PARTS = {
     "torso": ("pelvis", "spine", "chest", "neck", "head", "l_clavicle", "r_clavicle"),
@@ -86,17 +86,6 @@ def layer_vertex_indices(model, blocks) -> np.ndarray:
     """Indices of the mesh vertices whose body part belongs to any of ``blocks``."""
     joints = [model.joint_index(j) for b in blocks for j in LAYER_PARTS[b]]
     return np.flatnonzero(np.isin(np.asarray(model.vertex_part), joints))
-
-
-def faces_of_blocks(model, blocks) -> np.ndarray:
-    """Triangles (F', 3) of the mesh with a vertex on a body part of any of ``blocks``
-    (:data:`LAYER_PARTS`): the model a hierarchical layer renders when only the parts
-    filtered so far are drawn (sec. 2.4: "render the body parts that are affected by
-    variables being sampled in a partition or hierarchical level and the preceding ones")."""
-    keep = np.zeros(model.n_vertices, dtype=bool)
-    keep[layer_vertex_indices(model, blocks)] = True
-    faces = np.asarray(model.faces)
-    return np.ascontiguousarray(faces[keep[faces].any(axis=1)], dtype=np.int32)
 
 
 def part_boxes_3d(verts: np.ndarray, index: np.ndarray, spread: float = 2.0,

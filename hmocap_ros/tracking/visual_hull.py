@@ -12,12 +12,12 @@ full view of the cameras, not whoever is nearest a camera or half out of its fie
 ``exclude`` (where the people other trackers follow stand) leaves those people out.
 The grid is coarse over the whole room, then fine inside that component's box.
 
-Bridging (``bridge_misses``, our addition): the components are taken over a carving that lets
-a voxel miss the foreground in ``bridge_misses`` more views (still on foreground in
+Bridging (``bridge_misses``, beyond the thesis): the components are taken over a carving that
+lets a voxel miss the foreground in ``bridge_misses`` more views (still on foreground in
 ``min_views``), and each keeps only its voxels of the strict carving. A band of the body that
 the segmentation loses in one view (a shirt the colour of the wall behind it) otherwise cuts
-the hull in two, and the largest part, legs and hips, gives the start-up a height 0.5 m short
-(``docs/tracking.md``, Tuning, stop 22).
+the hull in two, and the largest part, legs and hips, gives the start-up a height far short of
+the person's.
 
 Outputs (:class:`Hull`): centroid, top height (the feet stand on the floor, y = 0), volume,
 and a heading guess from the principal horizontal axis of the upper-body voxels (the shoulder
@@ -55,43 +55,12 @@ class Hull:
     def top_within(self, centre_xz, radius: float) -> float | None:
         """Top of the hull's voxels standing within ``radius`` metres of ``centre_xz`` (x, z)
         on the floor: the height of one column, e.g. over a body's head, which a raised hand
-        beside it does not top (stop 25); None when the column holds no voxel."""
+        beside it does not top; None when the column holds no voxel."""
         d = self.points[:, [0, 2]] - np.asarray(centre_xz, dtype=np.float64)
         inside = np.einsum("ij,ij->i", d, d) <= radius * radius
         if not inside.any():
             return None
         return float(self.points[inside, 1].max() + 0.5 * self.voxel_size)
-
-    def trunk_axis(self, band: tuple = (0.35, 0.65)) -> np.ndarray:
-        """(x, z) of the trunk: the median of the voxels between ``band`` fractions of the
-        hull's top height (hips to chest of a standing person; a raised arm has few voxels
-        there, and the median ignores them), or of all voxels when that band is empty."""
-        y = self.points[:, 1]
-        inside = (y > band[0] * self.top) & (y < band[1] * self.top)
-        pts = self.points[inside] if inside.sum() >= 5 else self.points
-        return np.median(pts[:, [0, 2]], axis=0)
-
-    def head_top(self, centre_xz, radius: float, min_fraction: float,
-                 depth: float = 0.3) -> float | None:
-        """Top of the head in the column of ``radius`` around ``centre_xz`` (None: the trunk's
-        axis, :meth:`trunk_axis`): from the column's top down, the first horizontal voxel
-        layer holding at least ``min_fraction`` of the voxels of the column's fullest layer
-        within ``depth`` metres of its top. A hand or forearm held over the head is 1-6
-        voxels a layer (3-cm voxels), a head 20-55, so the hand is passed over where a plain
-        column top (:meth:`top_within`) takes it for the head (the ``arm_up`` tuning bags,
-        stop 26). None when the column holds no voxel."""
-        c = self.trunk_axis() if centre_xz is None else np.asarray(centre_xz, dtype=np.float64)
-        d = self.points[:, [0, 2]] - c
-        y = self.points[np.einsum("ij,ij->i", d, d) <= radius * radius, 1]
-        if len(y) == 0:
-            return None
-        layer = np.rint((y - y.min()) / self.voxel_size).astype(np.intp)
-        counts = np.bincount(layer)
-        top = len(counts) - 1
-        near = counts[max(top - int(round(depth / self.voxel_size)), 0):]
-        full = np.flatnonzero(counts >= min_fraction * near.max())
-        head = int(full[full >= top - len(near) + 1].max())
-        return float(y.min() + head * self.voxel_size + 0.5 * self.voxel_size)
 
     @property
     def height(self) -> float:
