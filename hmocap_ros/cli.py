@@ -106,7 +106,7 @@ COMMAND_GROUPS = {
         "train models offline",
         "Train models from bags with ground truth.",
         {
-            "gestures": ("hmocap_ros.gestures.train_cli", "train a gesture forest from depth bags"),
+            "gestures": ("hmocap_ros.commands.train_gestures", "train a gesture forest from depth bags"),
         },
     ),
 }

@@ -1,4 +1,4 @@
-"""Tests of ``hmocap train gestures`` and ``hmocap eval gestures`` (hmocap_ros.gestures.train_cli,
+"""Tests of ``hmocap train gestures`` and ``hmocap eval gestures`` (hmocap_ros.commands.train_gestures,
 hmocap_ros.eval.gesture_eval) and of the shipped gesture forest on the shipped demo bag."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hmocap_ros.commands import train_gestures
 from hmocap_ros.eval import gesture_eval as ge
 from hmocap_ros.gestures import load_forest, save_forest
-from hmocap_ros.gestures import train_cli
 from hmocap_ros.sim import gesture_dataset as gd
 from hmocap_ros.sim.gesture_set import GESTURE_CLASSES
 
@@ -46,14 +46,14 @@ def test_average_precision_all_point_interpolated():
 def test_train_then_eval_end_to_end(tmp_path, tiny_bag, capsys):
     model = tmp_path / "tiny.npz"
     argv = [tiny_bag, "--out", model, "--trees", 2, "--depth", 8, "--samples-per-class", 300, "--quiet"]
-    assert train_cli.main_from_args(_args(train_cli, argv)) == 0
+    assert train_gestures.main_from_args(_args(train_gestures, argv)) == 0
     forest = load_forest(model)
     assert forest.class_names == ("background",) + GESTURE_CLASSES
     assert len(forest.trees) == 2 and forest.features.clipped
     assert forest.meta["training"]["focal_px"] == pytest.approx(575.0 * 160 / 640)
     # pixel*metre sizes follow the focal length (575/4 px here, 525 px for the defaults)
     assert forest.features.patch_half_size_px_m == pytest.approx(85.0 * 143.75 / 525.0)
-    assert train_cli.main_from_args(_args(train_cli, argv)) == 2  # refuses to overwrite
+    assert train_gestures.main_from_args(_args(train_gestures, argv)) == 2  # refuses to overwrite
     assert "exists" in capsys.readouterr().err
 
     out_json, out_png = tmp_path / "eval.json", tmp_path / "pr.png"
@@ -76,7 +76,7 @@ def test_plain_unboosted_training(tmp_path, tiny_bag):
     model = tmp_path / "plain.npz"
     argv = [tiny_bag, "--out", model, "--trees", 1, "--depth", 6, "--samples-per-class", 200,
             "--kappa", "none", "--no-boost", "--quiet"]
-    assert train_cli.main_from_args(_args(train_cli, argv)) == 0
+    assert train_gestures.main_from_args(_args(train_gestures, argv)) == 0
     forest = load_forest(model)
     assert not forest.features.clipped and forest.meta["training"]["method"] == "bagged"
 

@@ -10,7 +10,7 @@ import pytest
 
 from hmocap_ros.gestures import DetectorParams, FeatureParams, Forest, GestureDetector, Tree
 from hmocap_ros.gestures.depth_features import depth_to_metres
-from hmocap_ros.gestures.detection import forest_grid_proba, forest_grid_votes, grid_shape, pad_for_forest
+from hmocap_ros.gestures.grid_votes import forest_grid_proba, forest_grid_votes, grid_shape, pad_for_forest
 from hmocap_ros.gestures.params import DepthFormat
 from fixtures.toy_depth import add_sensor_noise, toy_detector_params, toy_forest, toy_frame
 

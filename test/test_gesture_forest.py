@@ -17,8 +17,9 @@ from hmocap_ros.gestures import (
     train_forest,
     train_forest_on_samples,
 )
-from hmocap_ros.gestures.forest import balanced_error, frames_to_metres, information_gain
+from hmocap_ros.gestures.forest import balanced_error, frames_to_metres
 from hmocap_ros.gestures.patches import mine_hard_negatives
+from hmocap_ros.gestures.tree_growth import information_gain
 from fixtures.toy_depth import TOY_CLASSES, toy_forest, toy_sequence, toy_train_params
 from hmocap_ros.gestures.trees import apply_tree
 

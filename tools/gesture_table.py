@@ -24,8 +24,7 @@ interrupted run resumes where it stopped)::
 The default forest (boosted, kappa 15 cm) is the one shipped as
 ``hmocap_ros/data/gesture_forest.npz``: ``--ship`` copies it there (``hmocap train gestures``
 on the same three bags with its defaults writes the same file, see GESTURE_FOREST.md).
-The validation bag is the one the defaults were chosen on; the test bags were not looked at
-before this table.
+The defaults are chosen on the validation bag; the test bags are held out for this table.
 """
 
 from __future__ import annotations
@@ -45,7 +44,7 @@ sys.path.insert(0, str(ROOT))
 from hmocap_ros.eval.gesture_eval import evaluate_gestures, plot_pr, read_gesture_bag  # noqa: E402
 from hmocap_ros.gestures.forest import train_forest_on_frames  # noqa: E402
 from hmocap_ros.gestures.forest_file import load_forest, save_forest  # noqa: E402
-from hmocap_ros.gestures.train_cli import read_training_bags, train_params_for_focal  # noqa: E402
+from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
 from hmocap_ros.sim import gesture_dataset as gd  # noqa: E402
 
 #: name -> ``hmocap sim gestures`` arguments (all 640x480). Short holds in the training bags give
@@ -88,7 +87,7 @@ def variant_name(boosted: bool, kappa: float | None) -> str:
     return ("boosted" if boosted else "plain") + (", no clipping" if kappa is None else f", kappa {kappa * 100:.0f} cm")
 
 
-def main(argv=None) -> int:
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--workdir", default="/tmp/hmocap_gesture_table", help="bags, forests and results (cache)")
     p.add_argument("--trees", type=int, default=15)
@@ -97,63 +96,47 @@ def main(argv=None) -> int:
     p.add_argument("--only", nargs="*", help="train/score only these variants (names as in the table)")
     p.add_argument("--out-dir", default=str(ROOT / "docs" / "figures"))
     p.add_argument("--ship", action="store_true", help=f"copy the '{DEFAULT}' forest to hmocap_ros/data/")
-    ns = p.parse_args(argv)
+    return p
 
-    work = Path(ns.workdir)
-    work.mkdir(parents=True, exist_ok=True)
-    bags = {name: make_bag(work, name) for name in TRAIN + EVAL}
-    variants = [(b, k) for b in (True, False) for k in KAPPAS]
-    names = [variant_name(b, k) for b, k in variants]
-    todo = [(b, k) for b, k in variants if not ns.only or variant_name(b, k) in ns.only]
-    todo.sort(key=lambda v: variant_name(*v) != DEFAULT)  # the default forest first
 
-    train = None
-    results = {}
-    for boosted, kappa in todo:
-        name = variant_name(boosted, kappa)
-        stem = name.replace(", ", "_").replace(" ", "")
-        model, scores = work / f"forest_{stem}.npz", work / f"scores_{stem}.json"
-        if scores.exists():
-            results[name] = json.loads(scores.read_text())
-            print(f"{name}: cached", flush=True)
-            continue
-        if not model.exists():
-            if train is None:
-                train, _ = read_training_bags([bags[b] for b in TRAIN])
-            params = train_params_for_focal(train.focal_px, n_trees=ns.trees, max_depth=ns.depth, kappa_m=kappa,
-                                            boosted=boosted)
-            t0 = time.perf_counter()
-            forest = train_forest_on_frames(train.depth, train.labels, params, np.random.default_rng(ns.seed),
-                                            class_names=train.class_names)
-            forest.meta["training"].update({"focal_px": train.focal_px, "bags": [f"{b}.mcap" for b in TRAIN],
-                                            "seed": ns.seed})
-            save_forest(forest, model)
-            print(f"{name}: trained in {time.perf_counter() - t0:.0f} s ({forest.n_nodes} nodes)", flush=True)
-        forest = load_forest(model)
-        r = {"forest": str(model), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
-             "train_seconds": forest.meta["training"]["seconds_total"],
-             "train_samples": forest.meta["training"]["n_samples"],
-             "train_frames": forest.meta["training"]["n_frames"]}
-        for bag in EVAL:
-            data = read_gesture_bag(bags[bag])
-            e = evaluate_gestures(data, forest)
-            r[bag] = e
-            aps = " ".join(f"{g} {c['ap']:.2f}" for g, c in e["per_class"].items())
-            print(f"{name} on {bag}: mean AP {e['mean_ap']:.3f} ({aps})", flush=True)
-            del data
-        scores.write_text(json.dumps(r))
-        results[name] = r
+def train_variant(ns, bags: dict, boosted: bool, kappa: float | None, model: Path, training: dict) -> None:
+    """Train one variant on the training bags and save it to ``model``; ``training`` holds the
+    training frames once read (shared by the variants)."""
+    if "data" not in training:
+        training["data"], _ = read_training_bags([bags[b] for b in TRAIN])
+    train = training["data"]
+    params = train_params_for_focal(train.focal_px, n_trees=ns.trees, max_depth=ns.depth, kappa_m=kappa,
+                                    boosted=boosted)
+    t0 = time.perf_counter()
+    forest = train_forest_on_frames(train.depth, train.labels, params, np.random.default_rng(ns.seed),
+                                    class_names=train.class_names)
+    forest.meta["training"].update({"focal_px": train.focal_px, "bags": [f"{b}.mcap" for b in TRAIN],
+                                    "seed": ns.seed})
+    save_forest(forest, model)
+    print(f"{variant_name(boosted, kappa)}: trained in {time.perf_counter() - t0:.0f} s ({forest.n_nodes} nodes)",
+          flush=True)
 
-    missing = [n for n in names if n not in results]
-    if missing:
-        print(f"not all variants scored yet ({', '.join(missing)}): no table written")
-        return 0
-    out = Path(ns.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+
+def score_variant(name: str, model: Path, bags: dict) -> dict:
+    """The forest's size and training figures, and its evaluation on each of :data:`EVAL`."""
+    forest = load_forest(model)
+    r = {"forest": str(model), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
+         "train_seconds": forest.meta["training"]["seconds_total"],
+         "train_samples": forest.meta["training"]["n_samples"],
+         "train_frames": forest.meta["training"]["n_frames"]}
+    for bag in EVAL:
+        data = read_gesture_bag(bags[bag])
+        e = evaluate_gestures(data, forest)
+        r[bag] = e
+        aps = " ".join(f"{g} {c['ap']:.2f}" for g, c in e["per_class"].items())
+        print(f"{name} on {bag}: mean AP {e['mean_ap']:.3f} ({aps})", flush=True)
+        del data
+    return r
+
+
+def table_lines(results: dict, names: list, ns) -> list[str]:
+    """The Markdown tables: AP per gesture and bag, then size and training time per forest."""
     default = results[DEFAULT]
-    plot_pr(default["test"], out / "gesture_pr.png",
-            f"{DEFAULT}, test bag: mean AP {default['test']['mean_ap']:.3f}\n"
-            f"correct: class right, within {default['test']['tolerance_px']:g} px at 640x480")
     gestures = list(default["test"]["per_class"])
     lines = ["<!-- written by tools/gesture_table.py; do not edit -->", ""]
     for bag in EVAL:
@@ -173,14 +156,57 @@ def main(argv=None) -> int:
     for n in names:
         r = results[n]
         lines.append(f"| {n} | {r['n_nodes']} | {r['file_bytes'] / 1e6:.2f} | {r['train_seconds']:.0f} |")
-    (out / "gesture_table.md").write_text("\n".join(lines) + "\n")
-    summary = {n: {"n_nodes": r["n_nodes"], "train_seconds": r["train_seconds"],
-                   **{bag: {"mean_ap": r[bag]["mean_ap"], "ap": {g: c["ap"] for g, c in r[bag]["per_class"].items()},
-                            "positives": {g: c["positives"] for g, c in r[bag]["per_class"].items()},
-                            "fps": r[bag]["fps"]} for bag in EVAL}}
-               for n, r in results.items()}
-    summary["_bags"] = {b: sim_command(b) for b in BAGS}
-    (out / "gesture_table.json").write_text(json.dumps(summary, indent=1) + "\n")
+    return lines
+
+
+def summary(results: dict) -> dict:
+    """Every number of the tables (and fps) per variant, and the bags' commands."""
+    out = {n: {"n_nodes": r["n_nodes"], "train_seconds": r["train_seconds"],
+               **{bag: {"mean_ap": r[bag]["mean_ap"], "ap": {g: c["ap"] for g, c in r[bag]["per_class"].items()},
+                        "positives": {g: c["positives"] for g, c in r[bag]["per_class"].items()},
+                        "fps": r[bag]["fps"]} for bag in EVAL}}
+           for n, r in results.items()}
+    out["_bags"] = {b: sim_command(b) for b in BAGS}
+    return out
+
+
+def main(argv=None) -> int:
+    ns = _parser().parse_args(argv)
+    work = Path(ns.workdir)
+    work.mkdir(parents=True, exist_ok=True)
+    bags = {name: make_bag(work, name) for name in TRAIN + EVAL}
+    variants = [(b, k) for b in (True, False) for k in KAPPAS]
+    names = [variant_name(b, k) for b, k in variants]
+    todo = [(b, k) for b, k in variants if not ns.only or variant_name(b, k) in ns.only]
+    todo.sort(key=lambda v: variant_name(*v) != DEFAULT)  # the default forest first
+
+    training = {}
+    results = {}
+    for boosted, kappa in todo:
+        name = variant_name(boosted, kappa)
+        stem = name.replace(", ", "_").replace(" ", "")
+        model, scores = work / f"forest_{stem}.npz", work / f"scores_{stem}.json"
+        if scores.exists():
+            results[name] = json.loads(scores.read_text())
+            print(f"{name}: cached", flush=True)
+            continue
+        if not model.exists():
+            train_variant(ns, bags, boosted, kappa, model, training)
+        results[name] = score_variant(name, model, bags)
+        scores.write_text(json.dumps(results[name]))
+
+    missing = [n for n in names if n not in results]
+    if missing:
+        print(f"not all variants scored yet ({', '.join(missing)}): no table written")
+        return 0
+    out = Path(ns.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    default = results[DEFAULT]
+    plot_pr(default["test"], out / "gesture_pr.png",
+            f"{DEFAULT}, test bag: mean AP {default['test']['mean_ap']:.3f}\n"
+            f"correct: class right, within {default['test']['tolerance_px']:g} px at 640x480")
+    (out / "gesture_table.md").write_text("\n".join(table_lines(results, names, ns)) + "\n")
+    (out / "gesture_table.json").write_text(json.dumps(summary(results), indent=1) + "\n")
     print(f"wrote {out / 'gesture_table.md'}, {out / 'gesture_table.json'}, {out / 'gesture_pr.png'}")
     if ns.ship:
         target = ROOT / "hmocap_ros" / "data" / "gesture_forest.npz"

@@ -5,8 +5,10 @@
 - :mod:`~hmocap_ros.gestures.patches`: patch (sample) collection from annotated frames, and
   hard negative mining by detection on the training frames.
 - :mod:`~hmocap_ros.gestures.trees`: the forest model (flat node arrays), shared with online forests.
-- :mod:`~hmocap_ros.gestures.forest`: offline training with information gain (eq. 3.2),
-  boosted tree-by-tree learning (sec. 3.2.3) and mining rounds.
+- :mod:`~hmocap_ros.gestures.tree_growth`: growth of one offline tree by information gain
+  (sec. 3.2.1, eq. 3.2).
+- :mod:`~hmocap_ros.gestures.forest`: offline forest training: boosted tree-by-tree learning
+  (sec. 3.2.3) and hard negative mining rounds.
 - :mod:`~hmocap_ros.gestures.detection`: per-frame localization: votes, Parzen density,
   temporal smoothing (eq. 3.4), volume test (eq. 3.5).
 - :mod:`~hmocap_ros.gestures.forest_file`: the versioned ``.npz`` forest file format.
@@ -25,8 +27,7 @@ Typical use::
 
 from hmocap_ros.gestures.depth_features import depth_to_metres, evaluate_tests, random_offsets
 from hmocap_ros.gestures.detection import Detection, GestureDetector
-from hmocap_ros.gestures.forest import (TreeReport, grow_tree, train_forest, train_forest_on_frames,
-                                       train_forest_on_samples)
+from hmocap_ros.gestures.forest import TreeReport, train_forest, train_forest_on_frames, train_forest_on_samples
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest, read_header, save_forest
 from hmocap_ros.gestures.params import (
     DepthFormat,
@@ -37,6 +38,7 @@ from hmocap_ros.gestures.params import (
     TrainParams,
 )
 from hmocap_ros.gestures.patches import SampleSet, collect_samples, mine_hard_negatives
+from hmocap_ros.gestures.tree_growth import grow_tree
 from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
 
 __all__ = [

@@ -27,8 +27,6 @@ OUTSIDE_MODES = ("border", "background")
 REFERENCE_FOCAL_PX = 525.0
 
 
-
-
 def _check(checks, name):
     for ok, message in checks:
         if not ok:
@@ -45,15 +43,16 @@ class DepthFormat:
     """
 
     unit_m: float = param(
-        0.0, "Metres per raw depth unit: 0.001 for millimetres (16UC1), 0.000125 for 1/8 mm, "
+        0.0, "Metres per raw depth unit (>= 0): 0.001 for millimetres (16UC1), 0.000125 for 1/8 mm, "
              "1.0 for metres (32FC1); 0 = REP 118: integer images in mm, float images in m.")
     invalid_value: float = param(
         0.0, "Raw value that marks a pixel without depth (NaN and inf are always invalid).")
     min_depth_m: float = param(
-        0.3, "Nearer depths are invalid (sensor minimum; bounds the test offsets in pixels).")
+        0.3, "Nearer depths (metres, > 0) are invalid: the sensor minimum; it bounds the test "
+             "offsets in pixels.")
     max_depth_m: float = param(
-        8.0, "Farther depths are invalid (sensor maximum; must be below the forest's "
-             "background_depth_m).")
+        8.0, "Farther depths (metres) are invalid: the sensor maximum, above min_depth_m and below "
+             "the forest's background_depth_m.")
 
     def __post_init__(self):
         _check([(self.unit_m >= 0.0, "unit_m must be >= 0 (0 = REP 118 by dtype)"),
@@ -74,15 +73,15 @@ class FeatureParams:
     feature_type: str = param(
         "clipped", "'clipped': depth-clipped pixel-pair tests (eq. 3.6); 'plain': eq. 3.3.")
     kappa_m: float = param(
-        0.15, "Clipping parameter kappa (eq. 3.6): probe depths are clipped to d(x) +- kappa "
-              "(thesis best: 0.15 m). Ignored by plain tests.")
+        0.15, "Clipping parameter kappa (eq. 3.6) in metres, > 0: probe depths are clipped to "
+              "d(x) +- kappa. Ignored by plain tests.")
     patch_half_size_px_m: float = param(
-        85.0, "Half side of the square of test offsets u, v in pixel*metres: at reference depth d "
-              "the probes lie within +-value/d pixels (85 = the thesis' 85x85 px patch at 2 m).")
+        85.0, "Half side of the square of test offsets u, v in pixel*metres, > 0: at reference "
+              "depth d the probes lie within +-value/d pixels (85 = an 85x85 px patch at 2 m).")
     background_depth_m: float = param(
-        10.0, "Depth read by a probe that falls on an invalid pixel (or outside the image, with "
-              "outside = 'background'): far background (with clipping it reads d(x) + kappa like "
-              "any far clutter).")
+        10.0, "Depth in metres (> 0, beyond every valid depth) read by a probe that falls on an "
+              "invalid pixel (or outside the image, with outside = 'background'): far background "
+              "(with clipping it reads d(x) + kappa like any far clutter).")
     outside: str = param(
         "border", "What a probe outside the image reads: 'border' = the nearest image pixel (the "
                   "scene goes on beyond the frame), 'background' = background_depth_m.")
@@ -109,25 +108,26 @@ class PatchParams:
     """Patch collection from annotated frames (thesis sec. 3.2.3, "Patch collection")."""
 
     n_positive: int = param(
-        64, "N+: positive samples per gesture frame, drawn in the box around the annotated point.")
+        64, "N+: positive samples per gesture frame (>= 1), drawn in the box around the annotated "
+            "point.")
     n_negative: int = param(
-        256, "N-: negative samples per frame: outside the box in gesture frames, anywhere in "
-             "negative frames.")
+        256, "N-: negative samples per frame (>= 0): outside the box in gesture frames, anywhere "
+             "in negative frames.")
     box_half_size_px_m: float = param(
-        20.0, "Half side of the positive box in pixel*metres, scaled by the annotated point's "
-              "depth (20 = +-10 px at 2 m).")
+        20.0, "Half side of the positive box in pixel*metres (> 0), scaled by the annotated "
+              "point's depth (20 = +-10 px at 2 m).")
     positive_depth_tolerance_m: float = param(
-        0.10, "Box pixels whose depth differs from the annotated point's by more are not "
-              "positives (background seen through the box); 0 disables the check.")
+        0.10, "Box pixels whose depth differs from the annotated point's by more (metres, >= 0) "
+              "are not positives (background seen through the box); 0 disables the check.")
     negative_exclusion_scale: float = param(
         1.0, "Negatives of gesture frames are drawn outside the box scaled by this factor "
-             "(1 = just outside the box, as in the thesis).")
+             "(>= 1; 1 = just outside the box).")
     n_negative_near: int = param(
-        256, "Extra negatives per gesture frame drawn outside the (scaled) box but inside the "
-           "square of half side near_half_size_px_m / d around the annotated point: the rest of "
-           "the hand, the arm, the face, which a detector sees next to the gesture.")
+        256, "Extra negatives per gesture frame (>= 0) drawn outside the (scaled) box but inside "
+             "the square of half side near_half_size_px_m / d around the annotated point: the rest "
+             "of the hand, the arm, the face, which a detector sees next to the gesture.")
     near_half_size_px_m: float = param(
-        85.0, "Half side of the near-negative square in pixel*metres (85 = the test patch).")
+        85.0, "Half side of the near-negative square in pixel*metres (> 0; 85 = the test patch).")
 
     def __post_init__(self):
         _check([(self.n_positive >= 1 and self.n_negative >= 0, "need n_positive >= 1, n_negative >= 0"),
@@ -143,32 +143,32 @@ class PatchParams:
 class ForestParams:
     """Offline forest growth (sec. 3.2.1) and boosted tree-by-tree learning (sec. 3.2.3)."""
 
-    n_trees: int = param(15, "Trees M of the forest (thesis: 15).")
-    max_depth: int = param(20, "Maximum depth D of a tree (root = 0; thesis: 20).")
+    n_trees: int = param(15, "Trees M of the forest (>= 1).")
+    max_depth: int = param(20, "Maximum depth D of a tree (root = 0), 1 to 64.")
     n_tests: int = param(
-        100, "Random candidate tests (offset pairs u, v) drawn per node.")
+        100, "Random candidate tests (offset pairs u, v) drawn per node (>= 1).")
     n_thresholds: int = param(
-        16, "Random thresholds per candidate test, drawn among the node's feature values.")
-    min_samples_leaf: int = param(5, "A split must leave at least this many samples on each side.")
-    min_gain: float = param(1e-4, "Nodes whose best information gain (eq. 3.2, nats) is lower stay leaves.")
+        16, "Random thresholds per candidate test (>= 1), drawn among the node's feature values.")
+    min_samples_leaf: int = param(5, "A split must leave at least this many samples (>= 1) on each side.")
+    min_gain: float = param(1e-4, "Nodes whose best information gain (eq. 3.2, nats, >= 0) is lower stay "
+                                  "leaves.")
     samples_per_class: int = param(
-        10000, "Balanced bag: samples of each class drawn with replacement per tree (thesis: "
-               "about 20000).")
+        10000, "Balanced bag: samples of each class drawn with replacement per tree (>= 1).")
     boosted: bool = param(
         True, "Boosted learning (sec. 3.2.3): the out-of-bag samples a tree misclassifies join "
               "the next tree's bag; false = independent balanced bags.")
     max_boost_fraction: float = param(
         0.5, "Cap on the misclassified out-of-bag samples carried to the next tree, as a "
-             "fraction of the balanced bag size.")
+             "fraction of the balanced bag size, 0 to 10.")
     mining_rounds: int = param(
-        1, "Rounds of hard negative mining: the trained forest votes on its training frames "
-           "like the detector; pixels voting for a gesture away from the annotated one join "
-           "the samples as background and the forest is trained again (0 = none).")
-    mining_per_frame: int = param(256, "At most this many mined negatives per frame and round.")
+        1, "Rounds of hard negative mining (>= 0): the trained forest votes on its training "
+           "frames like the detector; pixels voting for a gesture away from the annotated one "
+           "join the samples as background and the forest is trained again (0 = none).")
+    mining_per_frame: int = param(256, "At most this many mined negatives per frame and round (>= 1).")
     mining_stride: int = param(
-        4, "Grid step (pixels) of the mining votes, as the detector's stride.")
+        4, "Grid step (pixels, 1 to 64) of the mining votes, as the detector's stride.")
     mining_exclusion_scale: float = param(
-        2.0, "Votes within this many positive boxes of the annotated point are not mined.")
+        2.0, "Votes within this many positive boxes (>= 1) of the annotated point are not mined.")
 
     def __post_init__(self):
         _check([(self.n_trees >= 1, "n_trees must be >= 1"),
@@ -214,35 +214,40 @@ class DetectorParams:
     """Per-frame gesture localization (thesis sec. 3.2.4) on one depth camera."""
 
     depth_unit_m: float = param(
-        0.0, "Metres per raw depth unit (0.001 = mm, 0.000125 = 1/8 mm, 1 = m); 0 = REP 118: "
+        0.0, "Metres per raw depth unit, >= 0 (0.001 = mm, 0.000125 = 1/8 mm, 1 = m); 0 = REP 118: "
              "16UC1 in mm, 32FC1 in m.")
     invalid_value: float = param(0.0, "Raw depth value of pixels without depth (NaN is always invalid).")
-    min_depth_m: float = param(0.3, "Nearer depths are invalid and cast no vote.")
-    max_depth_m: float = param(8.0, "Farther depths are invalid and cast no vote.")
+    min_depth_m: float = param(0.3, "Nearer depths (metres, > 0) are invalid and cast no vote.")
+    max_depth_m: float = param(8.0, "Farther depths (metres, above min_depth_m and below the forest's "
+                                    "background_depth_m) are invalid and cast no vote.")
     stride: int = param(
-        4, "Grid step in pixels: the forest is evaluated at every stride-th pixel of every "
-           "stride-th row (4 = 160x120 votes at 640x480).")
+        4, "Grid step in pixels (1 to 64): the forest is evaluated at every stride-th pixel of "
+           "every stride-th row (4 = 160x120 votes at 640x480).")
     parzen_sigma_px: float = param(
-        6.0, "Standard deviation (pixels) of the Gaussian Parzen kernel over the vote image.")
+        6.0, "Standard deviation (pixels, >= 0) of the Gaussian Parzen kernel over the vote "
+             "image; 0 = no smoothing.")
     alpha: float = param(
-        0.8, "Adaptation rate of the temporal smoothing p' = alpha p + (1 - alpha) p'_prev (eq. 3.4).")
+        0.8, "Adaptation rate alpha in (0, 1] of the temporal smoothing p' = alpha p + "
+             "(1 - alpha) p'_prev (eq. 3.4); 1 = no smoothing.")
     volume_radius_px_m: float = param(
-        20.0, "Radius of the disk S of the volume test (eq. 3.5) in pixel*metres: value/d pixels "
-              "at the maximum's depth d (20 = 10 px at 2 m, about 4 cm at f = 525 px; like the "
-              "positive box of training).")
+        20.0, "Radius of the disk S of the volume test (eq. 3.5) in pixel*metres, > 0: value/d "
+              "pixels at the maximum's depth d (20 = 10 px at 2 m, about 4 cm at f = 525 px).")
     min_score: float = param(
-        0.4, "A class is detected when its smoothed density at the maximum is at least this "
-             "(0.4 and 0.3 below: the best F1 on a validation bag, docs/gestures.md).")
+        0.4, "A class is detected when its smoothed density (eq. 3.4) at the maximum is at least "
+             "this; densities lie in [0, 1].")
     min_volume: float = param(
-        0.3, "... and the mean smoothed density over the disk S (eq. 3.5 / |S|) at least this.")
+        0.3, "... and the mean smoothed density over the disk S (eq. 3.5 / |S|) at least this, "
+             "in [0, 1].")
     suppression_radius_px_m: float = param(
-        60.0, "A detection closer than value/d pixels (d its depth) to a higher-scoring detection "
-              "of another class is dropped: one place shows one gesture. 0 keeps all.")
+        60.0, "A detection closer than value/d pixels (pixel*metres, >= 0; d its depth) to a "
+              "higher-scoring detection of another class is dropped: one place shows one gesture. "
+              "0 keeps all.")
     max_gap_s: float = param(
-        1.0, "The smoothing state restarts when consecutive stamps are further apart than this, "
-             "or go back in time (a replayed bag looping), or the image size changes.")
+        1.0, "Seconds (> 0): the smoothing state restarts when consecutive stamps are further "
+             "apart than this, or go back in time (a replayed bag looping), or the image size "
+             "changes.")
     reference_focal_px: float = param(
-        REFERENCE_FOCAL_PX, "Focal length (px) the pixel sizes above (stride, parzen_sigma_px, "
+        REFERENCE_FOCAL_PX, "Focal length (px, >= 0) the pixel sizes above (stride, parzen_sigma_px, "
                             "volume_radius_px_m, suppression_radius_px_m) are given for; they are "
                             "scaled by the camera's fx / this (525 = a 640x480 Kinect-like camera). "
                             "0 uses them as given.")

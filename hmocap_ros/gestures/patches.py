@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hmocap_ros.gestures.depth_features import check_stack, stack_metres
+from hmocap_ros.gestures.grid_votes import forest_grid_votes, grid_shape, pad_for_forest
 from hmocap_ros.gestures.params import FeatureParams, PatchParams
 from hmocap_ros.gestures.trees import Forest
 
@@ -148,15 +149,13 @@ def mine_hard_negatives(forest: Forest, frames_m: np.ndarray, labels, params: Pa
     negative mining of thesis sec. 3.3.2, run offline over the whole training set).
 
     The forest votes on every ``stride``-th pixel of each frame, exactly as the detector does
-    (:func:`~hmocap_ros.gestures.detection.forest_grid_votes`, sec. 3.2.4); a pixel that votes for
+    (:func:`~hmocap_ros.gestures.grid_votes.forest_grid_votes`, sec. 3.2.4); a pixel that votes for
     a gesture is a false positive unless it lies within ``exclusion_scale`` positive boxes of the
     frame's annotated gesture (whose pixels are, or border on, positives). Up to ``per_frame``
     of them per frame, drawn at random, become background samples. These are the shapes the
     uniform negatives of patch collection rarely hit: other people's hands, near-miss poses,
     the moments between gestures, clutter that looks like a hand.
     """
-    from hmocap_ros.gestures.detection import forest_grid_votes, grid_shape, pad_for_forest
-
     frames_m = check_stack(frames_m)
     lab = frame_labels(labels, frames_m.shape[0])
     flat = forest.flat()

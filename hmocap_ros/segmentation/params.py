@@ -12,8 +12,6 @@ from dataclasses import dataclass
 from hmocap_ros.params import param
 
 
-
-
 @dataclass(frozen=True)
 class ForegroundParams:
     """Tunables of :class:`hmocap_ros.segmentation.BackgroundModel` (thesis sec. 2.4, after Xu et al. [128]).
@@ -22,32 +20,34 @@ class ForegroundParams:
     """
 
     learn_frames: int = param(
-        50, "Frames (from the first one, or after relearn) that learn the background mean and "
-            "variance; no foreground is reported before they are done.")
+        50, "Frames (>= 1; from the first one, or after relearn) that learn the background mean "
+            "and variance; no foreground is reported before they are done.")
     k_sigma: float = param(
         3.5, "Foreground threshold: a pixel is foreground when its Mahalanobis distance to the "
-             "background Gaussian (diagonal, 3 channels) exceeds k_sigma.")
+             "background Gaussian (diagonal, 3 channels) exceeds k_sigma (standard deviations, > 0).")
     min_sigma: float = param(
-        3.0, "Floor of every channel's standard deviation (levels): covers sensor noise that the "
-             "learning frames under-sample and noise-free (rendered) images.")
+        3.0, "Floor of every channel's standard deviation (levels, > 0, at most max_sigma): covers "
+             "sensor noise that the learning frames under-sample and noise-free (rendered) images.")
     max_sigma: float = param(
-        30.0, "Ceiling of every channel's standard deviation (levels), so that a flickering pixel "
-              "does not become blind.")
+        30.0, "Ceiling of every channel's standard deviation (levels, at least min_sigma), so that "
+              "a flickering pixel does not become blind.")
     learning_rate: float = param(
-        0.005, "Running-average rate of mean and variance where the pixel is background "
-               "(0.005 per frame = 8 s time constant at 25 fps); 0 freezes the model.")
+        0.005, "Running-average rate of mean and variance where the pixel is background, per "
+               "frame in [0, 1] (0.005 = 8 s time constant at 25 fps); 0 freezes the model.")
     absorb_frames: int = param(
         500, "A pixel that differs from the background for this many consecutive frames "
-             "(a moved chair, a new shadow) is absorbed into the background; 0 never absorbs.")
+             "(0 to 65535; a moved chair, a new shadow) is absorbed into the background; 0 never "
+             "absorbs.")
     absorb_rate: float = param(
-        0.1, "Rate at which an absorbed pixel's mean moves to the new colour each frame.")
+        0.1, "Rate at which an absorbed pixel's mean moves to the new colour, per frame in (0, 1].")
     shadow_suppression: bool = param(
         True, "Label darker pixels of the background's chromaticity as shadow, not foreground.")
     shadow_min_brightness: float = param(
-        0.5, "tau_low: the lowest brightness ratio (pixel / background, along the background colour) "
-             "that can still be a shadow; darker pixels are foreground.")
+        0.5, "tau_low: the lowest brightness ratio (pixel / background, along the background colour; "
+             "> 0 and below tau_high) that can still be a shadow; darker pixels are foreground.")
     shadow_max_brightness: float = param(
-        1.0, "tau_high: shadows are strictly darker than this ratio of the background brightness.")
+        1.0, "tau_high: shadows are strictly darker than this ratio of the background brightness "
+             "(above tau_low, at most 1).")
     highlight_max_brightness: float = param(
         1.15, "Highest brightness ratio (pixel / gain-scaled background) at which a pixel of the "
              "background's chromaticity is still background: a surface lit by another source than "
@@ -56,25 +56,26 @@ class ForegroundParams:
     shadow_max_chroma: float = param(
         0.03, "Largest chromaticity distortion of a shadow or highlight: colour distance "
              "perpendicular to the background colour, divided by the pixel's brightness (tan of "
-             "the colour angle).")
+             "the colour angle, >= 0).")
     shadow_chroma_sigma: float = param(
         2.0, "Extra tolerance of the chromaticity test for sensor noise, in standard deviations "
-             "(matters for dark pixels, whose colour angle is noisy).")
+             "(>= 0; matters for dark pixels, whose colour angle is noisy).")
     illumination_compensation: bool = param(
         True, "Estimate a global gain per frame (median brightness ratio over the last frame's "
               "background pixels) and compare each pixel with the gain-scaled background.")
     gain_sample_step: int = param(
-        4, "Pixel step (rows and columns) of the sample that estimates the global gain.")
+        4, "Pixel step (rows and columns, >= 1) of the sample that estimates the global gain.")
     opening_size: int = param(
-        3, "Side (pixels) of the elliptic structuring element of the opening that removes "
+        3, "Side (pixels, >= 0) of the elliptic structuring element of the opening that removes "
            "speckle; 0 or 1 disables it.")
     closing_size: int = param(
-        5, "Side (pixels) of the elliptic structuring element of the closing that bridges "
+        5, "Side (pixels, >= 0) of the elliptic structuring element of the closing that bridges "
            "small gaps; 0 or 1 disables it.")
     min_blob_area: int = param(
-        100, "Connected foreground components smaller than this (pixels) are removed; 0 keeps all.")
+        100, "Connected foreground components smaller than this (pixels, >= 0) are removed; 0 keeps "
+             "all.")
     max_hole_area: int = param(
-        300, "Background holes inside a blob up to this area (pixels) are filled; 0 fills none.")
+        300, "Background holes inside a blob up to this area (pixels, >= 0) are filled; 0 fills none.")
 
     def __post_init__(self):
         checks = [
