@@ -4,26 +4,27 @@
 The scene: the shipped CMU clip 13_26 retargeted onto the tracking body, exact silhouettes
 rendered at 640x480 in the 4 cameras of ``config/rig_example.yaml`` (no segmentation: this
 measures the tracker). The tracker is started on the first frame (the start-up is not timed),
-then every method runs ``--frames`` frames of tracking at its default budget (about 3,500
-weight evaluations per frame: HPF 7 layers x 500 particles as in the thesis' comparison,
-HPF+APO and DD-HPF 8 x 438, APF 14 x 250; with the default two sweeps over the kinematic
-tree, ``hpf_sweeps``, HPF 14 x 250 and HPF+APO and DD-HPF 15 x 234), with 1 and 2 numba
-threads. DD-HPF gets ideal
+then every method of :data:`hmocap_ros.tracking.methods.METHODS` runs ``--frames`` frames of
+tracking at its default budget of about 3,500 weight evaluations per frame (APF 14 layers x
+250 particles; in the default two sweeps over the kinematic tree, ``filter.sweeps``, HPF
+14 x 250 and HPF+APO and DD-HPF+ 15 x 234), with 1 and 2 numba threads. DD-HPF+ gets ideal
 hand-detector maps (1 where the hands are seen; the skin detector's own cost, 0.6 ms per
-640x480 image by ``bench_skin.py``, is the foreground node's). Printed per method: seconds per
-frame (median), evaluations per second, and where the time goes (skinning = eq. 2.11/2.12,
-projection (fused into the XOR pass by default), XOR = eq. 2.8/2.15, proposals (their own search;
-the re-ranking of proposals counts as skinning and XOR), detection (DD-HPF: 3D extremities and
-IK solutions), the rest = resampling, kernels, boxes); then the time of one fresh start-up
-search (``research_every``, once every 25 frames by default), which the frames above leave out;
-and what a second tracker slot costs while nobody else is in the room (``max_people`` 2: it
-carves the coarse visual hull of each frame to look for a new person).
+640x480 image by ``bench_skin.py``, is the foreground node's).
+
+Printed per method: seconds per frame (median), evaluations per second, and where the time
+goes (skinning = eq. 2.11/2.12, projection (fused into the XOR pass by default), XOR = eq.
+2.8/2.15, proposals (their own search; the re-ranking of proposals counts as skinning and
+XOR), detection (DD-HPF+: 3D extremities and IK solutions), the rest = resampling, kernels,
+boxes); then the time of one fresh search (``research.every``, once every 25 tracked frames
+by default), which the frames above leave out; and what a second tracker slot costs while
+nobody else is in the room (``max_people`` 2: it carves the coarse visual hull of each frame
+to look for a new person).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_tracker.py [--frames 10] [--threads 1 2]
-        [--mesh tracking_coarse] [--param hpf_sweeps=1]
+        [--methods hpf dd-hpf] [--mesh tracking_coarse] [--param filter.sweeps=1]
 
 The scene is always rendered with the 2,400-triangle ``tracking`` body; ``--mesh`` picks what
-the tracker renders its particles with (``TrackerParams.mesh``).
+the tracker renders its particles with (``weighting.mesh``).
 """
 from __future__ import annotations
 
@@ -38,11 +39,13 @@ import numpy as np
 from hmocap_ros.body import load_body_model, local_rotations_to_pose
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.eval.mocap_eval import tracker_overrides
+from hmocap_ros.params import from_flat
 from hmocap_ros.render import project_batch, render_silhouettes
 from hmocap_ros.rig import load_rig
 from hmocap_ros.sim.retarget import load_motion, place_in_room
-from hmocap_ros.tracking.body_layers import METHODS
-from hmocap_ros.tracking.body_tracker import TRACKER_MESHES, BodyTracker, TrackerParams
+from hmocap_ros.tracking.body_tracker import BodyTracker
+from hmocap_ros.tracking.methods import METHODS, method_names
+from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,36 +74,44 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--threads", type=int, nargs="*", default=[1, 2])
-    ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
-    ap.add_argument("--working-scale", type=float, default=0.25)
-    ap.add_argument("--mesh", default=TrackerParams().mesh, choices=TRACKER_MESHES,
-                    help="mesh the tracker renders its particles with (default %(default)s)")
+    ap.add_argument("--methods", nargs="*", default=list(method_names()), choices=method_names())
+    ap.add_argument("--working-scale", type=float, default=TrackerParams().weighting.working_scale,
+                    help="weighting.working_scale (default %(default)s)")
+    ap.add_argument("--mesh", default=TrackerParams().weighting.mesh, choices=TRACKER_MESHES,
+                    help="mesh the tracker renders its particles with, weighting.mesh "
+                         "(default %(default)s)")
     ap.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                    help="other tracker setting (as hmocap eval mocap --param)")
+                    help="other tracker setting by its dotted name, e.g. filter.sweeps=1 "
+                         "(repeatable; as hmocap eval mocap --param)")
     args = ap.parse_args()
     try:
-        overrides = tracker_overrides(args.param)
+        # --param wins over --working-scale and --mesh
+        settings = {"weighting.working_scale": args.working_scale, "weighting.mesh": args.mesh,
+                    **tracker_overrides(args.param)}
+        base = from_flat(TrackerParams, settings)
     except ValueError as err:
         ap.error(str(err))
+    scale, mesh = base.weighting.working_scale, base.weighting.mesh
     model = load_body_model("tracking")
     rig = load_rig(ROOT / "config" / "rig_example.yaml")
     shape, masks, maps = scene(model, rig, args.frames + 1)
     print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
           f"{platform.machine()}, cpus {numba.config.NUMBA_NUM_THREADS}")
-    print(f"4 views {rig[0].width}x{rig[0].height}, working scale {args.working_scale} "
-          f"({int(rig[0].width * args.working_scale)}x{int(rig[0].height * args.working_scale)}), "
+    print(f"4 views {rig[0].width}x{rig[0].height}, working scale {scale} "
+          f"({int(rig[0].width * scale)}x{int(rig[0].height * scale)}), "
           f"scene mesh {model.n_vertices} vertices / {len(model.faces)} triangles, tracker mesh "
-          f"{args.mesh} ({len(model.with_mesh(args.mesh).faces)} triangles), {args.frames} frames"
-          + "".join(f", {k}={v}" for k, v in overrides.items()))
+          f"{mesh} ({len(model.with_mesh(mesh).faces)} triangles), {args.frames} frames"
+          + "".join(f", {k}={v}" for k, v in settings.items() if not k.startswith("weighting.")))
+    every = TrackerParams().research.every
     for threads in args.threads:
         numba.set_num_threads(threads)
         for method in args.methods:
-            # the fresh search (research_every) runs on the frame after the timed ones
+            label = METHODS[method].label
+            # the fresh search (research.every) runs on the frame after the timed ones
             # (the start-up and warm-up frames do not count, so it is tracked frame n + 2)
-            tracker = BodyTracker(model, rig, TrackerParams(**{
-                **overrides, "method": method, "working_scale": args.working_scale,
-                "mesh": args.mesh, "research_every": args.frames + 2}),
-                                  np.random.default_rng(0), shape=shape)
+            params = from_flat(TrackerParams, {**settings, "method": method,
+                                               "research.every": args.frames + 2})
+            tracker = BodyTracker(model, rig, params, np.random.default_rng(0), shape=shape)
             tracker.update(list(masks[0]), 0)  # start-up (hull, Powell): not timed
             tracker.update(list(masks[1 % len(masks)]), 1, list(maps[1 % len(masks)]))  # warm-up
             totals, stages = [], {}
@@ -116,19 +127,17 @@ def main() -> None:
             # projection is fused into the XOR pass (fused_xor.py) at the default settings
             known = ("skinning", "projection", "xor", "proposals", "detection")
             rest = stages["total"] / n - sum(stages.get(k, 0.0) / n for k in known)
-            print(f"threads={threads} {method:8s} {spf:6.3f} s/frame  {evals:6.0f} evaluations/frame  "
+            print(f"threads={threads} {label:8s} {spf:6.3f} s/frame  {evals:6.0f} evaluations/frame  "
                   f"{evals / spf:8.0f} evaluations/s  | " + "  ".join(
                       f"{k} {stages.get(k, 0.0) / n:.3f}" for k in known) + f"  other {rest:.3f}",
                   flush=True)
             res = tracker.update(list(masks[n]), n + 1, list(maps[n]))
             search = res.timings.get("research", float("nan"))
-            every = TrackerParams().research_every
-            print(f"{'':18s}fresh search (research_every): {search:.2f} s on its frame, "
+            print(f"{'':18s}fresh search (research.every): {search:.2f} s on its frame, "
                   f"{search / every:.3f} s/frame at the default of one every {every} frames",
                   flush=True)
-        people = PeopleTracker(model, rig, TrackerParams(**{
-            **overrides, "method": "hpf-apo", "working_scale": args.working_scale,
-            "mesh": args.mesh}),
+        people = PeopleTracker(model, rig, from_flat(TrackerParams, {**settings,
+                                                                     "method": "hpf-apo"}),
                                np.random.default_rng(0), shape=shape, max_people=2)
         people.update(list(masks[0]), 0)
         idle = [people.update(list(masks[f]), f)[1].timings["total"]

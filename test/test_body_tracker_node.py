@@ -22,8 +22,9 @@ from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
-FAST = ["-p", "n_particles:=120", "-p", "n_layers:=0", "-p", "shape_particles:=60",
-        "-p", "shape_frames:=2", "-p", "working_scale:=1.0", "-p", "shape_working_scale:=1.0"]
+FAST = ["-p", "filter.particles:=120", "-p", "filter.layers:=0", "-p", "startup.particles:=60",
+        "-p", "startup.frames:=2", "-p", "weighting.working_scale:=1.0",
+        "-p", "startup.working_scale:=1.0"]
 
 
 def _points(msg) -> np.ndarray:
@@ -73,7 +74,7 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
     assert {"searching", "tracking"} <= states
     tracking = [{kv.key: kv.value for kv in s.values} for d in diags for s in d.msg.status
                 if s.message == "tracking"]
-    # dd-hpf runs the hpf-apo layers: two sweeps of the 7 blocks (hpf_sweeps) + the final layer
+    # dd-hpf runs the hpf-apo layers: two sweeps of the 7 blocks (filter.sweeps) + the final layer
     assert tracking and len(tracking[-1]["ms_per_layer"].split()) == 15
     # the skin maps arrived with the masks: hands were searched for in 3D on tracked frames
     assert any(float(t.get("time_detection", 0)) > 0 for t in tracking), tracking[-1]
@@ -141,7 +142,7 @@ def test_bad_input_is_logged_and_survived(tmp_path):
                             ["--ros-args", "-p", "max_wait_ms:=100.0", *FAST], env, tmp_path) as node:
         assert node.wait_for_output("waiting for the rig", 60), node.output()
         # diagnostics are volatile and published per frame set: a recorder that discovers the
-        # node only after the input has been sent records nothing (seen once in CI)
+        # node only after the input has been sent records nothing
         assert rec.wait_for_output("receiving /diagnostics from", 60), rec.output()
         with NodeProcess("pub", [sys.executable, "-c", script], env, tmp_path) as pub:
             assert pub.wait_for_output("sent", 60), pub.output()

@@ -9,7 +9,7 @@ particle budgets, a few frames.
 from __future__ import annotations
 
 import dataclasses
-from functools import partial
+import inspect
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -18,6 +18,8 @@ import pytest
 
 from hmocap_ros.body import (BodyShape, entity_sizes, local_rotations_to_pose,
                              rest_pose)
+from hmocap_ros.params import (field_overrides, flat_fields, flat_record, from_flat,
+                               replace_dotted)
 from hmocap_ros.render import project_batch, render_silhouettes
 from hmocap_ros.render.reference import silhouette_reference
 from hmocap_ros.sim.retarget import load_motion, place_in_room
@@ -26,13 +28,18 @@ from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARA
                                                           EstimationParams, shape_from_state,
                                                           shape_to_state)
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
-from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, METHODS, SWEEP_DECAY, body_sigma0,
-                                             clip_body_pose, make_schedule)
+from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, SWEEP_DECAY, body_sigma0,
+                                             clip_body_pose, make_schedule, schedule_for)
 from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.lpf.kernels import rejection_kernel
+from hmocap_ros.tracking.methods import METHODS, TrackingMethod, get_method, method_names
 from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d)
+from hmocap_ros.tracking.params import (FilterParams, ResearchParams, StartupParams,
+                                        WeightingParams)
+from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
+from hmocap_ros.tracking.startup import StartUp
 from hmocap_ros.tracking.visual_hull import Hull, carve, room_bounds, visual_hull
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -253,19 +260,20 @@ def test_visual_hull_takes_the_best_seen_person_or_the_one_near_the_last_pose(mo
 
 
 def test_tracker_starts_only_on_a_person_in_its_track_region(model, rig):
-    """``track_region``: a person outside it is not followed, one inside is."""
+    """``startup.track_region``: a person outside it is not followed, one inside is."""
     pose = model.rest_pose(None).copy()
     pose[model.skeleton.translation_dofs[[0, 2]]] = [0.4, 0.2]
     masks, _ = render_masks(model, rig, pose[None])
-    elsewhere = TrackerParams(method="hpf", shape_frames=1, shape_particles=8,
-                              track_region=[-2.0, -2.0, -1.0, -1.0])
+    elsewhere = from_flat(TrackerParams, {"method": "hpf", "startup.frames": 1,
+                                          "startup.particles": 8,
+                                          "startup.track_region": [-2.0, -2.0, -1.0, -1.0]})
     tracker = BodyTracker(model, rig, elsewhere, np.random.default_rng(0))
     assert tracker.update(list(masks[0]), 1).state == "searching"
-    around = dataclasses.replace(elsewhere, track_region=[0.0, -0.2, 0.8, 0.6])
+    around = replace_dotted(elsewhere, {"startup.track_region": [0.0, -0.2, 0.8, 0.6]})
     tracker = BodyTracker(model, rig, around, np.random.default_rng(0))
     assert tracker.update(list(masks[0]), 1).state != "searching"
     with pytest.raises(ValueError, match="track_region"):
-        TrackerParams(track_region=[1.0, 0.0, 0.0, 1.0])
+        StartupParams(track_region=[1.0, 0.0, 0.0, 1.0])
 
 
 # ----------------------------------------------------------------------------- anthropometry
@@ -357,7 +365,7 @@ def test_start_up_grows_to_a_taller_hull(model, rig):
     """grow_to: a hypothesis whose body stands more than the margin below the hull's top (the
     start frame's segmentation lost the head) grows to it; within the margin nothing moves.
     With ``column``, only the hull over the body's head counts: a raised hand beside it
-    (stop 24's held-out laugh) grows nothing, and a column without voxels neither."""
+    grows nothing, and a column without voxels neither."""
     est, x, g, ty, reset = _growth_estimator(model, rig)
     skel = model.skeleton
 
@@ -398,76 +406,6 @@ def test_start_up_grows_to_a_taller_hull(model, rig):
     assert est.hypotheses[0].estimate[g] == pytest.approx(est.params.scale_limits[1])
 
 
-def _block_hull(blocks) -> Hull:
-    """A hull of boxes ``[(x0, x1, y0, y1, z0, z1), ...]`` filled with 3-cm voxels."""
-    voxel = 0.03
-    pts = []
-    for x0, x1, y0, y1, z0, z1 in blocks:
-        axes = [np.arange(a + 0.5 * voxel, b, voxel) for a, b in ((x0, x1), (y0, y1), (z0, z1))]
-        pts.append(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3))
-    pts = np.unique(np.round(np.concatenate(pts), 6), axis=0)
-    return Hull(points=pts, voxel_size=voxel, centroid=pts.mean(axis=0),
-                top=float(pts[:, 1].max() + 0.5 * voxel), bottom=0.0, volume=0.0,
-                heading=0.0, elongation=1.0)
-
-
-#: a standing block body: legs and trunk to 1.44 m, an 18-cm head to 1.71 m
-_TRUNK = (-0.18, 0.18, 0.0, 1.44, -0.12, 0.12)
-_HEAD = (-0.09, 0.09, 1.44, 1.71, -0.09, 0.09)
-
-
-def test_head_top_passes_over_a_hand_held_over_the_head():
-    """Hull.head_top (stop 26): the column's top down to the first layer as full as a head;
-    a forearm held over the head (6 cm square, 8 cm off the axis) or an arm raised beside
-    it leaves the head's top where it is, while the plain column top and the hull's top
-    take the hand; with nothing over the head, the head's top is the column's."""
-    plain = _block_hull([_TRUNK, _HEAD])
-    assert plain.head_top(None, 0.15, 0.2) == pytest.approx(1.71, abs=0.015)
-    assert plain.head_top(None, 0.15, 0.2) == pytest.approx(plain.top_within((0, 0), 0.15))
-    over = _block_hull([_TRUNK, _HEAD, (0.05, 0.11, 1.71, 1.92, -0.03, 0.03)])
-    assert over.top == over.top_within((0, 0), 0.15) == pytest.approx(1.92, abs=0.015)
-    assert over.head_top(None, 0.15, 0.2) == pytest.approx(1.71, abs=0.015)
-    # an arm straight up beside the head: the trunk's axis stays on the trunk
-    beside = _block_hull([_TRUNK, _HEAD, (0.18, 0.27, 1.2, 2.0, -0.05, 0.05)])
-    np.testing.assert_allclose(beside.trunk_axis(), [0.0, 0.0], atol=0.02)
-    assert beside.head_top(None, 0.15, 0.2) == pytest.approx(1.71, abs=0.015)
-    assert beside.top == pytest.approx(2.0, abs=0.015)
-    # nothing in the column
-    assert plain.head_top((1.0, 1.0), 0.15, 0.2) is None
-
-
-def test_start_up_grows_to_the_head_not_to_a_hand_over_it(model, rig):
-    """grow_to with ``head_fraction`` (stop 26): the hull's head top against the body's crown;
-    a hull whose head stands taller than the body grows it, a hand held over a head as tall
-    as the body grows nothing (the plain column grows it to the hand)."""
-    est, x, _, _, reset = _growth_estimator(model, rig)
-    skel = model.skeleton
-
-    reset()
-    e = est.hypotheses[0].estimate
-    crown = model.forward(e[None, :skel.n_dofs], shape_from_state(e[None, skel.n_dofs:])
-                          ).end_sites[0, model.end_site_names.index("head_top")]
-    hx, top, hz = (float(v) for v in crown)
-
-    def body(head_top, hand=False):
-        blocks = [(hx - 0.18, hx + 0.18, 0.0, head_top - 0.27, hz - 0.12, hz + 0.12),
-                  (hx - 0.09, hx + 0.09, head_top - 0.27, head_top, hz - 0.09, hz + 0.09)]
-        if hand:
-            blocks.append((hx + 0.05, hx + 0.11, head_top, head_top + 0.21, hz - 0.03, hz + 0.03))
-        return _block_hull(blocks)
-
-    taller = body(top + 0.12)
-    (f,) = est.grow_to(taller, margin=0.06, column=0.15, head_fraction=0.2)
-    assert f == pytest.approx(taller.head_top((hx, hz), 0.15, 0.2) / top)
-    assert f > 1.05
-    reset()
-    with_hand = body(top, hand=True)
-    assert est.grow_to(with_hand, margin=0.06, column=0.15, head_fraction=0.2) == [1.0]
-    np.testing.assert_array_equal(est.hypotheses[0].estimate, x)
-    (f_hand,) = est.grow_to(with_hand, margin=0.06, column=0.15)
-    assert f_hand > 1.1
-
-
 def test_heading_search_keeps_required_headings(model, rig):
     """search_headings / start(also=...): a required heading (the travel direction) is posed,
     kept and Powell-fitted in addition to the searched ones, whatever its cost."""
@@ -493,20 +431,45 @@ def test_heading_search_keeps_required_headings(model, rig):
     assert [h.heading for h in est.hypotheses] == [1.0, 0.3]
 
 
+# ----------------------------------------------------------------------------- methods
+
+
+def test_the_registry_holds_the_four_methods_of_the_thesis():
+    """tracking.methods: the four methods in the thesis' order, and what each is built of."""
+    assert method_names() == ("apf", "hpf", "hpf-apo", "dd-hpf")
+    assert tuple(METHODS) == method_names()
+    apf, hpf, apo, dd = (METHODS[m] for m in method_names())
+    assert all(isinstance(m, TrackingMethod) for m in METHODS.values())
+    assert not apf.hierarchical and hpf.hierarchical and apo.hierarchical and dd.hierarchical
+    assert apo.boxed and dd.boxed and not hpf.boxed and not apf.boxed
+    assert dd.uses_detector and not any(m.uses_detector for m in (apf, hpf, apo))
+    assert [m.label for m in (apf, hpf, apo, dd)] == ["APF", "HPF", "HPF+APO", "DD-HPF+"]
+    assert apf.evaluations == hpf.evaluations == 3500
+    assert abs(apo.evaluations - 3500) <= 10 and dd.evaluations == apo.evaluations
+    assert get_method("hpf-apo") is apo and get_method(apo) is apo
+    assert from_flat(TrackerParams, {"method": "hpf-apo"}).tracking_method is apo
+    assert TrackerParams().tracking_method is dd
+    with pytest.raises(ValueError, match="method must be one of"):
+        get_method("pso")
+
+
 # ----------------------------------------------------------------------------- schedules
 
 
 def test_schedules_spend_about_equal_evaluations(model):
     skel = model.skeleton
-    counts = {m: make_schedule(m, skel).evaluations_per_frame for m in METHODS}
+    counts = {m: make_schedule(m, skel).evaluations_per_frame for m in method_names()}
     assert counts["apf"] == 3500 and counts["hpf"] == 3500
     assert abs(counts["hpf-apo"] - 3500) <= 10
-    hpf = make_schedule("hpf", skel, arm_chain=False)
-    assert hpf.n_weightings == 7
+    hpf = make_schedule("hpf", skel)
+    assert hpf.method is METHODS["hpf"] and hpf.n_weightings == 7
     dims = [layer.dims for layer in hpf.filter.layers]
     for block, d in zip(BODY_BLOCKS, dims):
-        np.testing.assert_array_equal(d, skel.group_dofs(block))
-    apo = make_schedule("hpf-apo", skel)
+        expected = skel.group_dofs(block)
+        if block.endswith("_shoulder"):  # a shoulder layer samples its elbow too
+            expected = np.union1d(expected, skel.group_dofs(block.replace("shoulder", "elbow")))
+        np.testing.assert_array_equal(d, expected)
+    apo = make_schedule(METHODS["hpf-apo"], skel)
     assert apo.n_weightings == 8 and apo.boxed == (True,) * 7 + (False,)
     assert make_schedule("apf", skel).n_weightings == 14
     # partitioned sampling: the kernel of layer l diffuses block l + 1 at sigma0
@@ -518,12 +481,26 @@ def test_schedules_spend_about_equal_evaluations(model):
         make_schedule("pso", skel)
 
 
+def test_schedule_for_reads_the_tracker_settings(model):
+    """schedule_for: the method and filter.* of TrackerParams; by default dd-hpf in two
+    sweeps, 15 x 234 (the node's diagnostics show 15 layers)."""
+    skel = model.skeleton
+    default = schedule_for(TrackerParams(), skel)
+    assert default.method is METHODS["dd-hpf"]
+    assert default.n_weightings == 15 and default.n_particles == 234
+    one = schedule_for(from_flat(TrackerParams, {"method": "hpf", "filter.sweeps": 1}), skel)
+    assert one.n_weightings == 7 and one.evaluations_per_frame == 3500
+    apf = schedule_for(from_flat(TrackerParams, {"method": "apf", "filter.particles": 40,
+                                                 "filter.layers": 5}), skel)
+    assert apf.n_weightings == 5 and apf.n_particles == 40
+
+
 def test_a_second_sweep_weighs_every_block_again_at_a_finer_std(model):
     skel = model.skeleton
     sigma0 = body_sigma0(skel)
     for method, block_layers in (("hpf", 6), ("hpf-apo", 7)):
-        one = make_schedule(method, skel, arm_chain=False)
-        two = make_schedule(method, skel, arm_chain=False, sweeps=2)
+        one = make_schedule(method, skel)
+        two = make_schedule(method, skel, sweeps=2)
         # the same evaluations per frame, spread over twice the block layers
         assert abs(two.evaluations_per_frame - one.evaluations_per_frame) <= 15
         assert two.n_weightings == one.n_weightings + len(BODY_BLOCKS)
@@ -553,61 +530,103 @@ def test_pose_kernel_respects_joint_limits(model):
     assert np.all(out[:, free] <= skel.upper[free] + 1e-12)
 
 
-# ----------------------------------------------------------------------------- tracker
+# ----------------------------------------------------------------------------- settings
+
+#: names the tracker's settings must not have: what these options chose is fixed behaviour
+DELETED_OPTIONS = ("dd_feet", "dd_reacquire", "start_head_fraction", "render_filtered_parts",
+                   "travel_research_every", "travel_heading", "estimator", "facing_cooldown",
+                   "velocity_dofs", "proposal_limbs", "arm_chain", "ignore_other_people")
 
 
-def test_tracker_params_are_described():
-    for f in dataclasses.fields(TrackerParams):
-        assert f.metadata.get("description"), f.name
+def test_tracker_params_are_described_and_few():
+    """Every leaf of TrackerParams is one a user might set: described, at most 45 of them,
+    none of the deleted options."""
+    leaves = list(flat_fields(TrackerParams))
+    names = [name for name, *_ in leaves]
+    for name, f, _, _ in leaves:
+        assert f.metadata.get("description", "").strip(), name
+    for f in dataclasses.fields(TrackerParams):  # the groups too
+        assert f.metadata.get("description", "").strip(), f.name
+    assert len(names) <= 45, len(names)
+    assert len(set(names)) == len(names)
+    last = {name.rsplit(".", 1)[-1] for name in names}
+    assert not set(DELETED_OPTIONS) & (last | set(names))
     with pytest.raises(ValueError):
         TrackerParams(method="kalman")
     with pytest.raises(ValueError, match="mesh"):
-        TrackerParams(mesh="hands")
-    with pytest.raises(ValueError, match="start_height_margin"):
-        TrackerParams(start_height_margin=-0.1)
-    with pytest.raises(ValueError, match="hpf_sweeps"):
-        TrackerParams(hpf_sweeps=0)
-    with pytest.raises(ValueError, match="start_height_column"):
-        TrackerParams(start_height_column=-0.1)
-    with pytest.raises(ValueError, match="start_head_fraction"):
-        TrackerParams(start_head_fraction=0.2, start_height_column=0.0)
-    with pytest.raises(ValueError, match="start_head_fraction"):
-        TrackerParams(start_head_fraction=1.5)
+        WeightingParams(mesh="hands")
+    with pytest.raises(ValueError, match="height_margin"):
+        StartupParams(height_margin=-0.1)
+    with pytest.raises(ValueError, match="sweeps"):
+        FilterParams(sweeps=0)
+    with pytest.raises(ValueError, match="height_column"):
+        StartupParams(height_column=-0.1)
+
+
+def test_dotted_settings_round_trip_and_unknown_names_are_refused():
+    """from_flat / flat_record / replace_dotted / field_overrides on dotted names."""
+    values = {"method": "hpf", "filter.sweeps": 1, "startup.frames": 2,
+              "startup.track_region": [0.0, -0.2, 0.8, 0.6], "weighting.mesh": "tracking_coarse",
+              "research.facing_limit": 30.0}
+    params = from_flat(TrackerParams, values)
+    assert params.method == "hpf" and params.filter.sweeps == 1 and params.startup.frames == 2
+    assert params.startup.track_region == (0.0, -0.2, 0.8, 0.6)
+    assert params.weighting.mesh == "tracking_coarse" and params.research.facing_limit == 30.0
+    assert params.lost == TrackerParams().lost  # a group not named keeps its defaults
+    record = flat_record(params)
+    assert list(record) == [name for name, *_ in flat_fields(TrackerParams)]
+    assert from_flat(TrackerParams, record) == params
+    assert replace_dotted(TrackerParams(), values) == params
+    overrides = field_overrides(TrackerParams, [
+        "method=hpf", "filter.sweeps=1", "startup.frames=2", "startup.track_region=0,-0.2,0.8,0.6",
+        "weighting.mesh=tracking_coarse", "research.facing_limit=30", "startup.estimate_shape=no"])
+    assert overrides == {**values, "startup.estimate_shape": False}
+    assert type(overrides["research.facing_limit"]) is float
+    assert type(overrides["filter.sweeps"]) is int
+    assert from_flat(TrackerParams, overrides) == replace_dotted(
+        params, {"startup.estimate_shape": False})
+    for bad in ("sweeps", "filter", "filter.n_particles", "hpf_sweeps", *DELETED_OPTIONS):
+        with pytest.raises(ValueError, match="unknown"):
+            from_flat(TrackerParams, {bad: 1})
+        with pytest.raises(ValueError, match="unknown"):
+            replace_dotted(params, {bad: 1})
+        with pytest.raises(ValueError, match="unknown"):
+            field_overrides(TrackerParams, [f"{bad}=1"])
+
+
+# ----------------------------------------------------------------------------- tracker
 
 
 def test_tracker_renders_particles_with_its_mesh_parameter(model, rig):
-    """``mesh`` swaps the rendered triangles of a shipped tracking body, not its skeleton; a
-    model of one's own is rendered as it is."""
-    tracker = BodyTracker(model, rig, TrackerParams(mesh="tracking_coarse"),
-                          np.random.default_rng(0))
+    """``weighting.mesh`` swaps the rendered triangles of a shipped tracking body, not its
+    skeleton; a model of one's own is rendered as it is."""
+    coarse_params = from_flat(TrackerParams, {"weighting.mesh": "tracking_coarse"})
+    tracker = BodyTracker(model, rig, coarse_params, np.random.default_rng(0))
     coarse = tracker.model
     assert coarse.name == "tracking_coarse" and coarse.n_vertices < model.n_vertices
     assert tracker.fitness.faces.max() < coarse.n_vertices == tracker.shape_fitness.model.n_vertices
     assert tracker.skel.dof_names == model.skeleton.dof_names
     assert BodyTracker(model, rig, TrackerParams(), np.random.default_rng(0)).model is model
     own = dataclasses.replace(model, name="custom")
-    assert BodyTracker(own, rig, TrackerParams(mesh="tracking_coarse"),
-                       np.random.default_rng(0)).model is own
+    assert BodyTracker(own, rig, coarse_params, np.random.default_rng(0)).model is own
 
 
-def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig):
-    """backwards_frames: the check fires when the pelvis travelled faster than backwards_step
-    per frame and the root yaw faces more than facing_limit (90) degrees away, never when off,
-    slow or facing forward, and not again during the cool-down after a search
-    (facing_cooldown, 0: research_every)."""
-    skel = model.skeleton
-    yaw, t = skel.dof_index("root_yaw"), skel.translation_dofs
+# ----------------------------------------------------------------------------- fresh searches
 
-    def run(frames, heading, step, **kw):
-        tracker = BodyTracker(model, rig, TrackerParams(**kw), np.random.default_rng(0))
-        tracker.estimate = rest_pose(skel).copy()
-        tracker.estimate[yaw] = heading
-        fired = []
-        for k in range(frames):  # travel along +Z by `step` per frame
-            tracker.estimate[t] = [0.0, 0.9, k * step]
-            fired.append(tracker._facing_away_from_travel(tracker._travel()))
-        return fired
 
+def _facing_checks(frames: int, heading: float, step: float, **research) -> list:
+    """The facing check of each frame of a pelvis travelling along +Z by ``step`` a frame
+    with the root yaw ``heading`` (``research``: ResearchParams fields)."""
+    policy = ResearchPolicy(ResearchParams(**research))
+    return [policy._facing_away(policy._travel(np.array([0.0, k * step])), heading)
+            for k in range(frames)]
+
+
+def test_facing_away_from_travel_triggers_only_when_moving_backwards():
+    """research.backwards_frames: the check fires when the pelvis travelled faster than
+    backwards_step per frame and the root yaw faces more than facing_limit (90) degrees away,
+    never when off, slow or facing forward, and not during the cool-down after a search."""
+    run = _facing_checks
     # facing -Z (heading pi) while travelling +Z at 10 cm a frame: fires once 4 steps are seen
     assert run(8, np.pi, 0.10, backwards_frames=4) == [False] * 4 + [True] * 4
     assert not any(run(8, 0.0, 0.10, backwards_frames=4))  # facing the travel
@@ -621,57 +640,72 @@ def test_facing_away_from_travel_triggers_only_when_moving_backwards(model, rig)
     assert not any(run(8, np.deg2rad(35.0), 0.10, backwards_frames=4))
     assert not any(run(8, np.deg2rad(25.0), 0.10, backwards_frames=4, facing_limit=30.0))
     with pytest.raises(ValueError, match="facing_limit"):
-        TrackerParams(facing_limit=0.0)
-    cool = {kw: BodyTracker(model, rig, TrackerParams(**dict(kw)), np.random.default_rng(0))
-            ._cooldown_after_search() for kw in ((), (("facing_cooldown", 10),),
-                                                 (("facing_cooldown", 2),),
-                                                 (("research_every", 0),))}
-    assert list(cool.values()) == [25, 10, 5, 5]  # research_every 25, backwards_frames 5
-    with pytest.raises(ValueError, match="facing_cooldown"):
-        TrackerParams(facing_cooldown=-1)
-    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=2), np.random.default_rng(0))
-    tracker.estimate = rest_pose(skel).copy()
-    tracker.estimate[yaw] = np.pi
-    tracker._research_cooldown = 3
-    fired = []
-    for k in range(6):
-        tracker.estimate[t] = [0.0, 0.9, k * 0.1]
-        fired.append(tracker._facing_away_from_travel(tracker._travel()))
+        ResearchParams(facing_limit=0.0)
+    policy = ResearchPolicy(ResearchParams(backwards_frames=2))
+    policy.cooldown = 3
+    fired = [policy._facing_away(policy._travel(np.array([0.0, k * 0.1])), np.pi)
+             for k in range(6)]
     assert fired == [False, False, False, True, True, True]
     with pytest.raises(ValueError, match="backwards"):
-        TrackerParams(backwards_frames=-1)
+        ResearchParams(backwards_frames=-1)
 
 
-def test_travel_research_is_due_only_while_travelling(model, rig):
-    """travel_research_every: a fresh search is due while the pelvis travels and that many
-    tracked frames have passed since the last one; never without travel, never when 0."""
-    tracker = BodyTracker(model, rig, TrackerParams(travel_research_every=10),
-                          np.random.default_rng(0))
-    travel = np.array([0.0, 0.5])
-    due = []
-    for frames in (5, 9, 13, 14, 20):
-        tracker._tracked_frames, tracker._last_search = frames, 4
-        due.append((tracker._travel_search_due(travel), tracker._travel_search_due(None)))
-    assert due == [(False, False)] * 3 + [(True, False)] * 2
-    tracker.params = TrackerParams()  # 0: off
-    assert not tracker._travel_search_due(travel)
-    with pytest.raises(ValueError, match="travel_research_every"):
-        TrackerParams(travel_research_every=-1)
+def _searches(policy: ResearchPolicy, frames: int, heading: float, step: float) -> list:
+    """``(frame, reason, heading)`` of each search the policy asks for while the pelvis
+    travels along +Z by ``step`` a frame with the root yaw ``heading``; each one runs (the
+    tracker calls ``searched()``)."""
+    out = []
+    for k in range(frames):
+        due = policy.after_frame(np.array([0.0, k * step]), heading)
+        if due is not None:
+            out.append((k, due.reason, due.heading))
+            policy.searched()
+    return out
 
 
-def test_travel_is_measured_over_backwards_frames(model, rig):
-    """_travel: the pelvis' (x, z) travel over backwards_frames frames once that many are
-    seen and it is faster than backwards_step; its heading (travel_heading) is the root yaw
-    facing it, the convention of initial_pose (+Z turned towards +X)."""
+def test_research_policy_searches_periodically_backwards_and_on_the_first_travel():
+    """after_frame: a search every research.every tracked frames; at once when the body
+    faces away from its travel; once when the travel is first measured after a start, with
+    the travel's heading. searched() starts the pelvis track again and holds the facing
+    check for max(every, backwards_frames) frames."""
+    still = ResearchPolicy(ResearchParams(every=3))
+    assert _searches(still, 9, 0.0, 0.0) == [(2, "periodic", None), (5, "periodic", None),
+                                            (8, "periodic", None)]
+    assert still.tracked_frames == 9
+    assert _searches(ResearchPolicy(ResearchParams(every=0)), 30, 0.0, 0.0) == []
+    # facing -Z while travelling +Z at 10 cm a frame: at once, and again each time the
+    # cool-down is over and the travel measured anew
+    backwards = ResearchPolicy(ResearchParams(every=0, backwards_frames=4))
+    assert _searches(backwards, 15, np.pi, 0.10) == [(4, "backwards", 0.0),
+                                                     (9, "backwards", 0.0),
+                                                     (14, "backwards", 0.0)]
+    # facing the travel: one search as soon as it is measured, then none until a new track
+    forwards = ResearchPolicy(ResearchParams(every=0, backwards_frames=4))
+    assert _searches(forwards, 20, 0.0, 0.10) == [(4, "travel", 0.0)]
+    assert forwards.travel_checked
+    forwards.reset()
+    assert not forwards.travel_checked and forwards.tracked_frames == 0
+    assert _searches(forwards, 20, 0.0, 0.10) == [(4, "travel", 0.0)]
+    # too slow to count as travel: nothing
+    assert _searches(ResearchPolicy(ResearchParams(every=0, backwards_frames=4)), 20, np.pi,
+                     0.03) == []
+    for research, cooldown in (({}, 25), ({"every": 0}, 5), ({"every": 2}, 5)):
+        policy = ResearchPolicy(ResearchParams(**research))
+        for k in range(3):
+            policy.after_frame(np.array([0.0, 0.1 * k]), 0.0)
+        policy.searched()
+        assert policy.cooldown == cooldown and policy.pelvis_track == []
+
+
+def test_travel_is_measured_over_backwards_frames(model):
+    """The pelvis' (x, z) travel over research.backwards_frames frames once that many are
+    seen and it is faster than backwards_step; its heading is the root yaw facing it, the
+    convention of initial_pose (+Z turned towards +X)."""
     skel = model.skeleton
-    t = skel.translation_dofs
-    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=3, travel_heading=True),
-                          np.random.default_rng(0))
-    tracker.estimate = rest_pose(skel).copy()
-    travels = []
-    for k in range(6):  # 6 cm a frame along (-x, +z)/sqrt(2)
-        tracker.estimate[t] = [-0.06 * k / np.sqrt(2), 0.9, 0.06 * k / np.sqrt(2)]
-        travels.append(tracker._travel())
+    policy = ResearchPolicy(ResearchParams(backwards_frames=3))
+    # 6 cm a frame along (-x, +z)/sqrt(2)
+    travels = [policy._travel(np.array([-0.06 * k / np.sqrt(2), 0.06 * k / np.sqrt(2)]))
+               for k in range(6)]
     assert all(v is None for v in travels[:3])
     np.testing.assert_allclose(travels[3], [-0.18 / np.sqrt(2), 0.18 / np.sqrt(2)], atol=1e-12)
     heading = np.arctan2(travels[5][0], travels[5][1])
@@ -684,21 +718,15 @@ def test_travel_is_measured_over_backwards_frames(model, rig):
     toes = (np.mean(np.asarray(verts)[np.isin(model.vertex_part, feet)], axis=0)
             - np.mean(np.asarray(joints)[feet], axis=0))[[0, 2]]
     assert np.dot(toes, travels[5]) / np.linalg.norm(toes) / np.linalg.norm(travels[5]) > 0.95
-    tracker.estimate = pose
-    assert not tracker._facing_away_from_travel(travels[5])
-    tracker.estimate[skel.dof_index("root_yaw")] = heading + np.pi
-    assert tracker._facing_away_from_travel(travels[5])
-    tracker.estimate[t] = [0.0, 0.9, 0.0]
-    tracker._pelvis_track.clear()
+    assert not policy._facing_away(travels[5], heading)
+    assert policy._facing_away(travels[5], heading + np.pi)
+    policy.pelvis_track.clear()
     for k in range(5):  # 4 cm a frame: slower than backwards_step
-        tracker.estimate[t] = [0.0, 0.9, 0.04 * k]
-        assert tracker._travel() is None
-    # backwards_frames 0 turns both off (travel_heading has no travel to go by)
-    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=0), np.random.default_rng(0))
-    tracker.estimate = rest_pose(skel).copy()
+        assert policy._travel(np.array([0.0, 0.04 * k])) is None
+    # backwards_frames 0 turns the travel off (and with it the travel heading)
+    policy = ResearchPolicy(ResearchParams(backwards_frames=0))
     for k in range(8):
-        tracker.estimate[t] = [0.0, 0.9, 0.1 * k]
-        assert tracker._travel() is None
+        assert policy._travel(np.array([0.0, 0.1 * k])) is None
 
 
 def test_start_up_hull_travel_seeds_the_pelvis_track(model, rig):
@@ -707,24 +735,34 @@ def test_start_up_hull_travel_seeds_the_pelvis_track(model, rig):
     frames."""
     skel = model.skeleton
     t = skel.translation_dofs
-    tracker = BodyTracker(model, rig, TrackerParams(backwards_frames=4, travel_heading=True),
+    tracker = BodyTracker(model, rig, from_flat(TrackerParams, {"research.backwards_frames": 4}),
                           np.random.default_rng(0), shape=subject_shape())
     pose = rest_pose(skel).copy()
     pose[t] = [1.0, 0.9, 2.0]
     hyp = SimpleNamespace(estimate=pose)
-    tracker._estimator = SimpleNamespace(best=lambda: hyp,
-                                         pose_particles=lambda: np.tile(pose, (5, 1)))
-    tracker._hull_track = [np.array([0.1, 0.2 + 0.1 * k]) for k in range(4)]
+    startup = StartUp.__new__(StartUp)  # a start-up whose estimator found ``pose``
+    startup.estimator = SimpleNamespace(best=lambda: hyp,
+                                        pose_particles=lambda: np.tile(pose, (5, 1)))
+    startup.step = np.zeros(3)
+    startup.track = [np.array([0.1, 0.2 + 0.1 * k]) for k in range(4)]
+    tracker._startup = startup
     tracker._finish_start()
-    np.testing.assert_allclose(tracker._pelvis_track, [[1.0, 1.7], [1.0, 1.8], [1.0, 1.9],
-                                                       [1.0, 2.0]], atol=1e-12)
-    tracker.estimate[t] = [1.0, 0.9, 2.1]  # the first tracked frame: 10 cm on
-    np.testing.assert_allclose(tracker._travel(), [0.0, 0.4], atol=1e-12)
+    assert tracker.state == "tracking" and tracker._startup is None
+    np.testing.assert_allclose(tracker.research.pelvis_track, [[1.0, 1.7], [1.0, 1.8],
+                                                               [1.0, 1.9], [1.0, 2.0]],
+                               atol=1e-12)
+    # the first tracked frame: 10 cm on
+    np.testing.assert_allclose(tracker.research._travel(np.array([1.0, 2.1])), [0.0, 0.4],
+                               atol=1e-12)
 
 
-def small_tracker(model, rig, shape=None, **kw):
-    params = TrackerParams(n_particles=120, working_scale=0.5, shape_working_scale=0.5,
-                           shape_particles=80, shape_frames=2, min_foreground=30, **kw)
+#: a small budget for the tracker tests (dotted settings, :func:`hmocap_ros.params.from_flat`)
+SMALL = {"filter.particles": 120, "weighting.working_scale": 0.5, "startup.working_scale": 0.5,
+         "startup.particles": 80, "startup.frames": 2, "startup.min_foreground": 30}
+
+
+def small_tracker(model, rig, shape=None, settings: dict | None = None):
+    params = from_flat(TrackerParams, {**SMALL, **(settings or {})})
     return BodyTracker(model, rig, params, np.random.default_rng(0), shape=shape)
 
 
@@ -733,7 +771,7 @@ def test_tracker_follows_a_short_sequence(model, rig, mesh):
     shape = subject_shape()
     params = clip_poses(model, 60, 8, shape, position=(-0.4, 0.3), heading=-1.0)
     masks, joints = render_masks(model, rig, params, shape)  # the 2,400-triangle body
-    tracker = small_tracker(model, rig, shape=shape, mesh=mesh)
+    tracker = small_tracker(model, rig, shape=shape, settings={"weighting.mesh": mesh})
     errors, states = [], []
     for f in range(len(masks)):
         res = tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
@@ -748,15 +786,15 @@ def test_tracker_follows_a_short_sequence(model, rig, mesh):
     assert all(1.0 <= e <= 120 for e in res.ess)
 
 
-def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
-    """research_every: a track turned by 120 degrees stays wrong without it, not with it."""
+def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig, monkeypatch):
+    """research.every: a track turned by 120 degrees stays wrong without it, not with it."""
     shape = subject_shape()
     params = clip_poses(model, 60, 4, shape, position=(-0.4, 0.3), heading=-1.0)
     masks, joints = render_masks(model, rig, params, shape)
     yaw = model.skeleton.dof_index("root_yaw")
     errors = {}
     for every in (0, 1):
-        tracker = small_tracker(model, rig, shape=shape, research_every=every)
+        tracker = small_tracker(model, rig, shape=shape, settings={"research.every": every})
         for f in range(2):
             tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
         assert tracker.state == "tracking"
@@ -764,16 +802,17 @@ def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
         tracker.particles[:, yaw] += np.deg2rad(120.0)
         tracker._previous_estimate = None
         steps = []  # (step before, step after) of every re-seed
-        research = tracker._research
 
-        def spy(obs, stamp_ns, research=research, tracker=tracker, **kw):
-            before = tracker.estimate - tracker._previous_estimate
-            reseeded = research(obs, stamp_ns, **kw)
-            if reseeded:
-                steps.append((before, tracker.estimate - tracker._previous_estimate))
-            return reseeded
+        def spy(*args, steps=steps, **kw):
+            given = inspect.signature(fresh_search).bind(*args, **kw).arguments
+            before = given["estimate"] - given["previous"]
+            found = fresh_search(*args, **kw)
+            if found is not None:
+                estimate, _, previous = found
+                steps.append((before, estimate - previous))
+            return found
 
-        tracker._research = spy
+        monkeypatch.setattr("hmocap_ros.tracking.body_tracker.fresh_search", spy)
         for f in range(2, 4):
             res = tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
         errors[every] = 1000 * np.linalg.norm(res.joints - joints[3], axis=1).mean()
@@ -787,8 +826,8 @@ def test_fresh_search_gets_the_tracker_out_of_a_wrong_pose(model, rig):
 
 
 def test_fresh_search_does_not_jump_to_another_person(model, rig, monkeypatch):
-    """research_every: when the hull holds only somebody else (the tracked person hidden),
-    the fresh search does not move the track to them."""
+    """research.every: when the hull holds only somebody else (the tracked person hidden),
+    the fresh search does not move the track to them (SAME_PERSON_RADIUS)."""
     shape = subject_shape()
     subject = clip_poses(model, 60, 2, shape, position=(-0.4, 0.3), heading=-1.0)
     bystander = model.rest_pose(None).copy()
@@ -797,11 +836,12 @@ def test_fresh_search_does_not_jump_to_another_person(model, rig, monkeypatch):
     other, _ = render_masks(model, rig, bystander[None], shape)
     moved = {}
     for radius in (0.5, 50.0):
-        tracker = small_tracker(model, rig, shape=shape, research_every=1)
+        tracker = small_tracker(model, rig, shape=shape, settings={"research.every": 1})
         for f in range(2):
             tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
         assert tracker.state == "tracking"
-        monkeypatch.setattr("hmocap_ros.tracking.body_tracker.SAME_PERSON_RADIUS", radius)
+        for module in ("startup", "research"):  # the hull it searches, the poses it keeps
+            monkeypatch.setattr(f"hmocap_ros.tracking.{module}.SAME_PERSON_RADIUS", radius)
         res = tracker.update(list(other[0]), STAMP0 + 2 * 40_000_000)
         pelvis = res.joints[model.joint_names.index("pelvis")]
         moved[radius] = np.linalg.norm(pelvis[[0, 2]] - subject[1, [0, 2]])
@@ -813,7 +853,7 @@ def test_tracker_survives_dropped_cameras_empty_frames_and_no_person(model, rig)
     shape = subject_shape()
     params = clip_poses(model, 0, 4, shape)
     masks, joints = render_masks(model, rig, params, shape)
-    tracker = small_tracker(model, rig, shape=shape, lost_frames=1)
+    tracker = small_tracker(model, rig, shape=shape, settings={"lost.frames": 1})
     empty = [np.zeros_like(m) for m in masks[0]]
     res = tracker.update(empty, STAMP0)
     assert res.state == "searching" and not res.has_pose

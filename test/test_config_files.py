@@ -1,6 +1,10 @@
-"""Every config/<node>.yaml loads and names only parameters its node declares; the launch file compiles."""
+"""Every config/<node>.yaml loads and names only parameters its node declares; the launch file compiles.
 
-import dataclasses
+A node declares each leaf of its parameter dataclasses by its dotted name
+(:func:`hmocap_ros.params.flat_fields`); a YAML file nests the groups (``filter: sweeps: 2``
+is the parameter ``filter.sweeps``).
+"""
+
 import importlib
 import py_compile
 from pathlib import Path
@@ -8,14 +12,27 @@ from pathlib import Path
 import pytest
 import yaml
 
+from hmocap_ros.params import flat_fields
+
 ROOT = Path(__file__).resolve().parents[1]
 # node name -> (module, config dataclass[, module, dataclass ...]): every dataclass the node declares
 NODE_CONFIGS = {
     "camera_rig_publisher": ("hmocap_ros.nodes.camera_rig_publisher", "CameraRigPublisherConfig"),
     "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation", "ForegroundNodeConfig", "hmocap_ros.segmentation", "ForegroundParams"),
     "gesture_detection": ("hmocap_ros.nodes.gesture_detection", "GestureNodeConfig", "hmocap_ros.gestures", "DetectorParams"),
-    "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.body_tracker", "TrackerParams"),
+    "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.params", "TrackerParams"),
 }
+
+
+def dotted(tree: dict, prefix: str = "") -> dict:
+    """A YAML mapping of parameters as ``{dotted name: value}`` (nested groups joined)."""
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(dotted(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def test_every_node_yaml_is_known():
@@ -27,19 +44,39 @@ def test_every_node_yaml_is_known():
 def test_node_yaml_matches_declared_parameters(node):
     data = yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())
     assert list(data) == [node]
-    params = data[node]["ros__parameters"]
+    params = dotted(data[node]["ros__parameters"])
     spec = NODE_CONFIGS[node]
     fields = {}
     for module, cls_name in zip(spec[::2], spec[1::2], strict=True):
         cls = getattr(importlib.import_module(module), cls_name)
-        fields.update({f.name: f for f in dataclasses.fields(cls)})
+        leaves = {name: (f, default) for name, f, default, _ in flat_fields(cls)}
+        assert not set(leaves) & set(fields), f"{cls_name} declares a name twice"
+        fields.update(leaves)
     assert set(params) <= set(fields), f"unknown parameters in {node}.yaml: {set(params) - set(fields)}"
     for name, value in params.items():
-        default = fields[name].default
-        if default is not dataclasses.MISSING:
-            expected = float if isinstance(default, float) else type(default)
-            assert isinstance(value, expected), f"{name}: {value!r} is not a {expected.__name__}"
-    assert all(f.metadata.get("description") for f in fields.values()), "every parameter needs a description"
+        default = fields[name][1]
+        expected = float if isinstance(default, float) else type(default)
+        if isinstance(default, (list, tuple)):
+            expected = (list, tuple)
+        assert isinstance(value, expected), f"{name}: {value!r} is not a {expected}"
+    assert all(f.metadata.get("description") for f, _ in fields.values()), \
+        "every parameter needs a description"
+
+
+def test_body_tracker_yaml_nests_every_tracker_setting_at_its_default():
+    """config/body_tracker.yaml holds each TrackerParams leaf in its group, at its default
+    (an empty list, which has no type in ROS YAML, is left out)."""
+    from hmocap_ros.tracking.params import TrackerParams
+
+    data = yaml.safe_load((ROOT / "config" / "body_tracker.yaml").read_text())
+    tree = data["body_tracker"]["ros__parameters"]
+    assert tree["filter"]["sweeps"] == TrackerParams().filter.sweeps  # nested, not dotted
+    params = dotted(tree)
+    for name, _, default, _ in flat_fields(TrackerParams):
+        if isinstance(default, (list, tuple)) and not default:
+            assert name not in params, name
+        else:
+            assert params[name] == default, name
 
 
 def test_launch_files_compile(tmp_path):

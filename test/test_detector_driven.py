@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from hmocap_ros.body import rest_pose
+from hmocap_ros.params import from_flat
 from hmocap_ros.render import project_batch, render_silhouettes
 from hmocap_ros.segmentation.skin import skin_probability
 from hmocap_ros.sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
@@ -258,9 +259,10 @@ def test_ik_solutions_put_the_hand_on_the_detection(model, rig, rest):
 def test_dd_hpf_tracks_with_detector_maps_and_runs_without(model, rig, rest):
     params = arms_out(model)
     masks, maps = scene(model, rig, params)
-    tracker = BodyTracker(model, rig, TrackerParams(
-        method="dd-hpf", n_particles=100, working_scale=0.5, min_foreground=30,
-        estimate_shape=False), np.random.default_rng(0))
+    tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
+        "method": "dd-hpf", "filter.particles": 100, "weighting.working_scale": 0.5,
+        "startup.min_foreground": 30, "startup.estimate_shape": False}),
+        np.random.default_rng(0))
     truth = model.pose(params[None])[1][0]
     errors = []
     for f in range(3):
@@ -268,7 +270,7 @@ def test_dd_hpf_tracks_with_detector_maps_and_runs_without(model, rig, rest):
         errors.append(np.linalg.norm(res.joints - truth, axis=1).mean())
     assert res.state == "tracking" and res.extremities is not None
     assert res.extremities.found[[0, 1]].all() and res.timings["detection"] > 0
-    assert not res.extremities.found[3:].any()  # feet only with dd_feet
+    assert not res.extremities.found[3:].any()  # the tracker's detector leaves the feet out
     assert errors[-1] < 0.08, errors
     # without maps (a foreground node that does not publish them) it runs as hpf-apo
     res = tracker.update(list(masks), STAMP0 + 10)

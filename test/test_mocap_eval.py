@@ -25,9 +25,9 @@ from hmocap_ros.rig import Rig, load_rig, rig_to_msg
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_BAG = ROOT / "hmocap_ros" / "data" / "demo" / "mocap_4cam.mcap"
 STAMP0 = 1_700_000_000_000_000_000
-SMALL_BUDGET = ["--particles", "40", "--param", "working_scale=1.0",
-                "--param", "shape_working_scale=1.0", "--param", "shape_particles=40",
-                "--param", "shape_frames=1", "--param", "min_foreground=15"]
+SMALL_BUDGET = ["--particles", "40", "--param", "weighting.working_scale=1.0",
+                "--param", "startup.working_scale=1.0", "--param", "startup.particles=40",
+                "--param", "startup.frames=1", "--param", "startup.min_foreground=15"]
 
 
 # ----------------------------------------------------------------------------- metrics
@@ -86,6 +86,10 @@ def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path):
                 "stage_seconds_per_frame", "states", "anthropometry", "params"):
         assert key in res, key
     assert len(res["per_frame_mm"]) == 3 and len(res["per_joint"]) == 19
+    # the settings of the run, by dotted name
+    assert res["params"]["method"] == "dd-hpf" and res["params"]["filter.particles"] == 40
+    assert res["params"]["startup.frames"] == 1 and res["params"]["filter.sweeps"] == 2
+    assert report["methods"]["hpf"]["params"]["method"] == "hpf"
     assert res["frames_with_pose"] == 3 and np.isfinite(res["mean_mm"])
     anthro = res["anthropometry"]
     assert set(anthro) >= {"estimated_m", "true_m", "error_mm", "mean_abs_error_mm",
@@ -174,7 +178,7 @@ def test_eval_falls_back_to_gt_silhouettes_without_empty_frames(tmp_path, capsys
     write_tiny_bag(bag, n_empty=0)
     out = tmp_path / "r.json"
     assert run_eval([str(bag), "--json", str(out), *SMALL_BUDGET,
-                     "--param", "min_views=2"]) == 0
+                     "--param", "startup.min_views=2"]) == 0
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "gt" and "ground-truth silhouettes" in \
         report["silhouettes_fallback"]
@@ -201,61 +205,40 @@ def test_eval_segments_a_bag_with_empty_frames_and_rejects_bad_bags(tmp_path):
 
 def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_path, load_tool):
     """--reuse compares the settings a report was made with (stored per method) with those the
-    run would use: a report made with ``--param KEY=VALUE`` is reused once VALUE is KEY's
-    default; one made before a default changed is not."""
+    run would use (flat, by dotted name): a report made with ``--param KEY=VALUE`` is reused
+    once VALUE is KEY's default; one whose stored settings differ from the defaults is not."""
     from hmocap_ros.eval.mocap_eval import stored_params
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
     table = load_tool("mocap_table")
-    default = TrackerParams().velocity_gain
+    default = TrackerParams().filter.velocity_gain
+    key = "filter.velocity_gain"
     ns = argparse.Namespace(seed=0, max_people=2, methods=["hpf"])
 
     def report(gain, overrides):
         path = tmp_path / f"r_{gain}.json"
-        params = stored_params("hpf", {"velocity_gain": gain})
+        params = stored_params("hpf", {key: gain})
+        assert params[key] == gain and params["method"] == "hpf"
         path.write_text(json.dumps({"seed": 0, "max_people": 2, "silhouettes": "fg",
                                     "methods": {"hpf": {"params": params}},
                                     "overrides": overrides}))
         return path
 
-    made_with_param = report(default, {"velocity_gain": default})
+    made_with_param = report(default, {key: default})
     assert table._reusable(made_with_param, ns, {}) is not None
-    assert table._reusable(made_with_param, ns, {"velocity_gain": default}) is not None
-    assert table._reusable(made_with_param, ns, {"velocity_gain": default / 2}) is None
+    assert table._reusable(made_with_param, ns, {key: default}) is not None
+    assert table._reusable(made_with_param, ns, {key: default / 2}) is None
     assert table._reusable(made_with_param, argparse.Namespace(
         seed=1, max_people=2, methods=["hpf"]), {}) is None
-    made_at_an_old_default = report(default / 2, {})
-    assert table._reusable(made_at_an_old_default, ns, {}) is None
-    assert table._reusable(made_at_an_old_default, ns, {"velocity_gain": default / 2}) is not None
+    assert table._reusable(made_with_param, argparse.Namespace(
+        seed=0, max_people=2, methods=["hpf", "apf"]), {}) is None
+    made_at_another_value = report(default / 2, {})
+    assert table._reusable(made_at_another_value, ns, {}) is None
+    assert table._reusable(made_at_another_value, ns, {key: default / 2}) is not None
     assert table._reusable(tmp_path / "missing.json", ns, {}) is None
-    # a report from before an option existed was made at its inert value (INERT_SETTINGS)
-    older = report(default, {})
-    data = json.loads(older.read_text())
-    del data["methods"]["hpf"]["params"]["start_height_margin"]
-    older.write_text(json.dumps(data))
-    assert table._reusable(older, ns, {"start_height_margin": 0.0}) is not None
-    assert table._reusable(older, ns, {"start_height_margin": 0.06}) is None
-
-
-def test_startup_scan_refuses_bad_arguments(tmp_path, load_tool, capsys):
-    scan = load_tool("startup_scan")
-    with pytest.raises(SystemExit):
-        scan.main([str(tmp_path / "missing.mcap")])
-    assert "no such bag" in capsys.readouterr().err
-    (tmp_path / "b.mcap").write_bytes(b"")
-    with pytest.raises(SystemExit):
-        scan.main([str(tmp_path / "b.mcap"), "--param", "no_such_setting=1"])
-    assert "no_such_setting" in capsys.readouterr().err
-
-
-def test_startup_scan_reads_the_highest_true_point(load_tool):
-    scan = load_tool("startup_scan")
-    names = ("pelvis", "head_top", "l_hand_tip")
-    truth = np.array([[[0.0, 1.0, 0.0], [0.0, 1.6, 0.0], [0.3, 1.9, 0.0]],
-                      [[0.0, 1.0, 0.0], [0.0, 1.6, 0.0], [0.3, 1.1, 0.0]],
-                      [[np.nan] * 3] * 3])
-    frames = argparse.Namespace(joint_names=names, truth=truth)
-    assert scan._truth_top(frames, 0) == (1.6, "l_hand_tip", 1.9)   # a raised hand
-    assert scan._truth_top(frames, 1) == (1.6, "head_top", 1.6)
-    assert scan._truth_top(frames, 2) is None                        # no truth on that frame
-    assert scan._truth_top(argparse.Namespace(joint_names=None, truth=None), 0) is None
+    # a report that lacks a setting the run uses is made again
+    lacking = report(default, {})
+    data = json.loads(lacking.read_text())
+    del data["methods"]["hpf"]["params"]["startup.height_margin"]
+    lacking.write_text(json.dumps(data))
+    assert table._reusable(lacking, ns, {}) is None

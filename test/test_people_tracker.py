@@ -9,12 +9,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hmocap_ros.params import from_flat
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
+from test_body_tracking import SMALL as SMALL_BUDGET
 from test_body_tracking import STAMP0, clip_poses, render_masks, subject_shape
 
-SMALL = dict(n_particles=120, working_scale=0.5, shape_working_scale=0.5, shape_particles=80,
-             shape_frames=2, min_foreground=30, method="hpf")
+#: the tracker tests' small budget, with the hierarchical filter
+SMALL = from_flat(TrackerParams, {**SMALL_BUDGET, "method": "hpf"})
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +43,7 @@ def test_body_ids():
 
 def test_two_people_get_a_track_each_and_never_share_one(model, rig, scene):
     masks, joints, bystander, _ = scene
-    people = PeopleTracker(model, rig, TrackerParams(**SMALL), np.random.default_rng(0),
+    people = PeopleTracker(model, rig, SMALL, np.random.default_rng(0),
                            max_people=2)
     for results in _run(people, masks, range(3)):
         assert len(results) == 2
@@ -69,9 +71,8 @@ def test_two_people_get_a_track_each_and_never_share_one(model, rig, scene):
 
 def test_one_slot_is_the_single_person_tracker_bit_for_bit(model, rig, scene):
     masks = scene[0]
-    params = TrackerParams(**SMALL)
-    single = BodyTracker(model, rig, params, np.random.default_rng(3))
-    people = PeopleTracker(model, rig, params, np.random.default_rng(3), max_people=2)
+    single = BodyTracker(model, rig, SMALL, np.random.default_rng(3))
+    people = PeopleTracker(model, rig, SMALL, np.random.default_rng(3), max_people=2)
     for f in range(2):
         a = single.update(list(masks[f]), STAMP0 + f)
         b = people.update(list(masks[f]), STAMP0 + f)[0]
@@ -81,43 +82,11 @@ def test_one_slot_is_the_single_person_tracker_bit_for_bit(model, rig, scene):
 
 def test_a_second_slot_waits_while_only_one_person_is_there(model, rig, scene):
     subject_only = scene[3]
-    people = PeopleTracker(model, rig, TrackerParams(**SMALL), np.random.default_rng(0),
+    people = PeopleTracker(model, rig, SMALL, np.random.default_rng(0),
                            max_people=2, ids=("user", "guest"))
     results = _run(people, subject_only, range(3))[-1]
     assert [r.state for r in results] == ["tracking", "searching"]
     assert not results[1].has_pose
     assert people.ids == ("user", "guest")
     with pytest.raises(ValueError, match="distinct"):
-        PeopleTracker(model, rig, TrackerParams(**SMALL), max_people=2, ids=("a", "a"))
-
-
-def test_ignoring_the_other_person_leaves_the_bystander_out_of_the_xor(model, rig, scene):
-    masks, joints, _, subject_only = scene
-    people = PeopleTracker(model, rig, TrackerParams(**SMALL, ignore_other_people=True),
-                           np.random.default_rng(0), max_people=2)
-    results = _run(people, masks, range(3))[-1]
-    assert [r.state for r in results] == ["tracking", "tracking"]
-    near = int(np.argmin([np.linalg.norm(r.joints - joints[2], axis=1).mean()
-                          for r in results]))
-    assert np.linalg.norm(results[near].joints - joints[2], axis=1).mean() < 0.08
-    subject, bystander = people.trackers[near], people.trackers[1 - near]
-    fitness = subject.fitness
-    both = fitness.observe(list(masks[2]))
-    alone = fitness.observe(list(subject_only[2]))
-    subject._others = (bystander,)
-    masked = subject._without_others(both)
-    assert masked.ignore is not None and masked.ignore.any()
-    assert (masked.counts < both.counts).all()
-    # with the bystander's foreground ignored (its tracker's body, one pixel wider), the
-    # subject's pose costs about what it costs with the subject alone in the room; counted,
-    # the bystander is unexplained foreground
-    verts, _ = fitness.pose(subject.estimate[None], subject.shape)
-    xor = {name: int(fitness.view_xor_from_verts(verts, obs).sum())
-           for name, obs in (("alone", alone), ("masked", masked), ("both", both))}
-    assert abs(xor["masked"] - xor["alone"]) < 0.15 * xor["alone"], xor
-    assert xor["both"] > 1.5 * xor["alone"], xor
-    # nobody else followed: nothing is masked
-    subject._others = ()
-    assert subject._without_others(both) is both
-    with pytest.raises(ValueError, match="shape"):
-        both.without(np.zeros((1, 2, 2), np.uint8))
+        PeopleTracker(model, rig, SMALL, max_people=2, ids=("a", "a"))

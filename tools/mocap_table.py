@@ -6,23 +6,23 @@ One command renders an evaluation bag per shipped CMU clip (``hmocap sim mocap``
 without and once with distractors (a door that opens, a rolling ball, a second person), then
 replays each through the same code as ``hmocap eval mocap`` (foreground segmentation, then the
 tracker with its estimated anthropometry; DD-HPF+ also gets the skin detector's maps) for the
-methods at about 3,500 weight
-evaluations per frame, and writes a Markdown table of mean (std) 3D joint errors in mm, the
-per-frame error plots and the JSON reports::
+methods of :data:`hmocap_ros.tracking.methods.METHODS` at about 3,500 weight evaluations per
+frame, and writes a Markdown table of mean (std) 3D joint errors in mm, the per-frame error
+plots and the JSON reports::
 
     .venv/bin/python tools/mocap_table.py                       # docs/tracking_results.md
     .venv/bin/python tools/mocap_table.py --seconds 1 --clips 13_26   # quick look
     .venv/bin/python tools/mocap_table.py --reuse               # resume an interrupted run
-    .venv/bin/python tools/mocap_table.py --param velocity_gain=1.0 --workdir /tmp/t --out t.md
+    .venv/bin/python tools/mocap_table.py --param filter.velocity_gain=0.5 --out t.md
 
 The tracker follows up to ``--max-people`` people (default 2: the subject and the bystander
 of the distractor scenes each get a tracker, :class:`~hmocap_ros.tracking.people_tracker.
 PeopleTracker`), and each frame is scored on the track nearest the subject; ``--max-people 1``
 gives the single tracker, which follows whoever the cameras see best.
 
-Held out: the tracker's settings were chosen on other CMU clips (13_29, 02_05, 01_01 from
-``../shared/data/bvh``, seeds 21-23); these clips are rendered with other seeds (other
-subjects, clothing, rooms and placements: seed 101.. without, 201.. with distractors).
+Held out: the tracker's settings were chosen on other CMU clips (13_29, 02_05, 01_01 from the
+project's shared CMU clips, simulator seeds 21-23); these clips are rendered with other seeds
+(other subjects, clothing, rooms and placements: seed 101.. without, 201.. with distractors).
 Bags are cached in ``--workdir`` (about 400 MB per 4 s bag) and reused when present.
 """
 from __future__ import annotations
@@ -38,10 +38,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.eval.mocap_eval import (METHODS, _json_default, evaluate,  # noqa: E402
-                                        plot_errors, settings_diff, stored_params,
-                                        tracker_overrides)
+from hmocap_ros.eval.mocap_eval import (_json_default, evaluate, plot_errors,  # noqa: E402
+                                        settings_diff, stored_params, tracker_overrides)
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
+from hmocap_ros.tracking.methods import METHODS, method_names  # noqa: E402
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"
 #: (label, clip, start s, seconds): the shipped clips; the walk and the run are used whole.
@@ -51,10 +51,6 @@ SEQUENCES = (
     ("Walk (02_01)", "002_01.bvh", 0.0, 2.8),
     ("Run (09_01)", "09_01.bvh", 0.0, 1.2),
 )
-
-
-#: column heads: the thesis' names (DD-HPF+ is DD HPF with the refinement layer, on HPF+APO)
-LABELS = {"apf": "APF", "hpf": "HPF", "hpf-apo": "HPF+APO", "dd-hpf": "DD-HPF+"}
 
 
 def bag_seed(index: int, distractors: bool) -> int:
@@ -83,9 +79,10 @@ def _cell(res: dict) -> str:
 
 def _reusable(path: Path, ns, overrides: dict) -> dict | None:
     """The report at ``path`` if it was made with this run's seed, max-people and methods and
-    with the tracker settings this run would use (the defaults as they are now, with
-    ``--param``): a report made before a default changed is not reused, one made with
-    ``--param KEY=VALUE`` is once VALUE is KEY's default."""
+    with the tracker settings this run would use (the defaults with ``--param``), compared
+    as flat ``{dotted name: value}`` records (:func:`~hmocap_ros.eval.mocap_eval.
+    settings_diff`): a report whose settings differ from these, or lack one, is not reused;
+    one made with ``--param KEY=VALUE`` is once VALUE is KEY's default."""
     if not path.exists():
         return None
     try:
@@ -109,7 +106,7 @@ def main(argv=None) -> int:
     p.add_argument("--clips", nargs="*", default=None,
                    help="subset of clip stems (13_26 14_19_first1201 002_01 09_01)")
     p.add_argument("--seconds", type=float, default=None, help="cap every sequence's length")
-    p.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
+    p.add_argument("--methods", nargs="*", default=list(method_names()), choices=method_names())
     p.add_argument("--seed", type=int, default=0, help="tracker seed")
     p.add_argument("--no-distractors", action="store_true", help="skip the distractor bags")
     p.add_argument("--max-people", type=int, default=2,
@@ -119,12 +116,15 @@ def main(argv=None) -> int:
                         "the same seed, max-people, methods and tracker settings (the current "
                         "defaults with --param), instead of tracking it again")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", default=[],
-                   help="override a TrackerParams field for every method (repeatable), as in "
-                        "hmocap eval mocap")
+                   help="override a tracker setting by its dotted name for every method, e.g. "
+                        "filter.sweeps=1 (repeatable), as in hmocap eval mocap")
     p.add_argument("--out", default=str(ROOT / "docs" / "tracking_results.md"))
     p.add_argument("--figures", default=str(ROOT / "docs" / "figures"))
     ns = p.parse_args(argv)
-    overrides = tracker_overrides(ns.param)
+    try:
+        overrides = tracker_overrides(ns.param)
+    except ValueError as err:
+        p.error(str(err))
 
     work = Path(ns.workdir)
     work.mkdir(parents=True, exist_ok=True)
@@ -155,7 +155,7 @@ def main(argv=None) -> int:
             print(f"{label:16s} {'distractors' if distractors else 'clean':11s} " + "  ".join(
                 f"{m} {_cell(report['methods'][m])}" for m in ns.methods), flush=True)
 
-    lines = ["| sequence | scene | " + " | ".join(LABELS.get(m, m) for m in ns.methods) + " |",
+    lines = ["| sequence | scene | " + " | ".join(METHODS[m].label for m in ns.methods) + " |",
              "|---|---|" + "---|" * len(ns.methods)]
     for label, seconds, distractors, report in rows:
         best = min(ns.methods, key=lambda m: report["methods"][m]["mean_mm"])

@@ -15,11 +15,30 @@ from pathlib import Path
 def _yaml_value(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
-    if isinstance(value, list):
+    if isinstance(value, (list, tuple)):
         return "[" + ", ".join(f'"{x}"' if isinstance(x, str) else repr(x) for x in value) + "]"
     if isinstance(value, str):
         return f'"{value}"'
     return repr(value)
+
+
+def _yaml_lines(cls, indent: str) -> list[str]:
+    """A parameter dataclass as YAML: a comment and a value per leaf, groups nested."""
+    lines = []
+    for field in dataclasses.fields(cls):
+        description = field.metadata.get("description", "")
+        if "group" in field.metadata:
+            lines += [f"{indent}# {line}" for line in textwrap.wrap(description, 95)]
+            lines.append(f"{indent}{field.name}:")
+            lines += _yaml_lines(field.metadata["group"], indent + "  ")
+            continue
+        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
+        lines += [f"{indent}# {line}" for line in textwrap.wrap(description, 99 - len(indent))]
+        if isinstance(default, (list, tuple)) and not default:
+            lines.append(f"{indent}# {field.name}: []   (left out: an empty list has no type in ROS YAML)")
+        else:
+            lines.append(f"{indent}{field.name}: {_yaml_value(default)}")
+    return lines
 
 
 def main(argv=None) -> None:
@@ -38,13 +57,7 @@ def main(argv=None) -> None:
     for spec in specs:
         module, name = spec.split(":")
         cls = getattr(importlib.import_module(module), name)
-        for field in dataclasses.fields(cls):
-            default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
-            lines += ["    # " + line for line in textwrap.wrap(field.metadata.get("description", ""), 95)]
-            if isinstance(default, list) and not default:
-                lines.append(f"    # {field.name}: []   (left out: an empty list has no type in ROS YAML)")
-            else:
-                lines.append(f"    {field.name}: {_yaml_value(default)}")
+        lines += _yaml_lines(cls, "    ")
     path = Path(__file__).resolve().parents[1] / "config" / f"{node}.yaml"
     path.write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")

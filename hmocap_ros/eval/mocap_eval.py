@@ -40,63 +40,21 @@ import json
 import logging
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
-from hmocap_ros.params import field_overrides
+from hmocap_ros.eval.mocap_frames import BagFrames, load_frames
+from hmocap_ros.params import field_overrides, flat_record, from_flat
+from hmocap_ros.tracking.methods import get_method, method_names
 
 __all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames",
            "main_from_args", "plot_errors", "run_method", "tracker_overrides"]
 
 log = logging.getLogger(__name__)
 
-METHODS = ("apf", "hpf", "hpf-apo", "dd-hpf")
-#: methods that need the per-view extremity (skin) detector maps
-DETECTOR_METHODS = ("dd-hpf",)
-
-
-@dataclass
-class BagFrames:
-    """Everything the evaluation needs from a bag, masks computed once for all methods.
-
-    rig: the cameras; stamps: (F,) frame-set stamps in order; masks: per frame a list of one
-    packed mask per camera (``np.packbits`` of ``mask != 0``) or None; truth: (F, J, 3) metres
-    (NaN where the frame has no skeleton); joint_names: names of ``truth``'s joints;
-    body_shape: the subject's BodyShape or None; silhouettes / fallback: what was used and why.
-    segmentation_s: seconds of foreground segmentation per frame set.
-    maps: per frame a list of one skin probability map per camera (uint8) or None, when
-    loaded for ``dd-hpf``; detector_s: seconds of skin detection per frame set.
-    """
-
-    rig: object
-    stamps: np.ndarray
-    masks: list
-    truth: np.ndarray
-    joint_names: tuple
-    body_shape: object | None
-    silhouettes: str
-    fallback: str = ""
-    segmentation_s: float = 0.0
-    shape_hw: tuple = ()
-    maps: list | None = None
-    detector_s: float = 0.0
-
-    def mask_list(self, k: int) -> list:
-        h, w = self.shape_hw
-        out = []
-        for packed in self.masks[k]:
-            if packed is None:
-                out.append(None)
-            else:
-                out.append(np.unpackbits(packed, count=h * w).reshape(h, w))
-        return out
-
-    @property
-    def has_truth(self) -> np.ndarray:
-        return np.isfinite(self.truth).all(axis=(1, 2))
 
 
 @dataclass
@@ -114,158 +72,6 @@ class EvalResult:
     fit_costs: list
     anthropometry: dict | None
     params: dict = field(default_factory=dict)
-
-
-# ----------------------------------------------------------------------------- bag
-
-
-def _body_shape_from_msg(msg):
-    from hmocap_ros.body import ENTITY_NAMES, BodyShape
-
-    names = list(msg.entity_names)
-    bone = np.ones(len(ENTITY_NAMES))
-    radial = np.ones(len(ENTITY_NAMES))
-    for k, n in enumerate(names):
-        if n in ENTITY_NAMES:
-            bone[ENTITY_NAMES.index(n)] = float(msg.bone_scale[k])
-            radial[ENTITY_NAMES.index(n)] = float(msg.radial_scale[k])
-    return BodyShape(bone, radial, float(msg.global_scale))
-
-
-def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None = None,
-                slop_ns: int = 0, fg_params: dict | None = None, out=None,
-                detector_maps: bool = False) -> BagFrames:
-    """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
-
-    max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
-    ForegroundParams fields to override (``learn_frames`` is set from the bag).
-    detector_maps: also compute each image's skin probability map (``segmentation.skin``,
-    the extremity detector of ``dd-hpf``).
-    """
-    from hmocap_ros.io import topics
-    from hmocap_ros.io.bag_reader import BagReader
-    from hmocap_ros.io.conversions import image_to_numpy, image_to_rgb
-    from hmocap_ros.io.msg_factory import stamp_to_ns
-    from hmocap_ros.rig import rig_from_msg
-    from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
-    from hmocap_ros.segmentation.skin import skin_probability
-
-    out = sys.stderr if out is None else out
-    if silhouettes not in ("fg", "gt"):
-        raise ValueError("silhouettes must be 'fg' or 'gt'")
-    with BagReader(bag) as reader:
-        available = reader.topics()
-        rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
-        if rig_msg is None:
-            raise ValueError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown")
-        rig = rig_from_msg(rig_msg)
-        if topics.GT_SKELETON not in available:
-            raise ValueError(f"{bag}: no {topics.GT_SKELETON}: nothing to score against")
-        truth_by_stamp = {}
-        joint_names: tuple = ()
-        for item in reader.messages([topics.GT_SKELETON]):
-            msg = item.msg
-            joint_names = tuple(str(n) for n in msg.joint_names)
-            truth_by_stamp[stamp_to_ns(msg.header.stamp)] = np.array(
-                [[p.x, p.y, p.z] for p in msg.positions], dtype=np.float64)
-        body_shape = None
-        if topics.GT_BODY_SHAPE in available:
-            shape_msg = reader.first(topics.GT_BODY_SHAPE)
-            if shape_msg is not None:
-                body_shape = _body_shape_from_msg(shape_msg)
-        names = rig.names
-        image_topics = [topics.camera_image(n) for n in names]
-        gt_topics = [topics.gt_silhouette(n) for n in names]
-        missing = [t for t in image_topics if t not in available]
-        if len(missing) == len(image_topics) and silhouettes == "fg":
-            raise ValueError(f"{bag}: none of the image topics {image_topics} is in the bag")
-        first_truth = min(truth_by_stamp) if truth_by_stamp else None
-        fallback = ""
-        if silhouettes == "fg":
-            n_empty = 0
-            for stamp, _ in reader.frame_sets([t for t in image_topics if t in available],
-                                              slop_ns, allow_partial=True, min_topics=1):
-                if first_truth is not None and stamp >= first_truth:
-                    break
-                n_empty += 1
-            if n_empty == 0:
-                fallback = ("the bag has no empty-room frames before the subject appears, so no "
-                            "background model can learn: using the ground-truth silhouettes")
-                silhouettes = "gt"
-                print(f"hmocap eval mocap: {fallback}", file=out)
-        use = gt_topics if silhouettes == "gt" else image_topics
-        use_present = [t for t in use if t in available]
-        if not use_present:
-            raise ValueError(f"{bag}: no {'silhouette' if silhouettes == 'gt' else 'image'} "
-                             f"topics ({use})")
-        bg = None
-        if silhouettes == "fg":
-            learn = int(np.clip(n_empty, 1, 100))
-            kw = dict(fg_params or {})
-            kw["learn_frames"] = learn
-            bg = [BackgroundModel(ForegroundParams(**kw)) for _ in names]
-        stamps, masks, truth = [], [], []
-        maps = [] if detector_maps else None
-        shape_hw: tuple = ()
-        seg_time = det_time = 0.0
-        n_truth = 0
-        read = list(use_present)
-        if detector_maps:
-            read += [t for t in image_topics if t in available and t not in read]
-        for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True,
-                                             min_topics=1):
-            decoded: dict = {}  # each image decoded once, for its mask and its skin map
-
-            def rgb_of(topic: str) -> np.ndarray:
-                if topic not in decoded:
-                    decoded[topic] = image_to_rgb(msgs[topic])
-                return decoded[topic]
-
-            row = []
-            t0 = time.perf_counter()
-            for k, topic in enumerate(use):
-                msg = msgs.get(topic)
-                if msg is None:
-                    row.append(None)
-                    continue
-                try:
-                    if bg is not None:
-                        mask = bg[k].apply(rgb_of(topic), stamp)
-                    else:
-                        mask = image_to_numpy(msg)
-                        mask = mask[..., 0] if mask.ndim == 3 else mask
-                except ValueError as err:
-                    log.warning("frame %d, %s: %s (view dropped)", stamp, topic, err)
-                    row.append(None)
-                    continue
-                shape_hw = shape_hw or mask.shape[:2]
-                row.append(np.packbits(mask != 0) if mask.shape[:2] == shape_hw else None)
-            seg_time += time.perf_counter() - t0
-            if detector_maps:
-                t0 = time.perf_counter()
-                map_row = []
-                for topic in image_topics:
-                    try:
-                        map_row.append(skin_probability(rgb_of(topic)) if topic in msgs else None)
-                    except ValueError as err:
-                        log.warning("frame %d, %s: %s (no detector map)", stamp, topic, err)
-                        map_row.append(None)
-                maps.append(map_row)
-                det_time += time.perf_counter() - t0
-            stamps.append(stamp)
-            masks.append(row)
-            gt = truth_by_stamp.get(stamp)
-            truth.append(gt if gt is not None else np.full((len(joint_names), 3), np.nan))
-            if gt is not None:
-                n_truth += 1
-                if max_frames is not None and n_truth >= max_frames:
-                    break
-    return BagFrames(rig=rig, stamps=np.asarray(stamps, dtype=np.int64), masks=masks,
-                     truth=np.stack(truth) if truth else np.zeros((0, len(joint_names), 3)),
-                     joint_names=joint_names, body_shape=body_shape, silhouettes=silhouettes,
-                     fallback=fallback, segmentation_s=seg_time / max(len(stamps), 1),
-                     shape_hw=tuple(shape_hw), maps=maps,
-                     detector_s=det_time / max(len(stamps), 1))
 
 
 # ----------------------------------------------------------------------------- runs
@@ -309,16 +115,17 @@ def _subject_track(results: list, truth: np.ndarray | None, root: int, true_root
 def method_params(method: str, particles: int = 0, layers: int = 0,
                   overrides: dict | None = None):
     """The TrackerParams of one method's run (``particles``/``layers`` 0: the method's own
-    budget; ``overrides``: ``--param`` fields)."""
-    from hmocap_ros.tracking.body_tracker import TrackerParams
+    budget; ``overrides``: ``--param`` settings by dotted name)."""
+    from hmocap_ros.tracking.params import TrackerParams
 
-    return TrackerParams(method=method, n_particles=particles, n_layers=layers,
-                         **(overrides or {}))
+    values = {"filter.particles": particles, "filter.layers": layers, **(overrides or {})}
+    values["method"] = method
+    return from_flat(TrackerParams, values)
 
 
 def params_record(params) -> dict:
-    """``params`` as a report stores them (``methods.<m>.params``): field name -> value."""
-    return {f.name: getattr(params, f.name) for f in fields(params)}
+    """``params`` as a report stores them (``methods.<m>.params``): dotted name -> value."""
+    return flat_record(params)
 
 
 def stored_params(method: str, overrides: dict | None = None) -> dict:
@@ -328,22 +135,10 @@ def stored_params(method: str, overrides: dict | None = None) -> dict:
                                  default=_json_default))
 
 
-#: Tracker settings added after reports were stored, with the value at which the tracker does
-#: what it did before the setting existed: a stored report without the key was made with it.
-INERT_SETTINGS = {"start_height_margin": 0.0, "ignore_other_people": False,
-                  "start_height_column": 0.0, "start_head_fraction": 0.0, "hpf_sweeps": 1}
-
-
 def settings_diff(stored: dict, wanted: dict) -> list[str]:
     """``"key stored -> wanted"`` for each setting a stored report's ``params`` differ in from
-    those a run would use now (:func:`stored_params`); a key of :data:`INERT_SETTINGS` that
-    the report lacks counts as its inert value."""
-    out = []
-    for k, v in wanted.items():
-        have = stored[k] if k in stored else INERT_SETTINGS.get(k)
-        if have != v:
-            out.append(f"{k} {stored.get(k)!r} -> {v!r}")
-    return out
+    those a run would use now (:func:`stored_params`)."""
+    return [f"{k} {stored.get(k)!r} -> {v!r}" for k, v in wanted.items() if stored.get(k) != v]
 
 
 def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int = 0,
@@ -361,6 +156,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
 
     model = load_body_model("tracking")
     params = method_params(method, particles, layers, overrides)
+    uses_detector = params.tracking_method.uses_detector
     shape = frames.body_shape if given_shape else None
     people = PeopleTracker(model, frames.rig, params, np.random.default_rng(seed), shape=shape,
                            max_people=max_people)
@@ -372,7 +168,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     states, costs, tracks = [], [], []
     times, stage, evals = [], {}, []
     for k, stamp in enumerate(frames.stamps):
-        maps = frames.maps[k] if (frames.maps is not None and method in DETECTOR_METHODS) else None
+        maps = frames.maps[k] if (frames.maps is not None and uses_detector) else None
         results = people.update(frames.mask_list(k), int(stamp), maps)
         slot = _subject_track(results, frames.truth[k], root, true_root)
         result = results[slot]
@@ -397,7 +193,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     subject = int(np.bincount(tracks).argmax()) if tracks else 0
     n = max(len(times), 1)
     spf = float(np.sum(times) / n)
-    seg = frames.segmentation_s + (frames.detector_s if method in DETECTOR_METHODS else 0.0)
+    seg = frames.segmentation_s + (frames.detector_s if uses_detector else 0.0)
     return EvalResult(
         method=method, summary=summary, seconds_per_frame=spf,
         fps=1.0 / spf if spf > 0 else float("inf"),
@@ -418,7 +214,7 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
     out = sys.stderr if out is None else out
     t0 = time.perf_counter()
     frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,
-                         detector_maps=any(m in DETECTOR_METHODS for m in methods))
+                         detector_maps=any(get_method(m).uses_detector for m in methods))
     report = {
         "bag": str(bag),
         "silhouettes": frames.silhouettes,
@@ -488,18 +284,18 @@ def plot_errors(report: dict, path: str | Path, title: str | None = None) -> Non
 
 
 def tracker_overrides(items) -> dict:
-    """TrackerParams fields from ``KEY=VALUE`` strings (``--param``; see
-    :func:`hmocap_ros.param_overrides.field_overrides`)."""
-    from hmocap_ros.tracking.body_tracker import TrackerParams
+    """TrackerParams settings by dotted name from ``KEY=VALUE`` strings (``--param``; see
+    :func:`hmocap_ros.params.field_overrides`)."""
+    from hmocap_ros.tracking.params import TrackerParams
 
     return field_overrides(TrackerParams, items, "tracker parameter")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="bag (.mcap or rosbag2 folder) in the documented layout")
-    parser.add_argument("--method", action="append", choices=METHODS,
-                        help="tracker method; repeat to compare several (default dd-hpf)")
-    parser.add_argument("--compare", action="store_true", help="run every method (" + ", ".join(METHODS) + ")")
+    parser.add_argument("--method", action="append", choices=method_names(),
+                        help="tracker method; repeat to compare several (default: body_tracker's)")
+    parser.add_argument("--compare", action="store_true", help="run every method (" + ", ".join(method_names()) + ")")
     parser.add_argument("--particles", type=int, default=0,
                         help="particles per layer (default: the method's, ~3500 evaluations)")
     parser.add_argument("--layers", type=int, default=0, help="APF layers (default 14)")
@@ -511,7 +307,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--given-shape", action="store_true",
                         help="track with the bag's true body shape (no anthropometry estimation)")
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
-                        help="override a TrackerParams field (repeatable)")
+                        help="override a tracker setting by its dotted name, e.g. "
+                             "filter.sweeps=1 (repeatable; body_tracker --help lists them)")
     parser.add_argument("--max-people", type=int, default=1,
                         help="people followed at once (one tracker each); the subject is scored "
                              "on the track nearest it (default 1)")
@@ -525,7 +322,9 @@ def main_from_args(ns: argparse.Namespace) -> int:
         import numba
 
         numba.set_num_threads(ns.threads)
-    methods = list(METHODS) if ns.compare else (ns.method or ["dd-hpf"])
+    from hmocap_ros.tracking.params import TrackerParams
+
+    methods = list(method_names()) if ns.compare else (ns.method or [TrackerParams().method])
     methods = list(dict.fromkeys(methods))
     try:
         overrides = tracker_overrides(ns.param)

@@ -9,8 +9,8 @@ Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
   is set; the masks are expected at the rig's resolution.
   ``<camera>/foreground`` (sensor_msgs/Image mono8, sensor-data QoS), per rig camera.
-  ``<camera>/skin`` (sensor_msgs/Image mono8, any resolution), per rig camera, with method
-  ``dd-hpf`` only: the extremity detector's maps (foreground_segmentation publishes them, each
+  ``<camera>/skin`` (sensor_msgs/Image mono8, any resolution), per rig camera, with a
+  method that uses a detector (``dd-hpf``) only: the extremity detector's maps (foreground_segmentation publishes them, each
   just before its mask). They are not waited for: a frame set is processed when its masks are
   complete, with the maps of its stamp that have arrived (a view without one is not searched
   for hands), so a foreground node that publishes none costs no latency.
@@ -29,7 +29,9 @@ Publications (all with the stamp of the frame set):
   extremities detected.
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``, ``queue_depth``,
 ``seed``, ``body_id``, ``max_people`` and every
-field of :class:`~hmocap_ros.tracking.TrackerParams` (``body_tracker --help``).
+setting of :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
+(``startup.height_margin``; ``body_tracker --help`` lists them; the YAML nests them in
+groups).
 
 Several people (``max_people``): one tracker per person
 (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); the first body is the one a
@@ -62,7 +64,7 @@ from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters
                                      sensor_qos)
 from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
 from hmocap_ros.stamp_sync import StampSynchronizer
-from hmocap_ros.tracking.body_tracker import TrackerParams
+from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
 from hmocap_ros.tracking.extremity_detection import END_EFFECTORS
 
@@ -145,7 +147,7 @@ class BodyTrackerNode(Node):
         self.frame_id = rig.frame_id
         self.tracker = PeopleTracker(self.model, rig, self.params, self.rng,
                                      max_people=len(self.ids), ids=self.ids)
-        self.use_maps = self.params.method == "dd-hpf"
+        self.use_maps = self.params.tracking_method.uses_detector
         self.maps = {name: {} for name in rig.names}  # camera -> stamp -> skin map (recent)
         self.sync = StampSynchronizer(
             list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
@@ -246,7 +248,7 @@ class BodyTrackerNode(Node):
         who = f"{self.ids[k]}: " if len(self.ids) > 1 else ""
         if result.state == "initialising":
             log.info(f"{who}a person appeared ({views} views): estimating the body shape "
-                     f"({self.params.shape_frames} frames, start-up took {seconds:.1f} s)")
+                     f"({self.params.startup.frames} frames, start-up took {seconds:.1f} s)")
         elif result.state == "tracking":
             mesh = self.tracker.trackers[k].model  # a shape's factors scale the tracker's mesh
             height = result.shape.height(mesh) if result.shape is not None else float("nan")

@@ -1,6 +1,6 @@
 """Layer schedules of the body tracker: APF, HPF, HPF with approximate partitioning, DD-HPF.
 
-Four schedules of the layered particle filter (:mod:`.layered_filter`, alg. 5) over the
+Four schedules of the layered particle filter (:mod:`hmocap_ros.lpf.layered_filter`, alg. 5) over the
 30-DoF "tracking" parameterisation of the body (:mod:`hmocap_ros.body.skeleton`), at about
 the same number of weight evaluations per frame (the comparison of thesis sec. 2.4.2 and
 2.5.2, where the APF runs 14 layers x 250 particles and the HPF 7 layers x 500):
@@ -23,7 +23,8 @@ dd-hpf     the hpf-apo schedule; the tracker adds IK particles from     8 x 438 
            layer of eq. 2.21 (sec. 2.5.2, :mod:`.ik_proposals`)
 =========  ==========================================================  ==========================
 
-The table is one sweep (``sweeps=1``). With ``sweeps=2`` the hierarchical schedules weigh
+Each shoulder layer samples its elbow too (the elbow layer then refines it). The table is
+one sweep (``sweeps=1``). With ``sweeps=2`` the hierarchical schedules weigh
 the seven blocks twice per frame, torso to right elbow and again (sec. 2.2.4: a layered
 filter is several filtering runs over sub-state spaces, and nothing asks each partition to
 come once; the thesis' shape estimation repeats its first layers as an annealing scheme,
@@ -41,14 +42,14 @@ Choices where the thesis is vague:
   and the inter-frame kernel ``K_t`` of the final run diffuses ``Psi_0`` (the torso), so each
   block is diffused once per frame, by its own motion std, right before its own weighting.
   Alg. 3's re-diffusion of the blocks already filtered is kept with a small ``nu``
-  (``refine_nu``, default 0.25; 0 turns it off): a slight local refinement of the parents,
+  (``filter.refine_nu``, default 0.25; 0 turns it off): a slight local refinement of the parents,
   which every later whole-image layer keeps measuring.
 * ``sigma0`` (``DEFAULT_SIGMA0``): the root-mean-square frame-to-frame change of each DoF at
   25 fps over motion-capture clips that are not used for any evaluation (CMU 13_29 jumping
-  jacks / twists / squats, 01_01 jumps and turns, 02_05 punches, 14_27 sit and stand, from
-  /work/shared/data/bvh, retargeted onto the body), left and right sides pooled, times
-  ``SIGMA0_FACTOR`` = 1.5 (a Gaussian with the RMS as std covers too few of the fast frames);
-  :func:`motion_sigma0` recomputes the statistic. Schedules take a ``sigma_scale`` on top.
+  jacks / twists / squats, 01_01 jumps and turns, 02_05 punches, 14_27 sit and stand, from the
+  project's shared CMU clips, retargeted onto the body), left and right sides pooled, times
+  ``SIGMA0_FACTOR`` = 1.5 (a Gaussian with the RMS as std covers too few of the fast frames).
+  Schedules take a ``sigma_scale`` on top.
 * Joint limits: the kernel clips every DoF to the skeleton's limits and shortens ball-joint
   swing vectors (:func:`clip_pose` without the yaw wrap: the root yaw is left continuous so
   that weighted means never straddle +-pi); the root position is kept inside the room.
@@ -59,33 +60,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
-from typing import Sequence
-
 import numpy as np
 
-from hmocap_ros.body.skeleton import SWING_NORM_MAX, Skeleton, local_rotations_to_pose
+from hmocap_ros.body.skeleton import SWING_NORM_MAX, Skeleton
 from hmocap_ros.lpf.kernels import gaussian_kernel
 from hmocap_ros.lpf.layered_filter import Layer, LayeredFilter, annealed_filter
+from hmocap_ros.tracking.methods import TrackingMethod, get_method
 
 __all__ = [
-    "BODY_BLOCKS", "DEFAULT_EVALUATIONS", "DEFAULT_SIGMA0", "METHODS", "SIGMA0_FACTOR",
-    "SWEEP_DECAY", "BodySchedule", "body_sigma0", "clip_body_pose", "make_schedule",
-    "motion_sigma0", "pose_kernel",
+    "BODY_BLOCKS", "DEFAULT_SIGMA0", "SIGMA0_FACTOR", "SWEEP_DECAY", "BodySchedule",
+    "body_sigma0", "clip_body_pose", "make_schedule", "pose_kernel", "schedule_for",
 ]
 
-METHODS = ("apf", "hpf", "hpf-apo", "dd-hpf")
 #: DoF groups of the tracking skeleton in kinematic-tree order (sec. 2.5.2).
 BODY_BLOCKS = ("torso", "l_leg", "r_leg", "l_shoulder", "r_shoulder", "l_elbow", "r_elbow")
-#: (layers, particles) per method at ~3500 evaluations per frame.
-DEFAULT_EVALUATIONS = {"apf": (14, 250), "hpf": (7, 500), "hpf-apo": (8, 438),
-                       "dd-hpf": (8, 438)}
 SIGMA0_FACTOR = 1.5
 #: Hierarchical schedules with several sweeps: std factor of a block's kernel per sweep after
 #: the first (the second sweep searches at half the first one's std).
 SWEEP_DECAY = 0.5
 
-#: RMS frame-to-frame change per DoF at 25 fps (metres, degrees) on the held-out clips (see
-#: the module docstring; ``motion_sigma0`` with the four clips, sides pooled, rounded; the
+#: RMS frame-to-frame change per DoF at 25 fps (metres, degrees) on the clips of the module
+#: docstring (sides pooled, rounded; the
 #: horizontal root translation pools x and z, which the clips' travel directions make unequal).
 MOTION_RMS = {
     "root_tx": 0.011, "root_ty": 0.016, "root_tz": 0.011,
@@ -115,32 +110,6 @@ def _generic(dof: str) -> str:
 def body_sigma0(skel: Skeleton, scale: float = 1.0) -> np.ndarray:
     """Inter-frame std ``sigma0`` (D,) of each DoF (metres / radians) times ``scale``."""
     return scale * np.array([DEFAULT_SIGMA0[_generic(n)] for n in skel.dof_names])
-
-
-def motion_sigma0(skel: Skeleton, model, clips: Sequence[str], fps: float = 25.0) -> dict:
-    """RMS frame-to-frame change per generic DoF (sides pooled) over BVH clips at ``fps``.
-
-    Returns {generic DoF name: rms} in metres / degrees: the statistic behind
-    :data:`MOTION_RMS`. The root yaw is unwrapped before differencing.
-    """
-    from hmocap_ros.sim.retarget import load_motion
-
-    sq: dict = {}
-    for clip in clips:
-        motion = load_motion(clip, model.joints_rest, model.parents, model.joint_names,
-                             model.end_sites_rest, model.end_site_parents, model.end_site_names,
-                             fps=fps)
-        p = local_rotations_to_pose(skel, motion.local_rotations, motion.root_translation)
-        yaw = skel.dof_index("root_yaw")
-        p[:, yaw] = np.unwrap(p[:, yaw])
-        d = np.diff(p, axis=0)
-        for i, name in enumerate(skel.dof_names):
-            sq.setdefault(_generic(name), []).append(d[:, i] ** 2)
-    out = {}
-    for name, chunks in sq.items():
-        rms = float(np.sqrt(np.concatenate(chunks).mean()))
-        out[name] = rms if name.startswith("root_t") else float(np.rad2deg(rms))
-    return out
 
 
 # ----------------------------------------------------------------------------- limits
@@ -218,6 +187,7 @@ def root_room_limits(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.nda
 class BodySchedule:
     """A method's layer schedule plus what the weighting function needs to know per layer.
 
+    method: the :class:`~hmocap_ros.tracking.methods.TrackingMethod` it implements.
     filter: the :class:`LayeredFilter` (alg. 5).
     layer_blocks: per weighting (L + 1 entries) the body block names it concentrates on, or
         () for a weighting over the whole body (APF layers, the final layers).
@@ -225,7 +195,7 @@ class BodySchedule:
         rather than the whole images (eq. 2.8).
     """
 
-    method: str
+    method: TrackingMethod
     filter: LayeredFilter
     layer_blocks: tuple
     boxed: tuple
@@ -245,21 +215,21 @@ class BodySchedule:
         return int(sum(s.n_particles or self.n_particles for s in steps))
 
 
-def _block_dims(skel: Skeleton, arm_chain: bool = False) -> list[np.ndarray]:
-    """DoF indices of each layer. ``arm_chain``: a shoulder layer also samples its elbow."""
+def _block_dims(skel: Skeleton) -> list[np.ndarray]:
+    """DoF indices of each layer: a shoulder layer also samples its elbow."""
     dims = [skel.group_dofs(b) for b in BODY_BLOCKS]
-    if arm_chain:
-        for side in ("l", "r"):
-            s = BODY_BLOCKS.index(f"{side}_shoulder")
-            e = BODY_BLOCKS.index(f"{side}_elbow")
-            dims[s] = np.union1d(dims[s], dims[e])
+    for side in ("l", "r"):
+        s = BODY_BLOCKS.index(f"{side}_shoulder")
+        e = BODY_BLOCKS.index(f"{side}_elbow")
+        dims[s] = np.union1d(dims[s], dims[e])
     return dims
 
 
-def _hierarchical(skel: Skeleton, method: str, n_particles: int, sigma0: np.ndarray, *, boxed: bool,
-                  survival_rate: float, refine_nu: float, kernel,
-                  arm_chain: bool = False, sweeps: int = 1) -> BodySchedule:
-    blocks = _block_dims(skel, arm_chain)
+def _hierarchical(skel: Skeleton, method: TrackingMethod, n_particles: int,
+                  sigma0: np.ndarray, *, survival_rate: float, refine_nu: float, kernel,
+                  sweeps: int = 1) -> BodySchedule:
+    blocks = _block_dims(skel)
+    boxed = method.boxed
     d = skel.n_dofs
     # the blocks weighed in order, ``sweeps`` times over the kinematic tree; without boxes
     # the final whole-image layer is the last block's weighting
@@ -298,28 +268,41 @@ def _hierarchical(skel: Skeleton, method: str, n_particles: int, sigma0: np.ndar
                         boxed=tuple([boxed] * len(order) + [False]))
 
 
-def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None,
-                  n_layers: int | None = None, sigma_scale: float = 1.0,
-                  survival_rate: float = 0.5, apf_alpha: float = 0.7, refine_nu: float = 0.25,
-                  jump_fraction: float = 0.0, jump_scale: float = 4.0,
-                  reseed_fraction: float = 0.0, arm_chain: bool = False,
-                  room_lo: np.ndarray | None = None,
-                  room_hi: np.ndarray | None = None, sweeps: int = 1) -> BodySchedule:
-    """The layer schedule of ``method`` (one of :data:`METHODS`); see the module table.
+def _annealed(skel: Skeleton, method: TrackingMethod, n_particles: int, n_layers: int,
+              sigma0: np.ndarray, *, survival_rate: float, apf_alpha: float,
+              kernel) -> BodySchedule:
+    lpf = annealed_filter(sigma0, n_layers, n_particles, alpha=apf_alpha,
+                          survival_rate=survival_rate)
+    layers = tuple(Layer(beta=L.beta, survival_rate=L.survival_rate,
+                         n_particles=L.n_particles, std=L.std, kernel=kernel)
+                   for L in lpf.layers)
+    final = Layer(survival_rate=survival_rate, n_particles=n_particles, kernel=kernel)
+    lpf = LayeredFilter(layers=layers, sigma0=sigma0, final=final)
+    return BodySchedule(method, lpf, tuple(() for _ in range(n_layers)),
+                        tuple(False for _ in range(n_layers)))
 
-    n_particles / n_layers: None gives :data:`DEFAULT_EVALUATIONS`. ``n_layers`` only applies
-    to the APF (the hierarchical schedules have one layer per body block and sweep).
+
+def make_schedule(method: str | TrackingMethod, skel: Skeleton, *,
+                  n_particles: int | None = None, n_layers: int | None = None,
+                  sigma_scale: float = 1.0, survival_rate: float = 0.5, apf_alpha: float = 0.7,
+                  refine_nu: float = 0.25, jump_fraction: float = 0.0, jump_scale: float = 4.0,
+                  reseed_fraction: float = 0.0, room_lo: np.ndarray | None = None,
+                  room_hi: np.ndarray | None = None, sweeps: int = 1) -> BodySchedule:
+    """The layer schedule of ``method`` (a name of :data:`~.methods.METHODS` or the method
+    itself); see the module table.
+
+    n_particles / n_layers: None gives the method's budget. ``n_layers`` only applies to the
+    APF (the hierarchical schedules have one layer per body block and sweep).
     sweeps: hierarchical schedules weigh the blocks this many times over the kinematic tree
     per frame (alg. 5 with each partition repeated; later sweeps diffuse a block with
     :data:`SWEEP_DECAY` times the std of the sweep before); with ``n_particles`` None the
     particles per layer shrink so the evaluations per frame stay those of one sweep.
     """
+    method = get_method(method)
     if sweeps < 1:
         raise ValueError("sweeps must be >= 1")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    default_layers, default_particles = DEFAULT_EVALUATIONS[method]
-    if method != "apf" and sweeps > 1:  # the same evaluations over more layers
+    default_layers, default_particles = method.layers, method.particles
+    if method.hierarchical and sweeps > 1:  # the same evaluations over more layers
         layers_total = sweeps * len(BODY_BLOCKS) + default_layers - len(BODY_BLOCKS)
         default_particles = int(round(default_layers * default_particles / layers_total))
     n = int(n_particles or default_particles)
@@ -328,15 +311,20 @@ def make_schedule(method: str, skel: Skeleton, *, n_particles: int | None = None
     sigma0 = body_sigma0(skel, sigma_scale)
     lo, hi = (None, None) if room_lo is None else root_room_limits(room_lo, room_hi)
     kernel = pose_kernel(skel, lo, hi, jump_fraction, jump_scale, reseed_fraction)
-    if method == "apf":
-        k = int(n_layers or default_layers)
-        lpf = annealed_filter(sigma0, k, n, alpha=apf_alpha, survival_rate=survival_rate)
-        layers = tuple(Layer(beta=L.beta, survival_rate=L.survival_rate,
-                             n_particles=L.n_particles, std=L.std, kernel=kernel)
-                       for L in lpf.layers)
-        final = Layer(survival_rate=survival_rate, n_particles=n, kernel=kernel)
-        lpf = LayeredFilter(layers=layers, sigma0=sigma0, final=final)
-        return BodySchedule("apf", lpf, tuple(() for _ in range(k)), tuple(False for _ in range(k)))
-    return _hierarchical(skel, method, n, sigma0, boxed=method != "hpf",
-                         survival_rate=survival_rate, refine_nu=refine_nu, kernel=kernel,
-                         arm_chain=arm_chain, sweeps=sweeps)
+    if not method.hierarchical:
+        return _annealed(skel, method, n, int(n_layers or default_layers), sigma0,
+                         survival_rate=survival_rate, apf_alpha=apf_alpha, kernel=kernel)
+    return _hierarchical(skel, method, n, sigma0, survival_rate=survival_rate,
+                         refine_nu=refine_nu, kernel=kernel, sweeps=sweeps)
+
+
+def schedule_for(params, skel: Skeleton, room_lo: np.ndarray | None = None,
+                 room_hi: np.ndarray | None = None) -> BodySchedule:
+    """The schedule of a tracker's settings (:class:`~.params.TrackerParams`)."""
+    f = params.filter
+    return make_schedule(params.tracking_method, skel, n_particles=f.particles or None,
+                         n_layers=f.layers or None, sigma_scale=f.sigma_scale,
+                         survival_rate=f.survival_rate, apf_alpha=f.apf_alpha,
+                         refine_nu=f.refine_nu, jump_fraction=f.jump_fraction,
+                         jump_scale=f.jump_scale, reseed_fraction=f.reseed_fraction,
+                         room_lo=room_lo, room_hi=room_hi, sweeps=f.sweeps)

@@ -5,17 +5,13 @@ person the cameras see best (:func:`~.visual_hull.visual_hull`), so with a bysta
 better view it follows the bystander. :class:`PeopleTracker` runs up to ``max_people``
 trackers on the same frame sets, each following a person of its own:
 
-- slot 0 is the single-person tracker of before, unchanged (same random draws, so with
+- slot 0 is exactly a single tracker (the same random draws, so with
   ``max_people = 1`` or nobody else in the room its output is bit for bit the same);
 - every other slot starts only on a person standing farther than
-  :data:`~.body_tracker.SAME_PERSON_RADIUS` (on the floor) from the people the other slots
+  :data:`~.startup.SAME_PERSON_RADIUS` (on the floor) from the people the other slots
   follow (``exclude``), so two slots never start on the same person;
 - if two slots nevertheless end up on one person (a track that lost its person and drifted
   onto another), the one with the worse fit (higher ``fit_cost``) is reset and searches again;
-- with ``ignore_other_people`` each slot's silhouette XOR leaves out the foreground under the
-  other slots' bodies (their latest estimates: the earlier slots' of this frame, the later
-  ones' of the last), so that a bystander beside or behind the subject is not fitted by the
-  subject's limbs; a slot that follows nobody masks nothing;
 - each slot draws from its own generator (slot 0 from the one passed in, the others spawned
   from it), so runs repeat bit for bit.
 
@@ -30,8 +26,10 @@ from typing import Sequence
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
-from hmocap_ros.tracking.body_tracker import (SAME_PERSON_RADIUS, BodyTracker, TrackerParams,
-                                              TrackResult)
+from hmocap_ros.tracking.body_tracker import BodyTracker
+from hmocap_ros.tracking.params import TrackerParams
+from hmocap_ros.tracking.result import TrackResult
+from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS
 
 __all__ = ["PeopleTracker", "body_ids"]
 
@@ -83,9 +81,7 @@ class PeopleTracker:
             others = [t.position for j, t in enumerate(self.trackers) if j != k]
             others = np.array([p for p in others if p is not None]).reshape(-1, 3)
             results.append(tracker.update(masks, stamp_ns, detector_maps,
-                                          exclude=others if len(others) else None,
-                                          others=[t for j, t in enumerate(self.trackers)
-                                                  if j != k]))
+                                          exclude=others if len(others) else None))
         self._drop_duplicates(results)
         return results
 

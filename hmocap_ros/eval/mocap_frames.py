@@ -1,0 +1,239 @@
+"""Reading a multi-view bag for the tracker's evaluation: masks, detector maps and truth.
+
+:func:`load_frames` reads any bag in the documented layout (:mod:`hmocap_ros.io.topics`),
+segments each frame set's images with the same foreground model as the live node (or reads
+the bag's exact silhouettes), optionally computes the skin maps of detector-driven tracking,
+and collects the ground truth. Masks are stored bit-packed, computed once for all methods.
+"""
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["BagFrames", "load_frames"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class BagFrames:
+    """Everything the evaluation needs from a bag, masks computed once for all methods.
+
+    rig: the cameras; stamps: (F,) frame-set stamps in order; masks: per frame a list of one
+    packed mask per camera (``np.packbits`` of ``mask != 0``) or None; truth: (F, J, 3) metres
+    (NaN where the frame has no skeleton); joint_names: names of ``truth``'s joints;
+    body_shape: the subject's BodyShape or None; silhouettes / fallback: what was used and why.
+    segmentation_s: seconds of foreground segmentation per frame set.
+    maps: per frame a list of one skin probability map per camera (uint8) or None, when
+    loaded for ``dd-hpf``; detector_s: seconds of skin detection per frame set.
+    """
+
+    rig: object
+    stamps: np.ndarray
+    masks: list
+    truth: np.ndarray
+    joint_names: tuple
+    body_shape: object | None
+    silhouettes: str
+    fallback: str = ""
+    segmentation_s: float = 0.0
+    shape_hw: tuple = ()
+    maps: list | None = None
+    detector_s: float = 0.0
+
+    def mask_list(self, k: int) -> list:
+        h, w = self.shape_hw
+        out = []
+        for packed in self.masks[k]:
+            if packed is None:
+                out.append(None)
+            else:
+                out.append(np.unpackbits(packed, count=h * w).reshape(h, w))
+        return out
+
+    @property
+    def has_truth(self) -> np.ndarray:
+        return np.isfinite(self.truth).all(axis=(1, 2))
+
+
+def _body_shape_from_msg(msg):
+    from hmocap_ros.body import ENTITY_NAMES, BodyShape
+
+    names = list(msg.entity_names)
+    bone = np.ones(len(ENTITY_NAMES))
+    radial = np.ones(len(ENTITY_NAMES))
+    for k, n in enumerate(names):
+        if n in ENTITY_NAMES:
+            bone[ENTITY_NAMES.index(n)] = float(msg.bone_scale[k])
+            radial[ENTITY_NAMES.index(n)] = float(msg.radial_scale[k])
+    return BodyShape(bone, radial, float(msg.global_scale))
+
+
+def _read_truth(reader, available, bag) -> tuple[dict, tuple, object]:
+    """The ground-truth skeletons by stamp, their joint names, and the subject's shape."""
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.msg_factory import stamp_to_ns
+
+    if topics.GT_SKELETON not in available:
+        raise ValueError(f"{bag}: no {topics.GT_SKELETON}: nothing to score against")
+    truth_by_stamp = {}
+    joint_names: tuple = ()
+    for item in reader.messages([topics.GT_SKELETON]):
+        msg = item.msg
+        joint_names = tuple(str(n) for n in msg.joint_names)
+        truth_by_stamp[stamp_to_ns(msg.header.stamp)] = np.array(
+            [[p.x, p.y, p.z] for p in msg.positions], dtype=np.float64)
+    body_shape = None
+    if topics.GT_BODY_SHAPE in available:
+        shape_msg = reader.first(topics.GT_BODY_SHAPE)
+        if shape_msg is not None:
+            body_shape = _body_shape_from_msg(shape_msg)
+    return truth_by_stamp, joint_names, body_shape
+
+
+def _empty_room_frames(reader, image_topics, slop_ns: int, first_truth) -> int:
+    """Frame sets before the first ground-truth skeleton: the empty room to learn from."""
+    n_empty = 0
+    for stamp, _ in reader.frame_sets(image_topics, slop_ns, allow_partial=True, min_topics=1):
+        if first_truth is not None and stamp >= first_truth:
+            break
+        n_empty += 1
+    return n_empty
+
+
+def _mask_row(use, msgs, stamp, bg, rgb_of) -> list:
+    """One mask per camera of a frame set (segmented, or the bag's silhouette), or None."""
+    from hmocap_ros.io.conversions import image_to_numpy
+
+    row = []
+    for k, topic in enumerate(use):
+        msg = msgs.get(topic)
+        if msg is None:
+            row.append(None)
+            continue
+        try:
+            if bg is not None:
+                mask = bg[k].apply(rgb_of(topic), stamp)
+            else:
+                mask = image_to_numpy(msg)
+                mask = mask[..., 0] if mask.ndim == 3 else mask
+        except ValueError as err:
+            log.warning("frame %d, %s: %s (view dropped)", stamp, topic, err)
+            row.append(None)
+            continue
+        row.append(mask)
+    return row
+
+
+def _map_row(image_topics, msgs, stamp, rgb_of) -> list:
+    """One skin probability map per camera of a frame set (``segmentation.skin``), or None."""
+    from hmocap_ros.segmentation.skin import skin_probability
+
+    row = []
+    for topic in image_topics:
+        try:
+            row.append(skin_probability(rgb_of(topic)) if topic in msgs else None)
+        except ValueError as err:
+            log.warning("frame %d, %s: %s (no detector map)", stamp, topic, err)
+            row.append(None)
+    return row
+
+
+def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None = None,
+                slop_ns: int = 0, fg_params: dict | None = None, out=None,
+                detector_maps: bool = False) -> BagFrames:
+    """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
+
+    max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
+    ForegroundParams fields to override (``learn_frames`` is set from the bag).
+    detector_maps: also compute each image's skin probability map (``segmentation.skin``,
+    the extremity detector of detector-driven tracking).
+    """
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.conversions import image_to_rgb
+    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
+
+    out = sys.stderr if out is None else out
+    if silhouettes not in ("fg", "gt"):
+        raise ValueError("silhouettes must be 'fg' or 'gt'")
+    with BagReader(bag) as reader:
+        available = reader.topics()
+        rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
+        if rig_msg is None:
+            raise ValueError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown")
+        rig = rig_from_msg(rig_msg)
+        truth_by_stamp, joint_names, body_shape = _read_truth(reader, available, bag)
+        names = rig.names
+        image_topics = [topics.camera_image(n) for n in names]
+        gt_topics = [topics.gt_silhouette(n) for n in names]
+        present_images = [t for t in image_topics if t in available]
+        if not present_images and silhouettes == "fg":
+            raise ValueError(f"{bag}: none of the image topics {image_topics} is in the bag")
+        fallback = ""
+        if silhouettes == "fg":
+            n_empty = _empty_room_frames(reader, present_images, slop_ns,
+                                         min(truth_by_stamp) if truth_by_stamp else None)
+            if n_empty == 0:
+                fallback = ("the bag has no empty-room frames before the subject appears, so no "
+                            "background model can learn: using the ground-truth silhouettes")
+                silhouettes = "gt"
+                print(f"hmocap eval mocap: {fallback}", file=out)
+        use = gt_topics if silhouettes == "gt" else image_topics
+        use_present = [t for t in use if t in available]
+        if not use_present:
+            raise ValueError(f"{bag}: no {'silhouette' if silhouettes == 'gt' else 'image'} "
+                             f"topics ({use})")
+        bg = None
+        if silhouettes == "fg":
+            params = ForegroundParams(**{**(fg_params or {}),
+                                         "learn_frames": int(np.clip(n_empty, 1, 100))})
+            bg = [BackgroundModel(params) for _ in names]
+        stamps, masks, truth = [], [], []
+        maps = [] if detector_maps else None
+        shape_hw: tuple = ()
+        seg_time = det_time = 0.0
+        n_truth = 0
+        read = list(use_present)
+        if detector_maps:
+            read += [t for t in present_images if t not in read]
+        for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True, min_topics=1):
+            decoded: dict = {}  # each image decoded once, for its mask and its skin map
+
+            def rgb_of(topic: str) -> np.ndarray:
+                if topic not in decoded:
+                    decoded[topic] = image_to_rgb(msgs[topic])
+                return decoded[topic]
+
+            t0 = time.perf_counter()
+            row = []
+            for mask in _mask_row(use, msgs, stamp, bg, rgb_of):
+                if mask is not None:
+                    shape_hw = shape_hw or mask.shape[:2]
+                row.append(np.packbits(mask != 0) if mask is not None
+                           and mask.shape[:2] == shape_hw else None)
+            seg_time += time.perf_counter() - t0
+            if detector_maps:
+                t0 = time.perf_counter()
+                maps.append(_map_row(image_topics, msgs, stamp, rgb_of))
+                det_time += time.perf_counter() - t0
+            stamps.append(stamp)
+            masks.append(row)
+            gt = truth_by_stamp.get(stamp)
+            truth.append(gt if gt is not None else np.full((len(joint_names), 3), np.nan))
+            if gt is not None:
+                n_truth += 1
+                if max_frames is not None and n_truth >= max_frames:
+                    break
+    return BagFrames(rig=rig, stamps=np.asarray(stamps, dtype=np.int64), masks=masks,
+                     truth=np.stack(truth) if truth else np.zeros((0, len(joint_names), 3)),
+                     joint_names=joint_names, body_shape=body_shape, silhouettes=silhouettes,
+                     fallback=fallback, segmentation_s=seg_time / max(len(stamps), 1),
+                     shape_hw=tuple(shape_hw), maps=maps,
+                     detector_s=det_time / max(len(stamps), 1))

@@ -1,0 +1,77 @@
+"""The weighting function of a body schedule: eq. 2.8, eq. 2.15 in boxes, eq. 2.21.
+
+:func:`layer_weight_fn` turns a :class:`~.body_layers.BodySchedule` and one frame's
+observation into the ``weight_fn(particles, layer)`` of the layered filter
+(:func:`hmocap_ros.lpf.layered_filter.lpf_run`): each layer skins and renders the particles
+(:class:`~.body_fitness.SilhouetteFitness`) and counts the silhouette XOR over the whole
+images (eq. 2.8) or inside the observation boxes of the layer's body parts (eq. 2.15,
+:mod:`.observation_boxes`); with detections, the final layer adds the detection cost of
+eq. 2.20 (the refinement layer, eq. 2.21). :func:`fit_cost` is the cost the tracker judges a
+frame's fit by.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hmocap_ros.render.silhouette import observed_counts
+from hmocap_ros.tracking.body_fitness import Observation, serial_below
+from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths, layer_boxes,
+                                                   layer_vertex_indices, part_boxes_3d,
+                                                   reach_box)
+
+__all__ = ["fit_cost", "layer_vertices", "layer_weight_fn"]
+
+
+def layer_vertices(model, schedule) -> list:
+    """Per weighting of ``schedule``, the vertices of its boxed parts (None: not boxed)."""
+    return [layer_vertex_indices(model, blocks) if boxed else None
+            for blocks, boxed in zip(schedule.layer_blocks, schedule.boxed)]
+
+
+def layer_weight_fn(fitness, model, schedule, vertices: list, weighting, obs: Observation,
+                    rest, refine=None):
+    """``weight_fn(particles, layer) -> costs`` of ``schedule`` on ``obs``.
+
+    fitness: the :class:`~.body_fitness.SilhouetteFitness`; vertices: :func:`layer_vertices`;
+    weighting: the tracker's ``weighting`` settings (box reach, spread, margin); rest: the
+    shaped rest body. refine: ``(kappa, cost_fn)`` adding ``kappa * cost_fn(particles)`` to
+    the final layer's cost (eq. 2.21), or None.
+    """
+    lengths = chain_lengths(model, rest)
+    last = schedule.n_weightings - 1
+
+    def weight(particles: np.ndarray, layer: int) -> np.ndarray:
+        verts, joints = fitness.pose(particles, rest)
+        boxes = None
+        if schedule.boxed[layer]:
+            block = schedule.layer_blocks[layer][0]
+            if block in LAYER_ANCHORS:
+                anchor = joints[:, model.joint_index(LAYER_ANCHORS[block][0])]
+                lo, hi = reach_box(anchor.mean(axis=0), lengths[block], weighting.box_reach,
+                                   weighting.box_margin)
+            else:
+                lo, hi = part_boxes_3d(verts, vertices[layer], weighting.box_spread,
+                                       weighting.box_margin)
+            boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
+        cost = fitness.costs_from_verts(verts, obs, boxes)
+        if refine is not None and layer == last:
+            kappa, cost_fn = refine
+            cost = cost + kappa * cost_fn(particles)
+        return cost
+
+    return weight
+
+
+def fit_cost(fitness, estimate: np.ndarray | None, shape, obs: Observation) -> float:
+    """Eq. 2.8 of ``estimate``, counted inside a box around its body (10 cm margin) and
+    averaged over the views: a second person or a door elsewhere in the images does not make
+    a good fit look collapsed. NaN without estimate or views."""
+    if estimate is None or obs.n_views == 0:
+        return float("nan")
+    verts, _ = fitness.pose(estimate[None], shape)
+    lo, hi = part_boxes_3d(verts, np.arange(verts.shape[1]), 0.0, 0.10)
+    boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
+    with serial_below(obs.n_views):
+        xor = fitness.view_xor_from_verts(verts, obs, boxes)[0]
+    inside = observed_counts(obs.masks, boxes)
+    return float(np.mean(xor / np.maximum(inside, fitness.min_count)))

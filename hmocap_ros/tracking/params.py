@@ -1,0 +1,277 @@
+"""Settings of the body tracker: one frozen dataclass of groups, each handed down whole.
+
+:class:`TrackerParams` holds the method and seven groups; the ``body_tracker`` node
+declares every leaf by its dotted name (``startup.height_margin``), the evaluator takes
+``--param filter.sweeps=1``. Defaults: 4 cameras at 640x480, 25 fps, about 3,500 weight
+evaluations per frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hmocap_ros.params import group, param
+from hmocap_ros.tracking.methods import get_method, method_names
+
+__all__ = ["DetectorParams", "FilterParams", "HullParams", "LostParams", "ResearchParams",
+           "StartupParams", "TRACKER_MESHES", "TrackerParams", "WeightingParams"]
+
+#: Shipped meshes a tracker can render its particles with (``weighting.mesh``).
+TRACKER_MESHES = ("tracking_coarse", "tracking")
+
+
+def _check(checks) -> None:
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(f"TrackerParams: {message}")
+
+
+@dataclass(frozen=True)
+class FilterParams:
+    """The layered particle filter (alg. 1-5) and its kernels."""
+
+    particles: int = param(0, "Particles per layer; 0: the method's budget (about 3,500 weight "
+                              "evaluations per frame over its layers).")
+    layers: int = param(0, "Annealing layers of the APF; 0: 14. The hierarchical methods have "
+                           "one layer per body part and sweep.")
+    sweeps: int = param(2, "Hierarchical methods: passes over the kinematic tree's blocks per "
+                           "frame (>= 1). A second pass weighs every block again once the "
+                           "others are filtered, at half the kernel std, with the particles "
+                           "per layer cut so the evaluations per frame stay the same "
+                           "(hpf-apo: 15 x 234); 1: one layer per block as in the thesis.")
+    survival_rate: float = param(0.3, "Particle survival rate in (0, 1] that sets each layer's "
+                                      "annealing exponent beta (eq. 2.9).")
+    apf_alpha: float = param(0.7, "APF: variance decay rate per layer in (0, 1] (eq. 2.10).")
+    refine_nu: float = param(0.25, "Hierarchical methods: decay in [0, 1) of the re-diffusion "
+                                   "of the blocks already filtered (alg. 3); 0: none.")
+    sigma_scale: float = param(1.0, "Factor (> 0) on the per-DoF inter-frame motion std sigma0 "
+                                    "(body_layers.MOTION_RMS).")
+    jump_fraction: float = param(0.1, "Fraction in [0, 1] of the particles that each kernel "
+                                      "diffuses with jump_scale times the std, so that a joint "
+                                      "can leave a wrong mode of the silhouette cost; 0: plain "
+                                      "Gaussian.")
+    jump_scale: float = param(4.0, "Std factor (>= 1) of the wide component of the kernel.")
+    reseed_fraction: float = param(0.1, "Fraction in [0, 1] of the particles whose limb DoFs "
+                                        "being diffused are drawn uniformly within the joint "
+                                        "limits, so that a lost limb can be found again.")
+    velocity_gain: float = param(1.0, "Fraction in [0, 1] of the estimate's last "
+                                      "frame-to-frame pelvis displacement added to the "
+                                      "particles before filtering (1: constant velocity; 0: "
+                                      "the thesis' zero-velocity Gaussian).")
+    proposal_fraction: float = param(0.35, "Fraction in [0, 1] of the particles that, per arm "
+                                           "and frame, take their arm DoFs from "
+                                           "silhouette-driven proposals (limb_proposals); 0: "
+                                           "Gaussian only.")
+
+    def __post_init__(self):
+        _check([
+            (self.particles >= 0 and self.layers >= 0, "filter.particles, filter.layers must "
+                                                       "be >= 0"),
+            (self.sweeps >= 1, "filter.sweeps must be >= 1"),
+            (0.0 < self.survival_rate <= 1.0, "filter.survival_rate must lie in (0, 1]"),
+            (0.0 < self.apf_alpha <= 1.0, "filter.apf_alpha must lie in (0, 1]"),
+            (0.0 <= self.refine_nu < 1.0, "filter.refine_nu must lie in [0, 1)"),
+            (self.sigma_scale > 0.0, "filter.sigma_scale must be > 0"),
+            (0.0 <= self.jump_fraction <= 1.0 and self.jump_scale >= 1.0,
+             "need 0 <= filter.jump_fraction <= 1 and filter.jump_scale >= 1"),
+            (0.0 <= self.reseed_fraction <= 1.0, "filter.reseed_fraction must lie in [0, 1]"),
+            (0.0 <= self.velocity_gain <= 1.0, "filter.velocity_gain must lie in [0, 1]"),
+            (0.0 <= self.proposal_fraction <= 1.0,
+             "filter.proposal_fraction must lie in [0, 1]"),
+        ])
+
+
+@dataclass(frozen=True)
+class WeightingParams:
+    """The silhouette weighting (eq. 2.8) and the observation boxes (eq. 2.15)."""
+
+    working_scale: float = param(0.25, "Image scale in (0, 1] at which silhouettes are "
+                                       "compared (0.25: 640x480 -> 160x120).")
+    mesh: str = param("tracking", "Body mesh the particles are rendered with (same joints "
+                                  "and DoFs): 'tracking' (2,400 triangles) or "
+                                  "'tracking_coarse' (1,000, about one per silhouette pixel "
+                                  "at 160x120: about twice as fast per frame, a few mm less "
+                                  "accurate).")
+    box_reach: float = param(1.05, "Observation boxes of the limb layers: half-size (> 0) as a "
+                                   "multiple of the length of the chain the layer moves, "
+                                   "around the joint it rotates (eq. 2.15).")
+    box_spread: float = param(2.0, "Observation boxes around parts (torso layer): standard "
+                                   "deviations of the particles' part positions added around "
+                                   "the mean part.")
+    box_margin: float = param(0.05, "Observation boxes: margin (m) around the parts.")
+
+    def __post_init__(self):
+        _check([
+            (0.0 < self.working_scale <= 1.0, "weighting.working_scale must lie in (0, 1]"),
+            (self.mesh in TRACKER_MESHES, f"weighting.mesh must be one of {TRACKER_MESHES}"),
+            (self.box_reach > 0.0, "weighting.box_reach must be > 0"),
+            (self.box_spread >= 0.0 and self.box_margin >= 0.0,
+             "weighting.box_spread and weighting.box_margin must be >= 0"),
+        ])
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """Detector-driven tracking (``dd-hpf``, sec. 2.5)."""
+
+    refine_kappa: float = param(2.0, "Weight kappa (per metre, >= 0) of the detection cost of "
+                                     "eq. 2.20 in the refinement layer (eq. 2.21).")
+
+    def __post_init__(self):
+        _check([(self.refine_kappa >= 0.0, "detector.refine_kappa must be >= 0")])
+
+
+@dataclass(frozen=True)
+class StartupParams:
+    """Finding a person and the start-up: visual hull, pose and anthropometry (sec. 2.3)."""
+
+    min_views: int = param(2, "Views with enough foreground needed to start (and to carve the "
+                              "visual hull), >= 1.")
+    min_full_views: int = param(3, "Views that must see the whole visual hull inside the image "
+                                   "before a track starts: a person half out of view gives a "
+                                   "wrong height and a wrong first pose.")
+    min_foreground: int = param(40, "Foreground pixels at the working resolution for a view to "
+                                    "count as seeing a person.")
+    track_region: list[float] = param([], "Floor box [x_min, z_min, x_max, z_max] (m, room "
+                                          "frame) where a track may start: only a person "
+                                          "whose visual hull centroid stands in it is followed "
+                                          "(e.g. the interaction area in front of a display); "
+                                          "once started, the track follows the person "
+                                          "anywhere. Empty: the whole room, the best-seen "
+                                          "person.")
+    estimate_shape: bool = param(True, "Estimate the anthropometry at start (sec. 2.3); false "
+                                       "keeps the model's proportions, scaled to the visual "
+                                       "hull.")
+    frames: int = param(4, "Frames (>= 1) of layered filtering over shape and pose at start.")
+    particles: int = param(250, "Particles per layer (>= 2) of the start-up filter.")
+    working_scale: float = param(0.5, "Image scale in (0, 1] of the start-up weighting.")
+    rejection_tau: float = param(0.7, "Acceptance ratio tau in (0, 1] of the "
+                                      "rejection-sampling shape kernel (eq. 2.13).")
+    rejection_trials: int = param(8, "Trials of the rejection-sampling kernel per layer.")
+    height_margin: float = param(0.03, "During the start-up frames: when the followed visual "
+                                       "hull's top stands more than this (m) above the top of "
+                                       "a start-up hypothesis' body (both read in the column "
+                                       "over its head, height_column), its global scale and "
+                                       "pelvis height grow by their ratio (the segmentation "
+                                       "can lose the head in the frame a track starts on); 0: "
+                                       "off.")
+    height_column: float = param(0.15, "Radius (m, on the floor) of the column around each "
+                                       "start-up hypothesis' head top in which the hull's top "
+                                       "and the body's are read, so that a hand raised beside "
+                                       "the head tops neither; 0: the highest points.")
+
+    def __post_init__(self):
+        # a list from ROS or the command line; kept as a tuple so the params stay immutable
+        object.__setattr__(self, "track_region", tuple(float(v) for v in self.track_region))
+        r = self.track_region
+        _check([
+            (self.min_views >= 1, "startup.min_views must be >= 1"),
+            (self.frames >= 1 and self.particles >= 2,
+             "startup.frames >= 1, startup.particles >= 2"),
+            (0.0 < self.working_scale <= 1.0, "startup.working_scale must lie in (0, 1]"),
+            (0.0 < self.rejection_tau <= 1.0, "startup.rejection_tau must lie in (0, 1]"),
+            (self.height_margin >= 0.0, "startup.height_margin must be >= 0"),
+            (self.height_column >= 0.0, "startup.height_column must be >= 0"),
+            (not r or (len(r) == 4 and np.isfinite(r).all() and r[0] < r[2] and r[1] < r[3]),
+             "startup.track_region must be empty or [x_min, z_min, x_max, z_max] with "
+             "min < max"),
+        ])
+
+
+@dataclass(frozen=True)
+class HullParams:
+    """The visual hull the start-up and the fresh searches carve (sec. 2.3.4)."""
+
+    voxel_size: float = param(0.03, "Voxel edge (m) of the fine visual hull grid.")
+    min_height: float = param(0.9, "Smallest hull top (m) accepted as a person.")
+    max_misses: int = param(0, "Views in which a hull voxel may project onto background "
+                               "(tolerates holes in the foreground).")
+    bridge_misses: int = param(1, "Views more than max_misses in which a voxel may project "
+                                  "onto background and still join the hull's parts into one "
+                                  "person (the hull keeps only the max_misses voxels): a band "
+                                  "of the body lost in one view, such as a shirt the colour "
+                                  "of the wall, then does not cut the person in two.")
+
+    def __post_init__(self):
+        _check([(self.voxel_size > 0.0, "hull.voxel_size must be > 0"),
+                (self.max_misses >= 0 and self.bridge_misses >= 0,
+                 "hull.max_misses and hull.bridge_misses must be >= 0")])
+
+
+@dataclass(frozen=True)
+class ResearchParams:
+    """Fresh searches while tracking: a way out of a wrong pose the filter cannot leave."""
+
+    every: int = param(25, "Every this many tracked frames a fresh start-up search (heading "
+                           "search with limb proposals and Powell fits from the visual hull, "
+                           "at the estimated shape) is weighed against the frame's estimate; "
+                           "the filter is re-seeded from it when it fits better (1.5-2 s on "
+                           "that frame on 2 cores); 0: off.")
+    backwards_frames: int = param(5, "Frames over which the pelvis' travel is measured: when it "
+                                     "moved faster than backwards_step and the body faces away "
+                                     "from the travel by more than facing_limit, a fresh "
+                                     "search runs at once; while the body travels, searches "
+                                     "also fit a pose facing the travel, and one runs as soon "
+                                     "as the travel is first measured after a start; 0: off.")
+    backwards_step: float = param(0.05, "Mean pelvis travel per frame (m, > 0) above which the "
+                                        "body counts as travelling (0.05: 1.25 m/s at 25 fps).")
+    facing_limit: float = param(90.0, "Degrees in (0, 180] between the body's facing "
+                                      "direction (root yaw) and its travel above which a "
+                                      "fresh search runs: 90 catches a body tracked back to "
+                                      "front; a smaller angle also a pelvis turned away from "
+                                      "the way it runs (people walk and run facing within "
+                                      "about 10 degrees of their travel).")
+
+    def __post_init__(self):
+        _check([
+            (self.every >= 0, "research.every must be >= 0 (0: off)"),
+            (self.backwards_frames >= 0 and self.backwards_step > 0.0,
+             "need research.backwards_frames >= 0 (0: off) and research.backwards_step > 0"),
+            (0.0 < self.facing_limit <= 180.0,
+             "research.facing_limit must lie in (0, 180] degrees"),
+        ])
+
+
+@dataclass(frozen=True)
+class LostParams:
+    """When a track counts as lost, and when a person's shape is forgotten."""
+
+    cost: float = param(0.6, "Mean per-view silhouette XOR / foreground, counted in a box "
+                             "around the estimated body (eq. 2.8 divided by the views), above "
+                             "which a frame counts as a failed fit.")
+    frames: int = param(8, "Consecutive failed fits (>= 1) after which the track is lost and "
+                           "restarts from the visual hull.")
+    forget_shape_frames: int = param(50, "Frames without a person after which the estimated "
+                                         "shape is forgotten.")
+
+    def __post_init__(self):
+        _check([(self.frames >= 1, "lost.frames must be >= 1")])
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Settings of :class:`~hmocap_ros.tracking.body_tracker.BodyTracker`: the method and the
+    groups, each handed whole to the part that uses it."""
+
+    method: str = param("dd-hpf", "Layered filter (tracking.methods): 'apf' (annealing, "
+                                  "14 x 250), 'hpf' (hierarchical, 14 x 250 in two sweeps), "
+                                  "'hpf-apo' (hierarchical with approximate partitioning of "
+                                  "observations, 15 x 234 in two sweeps) or 'dd-hpf' (hpf-apo "
+                                  "driven by hand detections: IK particles and the refinement "
+                                  "layer, sec. 2.5; needs detector maps).")
+    filter: FilterParams = group(FilterParams, "layered particle filter and kernels")
+    weighting: WeightingParams = group(WeightingParams, "silhouette weighting and boxes")
+    detector: DetectorParams = group(DetectorParams, "detector-driven tracking")
+    startup: StartupParams = group(StartupParams, "start-up and anthropometry")
+    hull: HullParams = group(HullParams, "visual hull")
+    research: ResearchParams = group(ResearchParams, "fresh searches while tracking")
+    lost: LostParams = group(LostParams, "track loss")
+
+    def __post_init__(self):
+        _check([(self.method in method_names(), f"method must be one of {method_names()}")])
+
+    @property
+    def tracking_method(self):
+        """The registered :class:`~hmocap_ros.tracking.methods.TrackingMethod`."""
+        return get_method(self.method)

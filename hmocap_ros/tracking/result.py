@@ -1,0 +1,74 @@
+"""What the body tracker reports: its state machine's states and one frame set's result."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.tracking.extremity_detection import Extremities
+
+__all__ = ["STATES", "TrackResult", "TrackerState"]
+
+
+class TrackerState(StrEnum):
+    """States of :class:`~hmocap_ros.tracking.body_tracker.BodyTracker` (values are what
+    diagnostics and reports show)."""
+
+    #: no person: too little foreground in too few views, or no visual hull; no pose
+    SEARCHING = "searching"
+    #: a person appeared: visual hull, pose and anthropometry estimation (sec. 2.3)
+    INITIALISING = "initialising"
+    #: layered particle filtering per frame (sec. 2.4-2.5)
+    TRACKING = "tracking"
+    #: the fit stayed bad for ``lost.frames`` frames; the next frame starts from the hull
+    LOST = "lost"
+
+    @property
+    def follows_person(self) -> bool:
+        return self in (TrackerState.INITIALISING, TrackerState.TRACKING)
+
+    @property
+    def looking(self) -> bool:
+        return self in (TrackerState.SEARCHING, TrackerState.LOST)
+
+
+STATES = tuple(s.value for s in TrackerState)
+
+
+@dataclass(frozen=True, eq=False)
+class TrackResult:
+    """What one ``update`` produced.
+
+    state: the :class:`TrackerState` after this frame.
+    params: (D,) pose parameters (tracking DoF set) or None; joints: (J, 3) joint positions in
+    metres in the room frame or None; joint_names: their names; shape: the body shape used.
+    fit_cost: eq. 2.8 cost of the estimate divided by the number of views (NaN without pose).
+    views: rig indices used; dropped: rig indices whose mask was missing or invalid.
+    layers: per-layer diagnostics (ESS, beta, times) of the filter run, if one ran.
+    timings: seconds per stage ("total", "observe", "hull", "init", "filter", "skinning",
+    "projection", "xor", "detection", "proposals", "research") and "evaluations".
+    extremities: dd-hpf's hand and head detections of this frame (None otherwise).
+    """
+
+    stamp_ns: int
+    state: TrackerState
+    params: np.ndarray | None = None
+    joints: np.ndarray | None = None
+    joint_names: tuple = ()
+    shape: BodyShape | None = None
+    fit_cost: float = float("nan")
+    views: tuple = ()
+    dropped: tuple = ()
+    layers: tuple = ()
+    timings: dict = field(default_factory=dict)
+    extremities: Extremities | None = None
+
+    @property
+    def has_pose(self) -> bool:
+        return self.joints is not None
+
+    @property
+    def ess(self) -> tuple:
+        return tuple(d.ess for d in self.layers)
