@@ -462,7 +462,7 @@ def annealed_filter(sigma0: np.ndarray, n_layers: int, n_particles: int | None =
                     alpha: float | Sequence[float] = 0.5, betas: Sequence[float] | None = None,
                     survival_rate: float = 0.5, adaptive_scale: float | None = None,
                     final_std: np.ndarray | None = None, lower: np.ndarray | None = None,
-                    upper: np.ndarray | None = None, estimator: str = "mean") -> LayeredFilter:
+                    upper: np.ndarray | None = None) -> LayeredFilter:
     """Annealed particle filter (alg. 2) as a layer schedule: ``n_layers`` weightings in all.
 
     Layers ``k = 0 .. n_layers - 2`` span all dimensions and diffuse with eq. 2.10
@@ -482,14 +482,14 @@ def annealed_filter(sigma0: np.ndarray, n_layers: int, n_particles: int | None =
 
     layers = tuple(make(k, stds[k]) for k in range(n_layers - 1))
     return LayeredFilter(layers=layers, sigma0=sigma0, final=make(n_layers - 1, final_std),
-                         lower=lower, upper=upper, estimator=estimator)
+                         lower=lower, upper=upper)
 
 
 def hierarchical_filter(blocks: Sequence[np.ndarray], sigma0: np.ndarray,
                         n_particles: int | None = None, *, layers_per_block: int = 1,
                         nu: float = 0.5, survival_rate: float = 0.5,
                         final_std: np.ndarray | None = None, lower: np.ndarray | None = None,
-                        upper: np.ndarray | None = None, estimator: str = "mean") -> LayeredFilter:
+                        upper: np.ndarray | None = None) -> LayeredFilter:
     """Hierarchical particle filter (HPF, sec. 2.2.4): one or more layers per block of dims.
 
     ``blocks`` are the sub-states ``Psi`` in kinematic-tree order (root first);
@@ -502,4 +502,4 @@ def hierarchical_filter(blocks: Sequence[np.ndarray], sigma0: np.ndarray,
                    for b in blocks for _ in range(layers_per_block))
     final = Layer(survival_rate=survival_rate, n_particles=n_particles, std=final_std)
     return LayeredFilter(layers=layers, sigma0=sigma0, nu=nu, final=final, lower=lower,
-                         upper=upper, estimator=estimator)
+                         upper=upper)
