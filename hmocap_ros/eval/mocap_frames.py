@@ -144,6 +144,53 @@ def _map_row(image_topics, msgs, stamp, rgb_of) -> list:
     return row
 
 
+def _frame_sets(reader, use, use_present, map_images, image_topics, slop_ns: int, bg,
+                truth_by_stamp, n_joints: int, max_frames: int | None):
+    """Every frame set's packed masks of the ``use`` topics (those in the bag:
+    ``use_present``), its skin maps when ``map_images`` (the image topics in the bag) is
+    given, its truth and the timing: ``(stamps, masks, truth, maps, shape_hw, segmentation s,
+    detection s)``."""
+    from hmocap_ros.io.conversions import image_to_rgb
+
+    stamps, masks, truth = [], [], []
+    maps = [] if map_images is not None else None
+    shape_hw: tuple = ()
+    seg_time = det_time = 0.0
+    n_truth = 0
+    read = list(use_present)
+    if map_images is not None:
+        read += [t for t in map_images if t not in read]
+    for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True, min_topics=1):
+        decoded: dict = {}  # each image decoded once, for its mask and its skin map
+
+        def rgb_of(topic: str) -> np.ndarray:
+            if topic not in decoded:
+                decoded[topic] = image_to_rgb(msgs[topic])
+            return decoded[topic]
+
+        t0 = time.perf_counter()
+        row = []
+        for mask in _mask_row(use, msgs, stamp, bg, rgb_of):
+            if mask is not None:
+                shape_hw = shape_hw or mask.shape[:2]
+            row.append(np.packbits(mask != 0) if mask is not None
+                       and mask.shape[:2] == shape_hw else None)
+        seg_time += time.perf_counter() - t0
+        if maps is not None:
+            t0 = time.perf_counter()
+            maps.append(_map_row(image_topics, msgs, stamp, rgb_of))
+            det_time += time.perf_counter() - t0
+        stamps.append(stamp)
+        masks.append(row)
+        gt = truth_by_stamp.get(stamp)
+        truth.append(gt if gt is not None else np.full((n_joints, 3), np.nan))
+        if gt is not None:
+            n_truth += 1
+            if max_frames is not None and n_truth >= max_frames:
+                break
+    return stamps, masks, truth, maps, shape_hw, seg_time, det_time
+
+
 def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None = None,
                 slop_ns: int = 0, fg_params: dict | None = None, out=None,
                 detector_maps: bool = False) -> BagFrames:
@@ -156,7 +203,6 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     """
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
-    from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.rig import rig_from_msg
     from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
 
@@ -195,42 +241,10 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
             params = ForegroundParams(**{**(fg_params or {}),
                                          "learn_frames": int(np.clip(n_empty, 1, 100))})
             bg = [BackgroundModel(params) for _ in names]
-        stamps, masks, truth = [], [], []
-        maps = [] if detector_maps else None
-        shape_hw: tuple = ()
-        seg_time = det_time = 0.0
-        n_truth = 0
-        read = list(use_present)
-        if detector_maps:
-            read += [t for t in present_images if t not in read]
-        for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True, min_topics=1):
-            decoded: dict = {}  # each image decoded once, for its mask and its skin map
-
-            def rgb_of(topic: str) -> np.ndarray:
-                if topic not in decoded:
-                    decoded[topic] = image_to_rgb(msgs[topic])
-                return decoded[topic]
-
-            t0 = time.perf_counter()
-            row = []
-            for mask in _mask_row(use, msgs, stamp, bg, rgb_of):
-                if mask is not None:
-                    shape_hw = shape_hw or mask.shape[:2]
-                row.append(np.packbits(mask != 0) if mask is not None
-                           and mask.shape[:2] == shape_hw else None)
-            seg_time += time.perf_counter() - t0
-            if detector_maps:
-                t0 = time.perf_counter()
-                maps.append(_map_row(image_topics, msgs, stamp, rgb_of))
-                det_time += time.perf_counter() - t0
-            stamps.append(stamp)
-            masks.append(row)
-            gt = truth_by_stamp.get(stamp)
-            truth.append(gt if gt is not None else np.full((len(joint_names), 3), np.nan))
-            if gt is not None:
-                n_truth += 1
-                if max_frames is not None and n_truth >= max_frames:
-                    break
+        frames = _frame_sets(reader, use, use_present,
+                             present_images if detector_maps else None, image_topics, slop_ns,
+                             bg, truth_by_stamp, len(joint_names), max_frames)
+    stamps, masks, truth, maps, shape_hw, seg_time, det_time = frames
     return BagFrames(rig=rig, stamps=np.asarray(stamps, dtype=np.int64), masks=masks,
                      truth=np.stack(truth) if truth else np.zeros((0, len(joint_names), 3)),
                      joint_names=joint_names, body_shape=body_shape, silhouettes=silhouettes,

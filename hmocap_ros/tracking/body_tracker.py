@@ -46,11 +46,11 @@ from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import BodySchedule, schedule_for
 from hmocap_ros.tracking.detector_driven import DetectorDriven
 from hmocap_ros.tracking.extremity_detection import Extremities
-from hmocap_ros.tracking.layer_weighting import fit_cost, layer_vertices, layer_weight_fn
+from hmocap_ros.tracking.layer_weighting import fit_cost, layer_vertices, layer_weight_fn, warm_up
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
 from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
-from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult
+from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult, stage_timings
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
 from hmocap_ros.tracking.visual_hull import room_bounds
 
@@ -139,23 +139,9 @@ class BodyTracker:
         return None
 
     def warm_up(self) -> float:
-        """Compile every numba kernel of the weighting (serial and parallel variants) on a
-        dummy frame; returns the seconds it took. A fresh install has no numba cache: without
-        this, the first frames with a person would stall for seconds while they compile."""
-        t0 = time.perf_counter()
-        w = self.fitness.working[0]
-        masks = [np.zeros((c.height, c.width), np.uint8) for c in self.fitness.working]
-        obs = self.fitness.observe(masks)
-        rest_params = self.model.rest_pose(None)[None]
-        for n in (1, 128):  # serial and parallel paths
-            params = np.repeat(rest_params, n, axis=0)
-            self.fitness.costs(params, obs)
-            verts, _ = self.fitness.pose(params)
-            self.fitness.costs_from_verts(verts, obs, np.array([[0, 0, w.width, w.height]] * obs.n_views))
-            self.fitness.costs_from_uv(self.fitness.project(verts, obs), obs)
-        self.proposer.evidence(obs, rest_params[0], self.fitness.rest(None), self.fitness.faces)
-        self.fitness.times.reset()
-        return time.perf_counter() - t0
+        """Compile the weighting's numba kernels (:func:`~.layer_weighting.warm_up`);
+        returns the seconds it took."""
+        return warm_up(self.fitness, self.proposer, self.model)
 
     # ------------------------------------------------------------------ weighting
 
@@ -371,14 +357,8 @@ class BodyTracker:
     def _result(self, stamp_ns: int, obs: Observation, t_start: float, timings: dict,
                 fit_cost: float = float("nan"), layers: tuple = (),
                 extremities: Extremities | None = None) -> TrackResult:
-        times = self.fitness.times
         extra = self.shape_fitness.times if self.shape_fitness is not self.fitness else None
-        timings = dict(timings)
-        timings["skinning"] = times.skinning + (extra.skinning if extra else 0.0)
-        timings["projection"] = times.projection + (extra.projection if extra else 0.0)
-        timings["xor"] = times.xor + (extra.xor if extra else 0.0)
-        timings["evaluations"] = times.evaluations + (extra.evaluations if extra else 0)
-        timings["total"] = time.perf_counter() - t_start
+        timings = stage_timings(timings, t_start, self.fitness.times, extra)
         params = joints = None
         shape = self._current_shape()
         if self.state.follows_person and self.estimate is not None:

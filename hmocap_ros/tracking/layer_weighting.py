@@ -11,6 +11,8 @@ frame's fit by.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from hmocap_ros.render.silhouette import observed_counts
@@ -19,7 +21,7 @@ from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths,
                                                    layer_vertex_indices, part_boxes_3d,
                                                    reach_box)
 
-__all__ = ["fit_cost", "layer_vertices", "layer_weight_fn"]
+__all__ = ["fit_cost", "layer_vertices", "layer_weight_fn", "warm_up"]
 
 
 def layer_vertices(model, schedule) -> list:
@@ -75,3 +77,24 @@ def fit_cost(fitness, estimate: np.ndarray | None, shape, obs: Observation) -> f
         xor = fitness.view_xor_from_verts(verts, obs, boxes)[0]
     inside = observed_counts(obs.masks, boxes)
     return float(np.mean(xor / np.maximum(inside, fitness.min_count)))
+
+
+def warm_up(fitness, proposer, model) -> float:
+    """Compile every numba kernel of the weighting (serial and parallel variants) and of the
+    limb proposals on a dummy frame; returns the seconds it took. A fresh install has no numba
+    cache: without this, the first frames with a person would stall for seconds while they
+    compile."""
+    t0 = time.perf_counter()
+    w = fitness.working[0]
+    masks = [np.zeros((c.height, c.width), np.uint8) for c in fitness.working]
+    obs = fitness.observe(masks)
+    rest_params = model.rest_pose(None)[None]
+    for n in (1, 128):  # serial and parallel paths
+        params = np.repeat(rest_params, n, axis=0)
+        fitness.costs(params, obs)
+        verts, _ = fitness.pose(params)
+        fitness.costs_from_verts(verts, obs, np.array([[0, 0, w.width, w.height]] * obs.n_views))
+        fitness.costs_from_uv(fitness.project(verts, obs), obs)
+    proposer.evidence(obs, rest_params[0], fitness.rest(None), fitness.faces)
+    fitness.times.reset()
+    return time.perf_counter() - t0

@@ -1,6 +1,7 @@
 """What the body tracker reports: its state machine's states and one frame set's result."""
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -9,7 +10,7 @@ import numpy as np
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.tracking.extremity_detection import Extremities
 
-__all__ = ["STATES", "TrackResult", "TrackerState"]
+__all__ = ["STATES", "TrackResult", "TrackerState", "stage_timings"]
 
 
 class TrackerState(StrEnum):
@@ -72,3 +73,16 @@ class TrackResult:
     @property
     def ess(self) -> tuple:
         return tuple(d.ess for d in self.layers)
+
+
+def stage_timings(timings: dict, t_start: float, times, extra=None) -> dict:
+    """A frame's ``TrackResult.timings``: the tracker's own stages, the weighting's stages
+    (``times``: the fitness' stage times, ``extra``: the start-up fitness', or None), the
+    evaluations and the total since ``t_start`` (``time.perf_counter``)."""
+    out = dict(timings)
+    out["skinning"] = times.skinning + (extra.skinning if extra else 0.0)
+    out["projection"] = times.projection + (extra.projection if extra else 0.0)
+    out["xor"] = times.xor + (extra.xor if extra else 0.0)
+    out["evaluations"] = times.evaluations + (extra.evaluations if extra else 0)
+    out["total"] = time.perf_counter() - t_start
+    return out
