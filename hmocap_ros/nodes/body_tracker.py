@@ -1,17 +1,18 @@
 """body_tracker: the 3D body pose of the person in the room from N foreground masks (thesis ch. 2).
 
 Synchronises the foreground masks of the rig cameras by stamp and runs
-:class:`~hmocap_ros.tracking.BodyTracker` on each set: layered particle filtering (APF, HPF
-or HPF with approximate partitioning of observations) of a skinned body with the silhouette
-XOR weighting, anthropometry estimated when a person appears.
+:class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on each set: layered particle filtering
+of a skinned body with the silhouette XOR weighting (``method``: one of
+:data:`~hmocap_ros.tracking.methods.METHODS`, APF, HPF, HPF with approximate partitioning of
+observations, or detector-driven HPF), anthropometry estimated when a person appears.
 
 Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
   is set; the masks are expected at the rig's resolution.
   ``<camera>/foreground`` (sensor_msgs/Image mono8, sensor-data QoS), per rig camera.
   ``<camera>/skin`` (sensor_msgs/Image mono8, any resolution), per rig camera, with a
-  method that uses a detector (``dd-hpf``) only: the extremity detector's maps (foreground_segmentation publishes them, each
-  just before its mask). They are not waited for: a frame set is processed when its masks are
+  method that uses a detector (``dd-hpf``) only: the extremity detector's maps
+  (foreground_segmentation publishes them, each just before its mask). They are not waited for: a frame set is processed when its masks are
   complete, with the maps of its stamp that have arrived (a view without one is not searched
   for hands), so a foreground node that publishes none costs no latency.
 Publications (all with the stamp of the frame set):
@@ -27,11 +28,10 @@ Publications (all with the stamp of the frame set):
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray): per body state, seconds per frame, ESS
   and milliseconds per layer, time per stage, views used and dropped, and with ``dd-hpf`` the
   extremities detected.
-Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``, ``queue_depth``,
-``seed``, ``body_id``, ``max_people`` and every
-setting of :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
-(``startup.height_margin``; ``body_tracker --help`` lists them; the YAML nests them in
-groups).
+Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``,
+``queue_depth``, ``seed``, ``body_id``, ``max_people`` and every setting of
+:class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
+(``startup.height_margin``; listed below; the YAML nests them in groups).
 
 Several people (``max_people``): one tracker per person
 (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); the first body is the one a
