@@ -31,14 +31,21 @@ def _cmd_replay(ns, ros_args):
 
 
 def _cmd_info(ns, _ros_args):
-    from hmocap_ros.io.bag_reader import BagReader
+    """The bag's summary, then the whole bag read (:meth:`BagReader.verify`): exit status 2 and
+    one line naming the part that cannot be read when it is damaged."""
+    from hmocap_ros.io.bag_reader import BagReader, BagReadError
 
-    with BagReader(ns.bag) as reader:
-        topics = reader.topics()
-        duration = (reader.end_ns - reader.start_ns) * 1e-9 if topics else 0.0
-        print(f"{ns.bag}: {sum(t.count for t in topics.values())} messages, {duration:.2f} s")
-        for t in sorted(topics.values(), key=lambda t: t.topic):
-            print(f"  {t.topic:40s} {t.msgtype:40s} {t.count:6d}{'  latched' if t.latched else ''}")
+    try:
+        with BagReader(ns.bag) as reader:
+            topics = reader.topics()
+            duration = (reader.end_ns - reader.start_ns) * 1e-9 if topics else 0.0
+            print(f"{ns.bag}: {sum(t.count for t in topics.values())} messages, {duration:.2f} s")
+            for t in sorted(topics.values(), key=lambda t: t.topic):
+                print(f"  {t.topic:40s} {t.msgtype:40s} {t.count:6d}{'  latched' if t.latched else ''}")
+            reader.verify()
+    except BagReadError as err:
+        print(f"hmocap info: {err}", file=sys.stderr)
+        return 2
     return 0
 
 
@@ -162,6 +169,14 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("names", nargs="*", metavar="NAME",
                    help=f"benchmarks to run ({', '.join(_benchmarks()) or 'none found'})")
     p.set_defaults(func=_cmd_bench)
+
+    from hmocap_ros.commands import repair
+
+    p = sub.add_parser("repair", help="rewrite a bag whose recording did not close, with its summary",
+                       description="Rewrite a bag whose recording was cut short (killed, power cut, disk "
+                                   "full) whole: every complete record kept, indexes and statistics added.")
+    repair.add_arguments(p)
+    p.set_defaults(func=lambda ns, _ros_args: repair.main_from_args(ns))
 
     p = sub.add_parser("info", help="list a bag's topics, types and counts")
     p.add_argument("bag", help=".mcap file or rosbag2 directory")

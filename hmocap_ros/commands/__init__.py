@@ -6,4 +6,5 @@ they never import it. Each command module has ``add_arguments(parser)`` and
 ``main_from_args(ns)`` (:data:`hmocap_ros.cli.COMMAND_GROUPS`).
 
 - :mod:`~hmocap_ros.commands.train_gestures`: ``hmocap train gestures``.
+- :mod:`~hmocap_ros.commands.repair`: ``hmocap repair``.
 """

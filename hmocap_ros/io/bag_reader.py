@@ -5,11 +5,14 @@ conversion functions of :mod:`hmocap_ros.io.conversions` accept them like rclpy 
 or as raw CDR bytes for replay; :meth:`BagReader.frame_sets` groups the images of several
 cameras by their ``header.stamp`` with the same :class:`~hmocap_ros.stamp_sync.StampSynchronizer`
 the live nodes use. Type definitions come from the bag itself, so bags of other tools
-read as long as they are rosbag2 bags.
+read as long as they are rosbag2 bags. A bag whose recording did not close (no MCAP summary)
+is read up to its last complete record, with a warning that names ``hmocap repair``.
 """
 
 from __future__ import annotations
 
+import logging
+from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,11 +21,64 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability
 
 from .msg_factory import stamp_to_ns
+from .summaryless_mcap import summaryless_view
 from .typestore import hmocap_typestore
 
 
+_log = logging.getLogger(__name__)
+
+
 class BagReadError(RuntimeError):
-    """A bag could not be opened or read."""
+    """A bag could not be opened or read; the message starts with the bag's path."""
+
+
+def _reason(err: Exception) -> str:
+    return (str(err) or type(err).__name__).rstrip(".")
+
+
+def unreadable(path: Path, reason: str) -> BagReadError:
+    """The error for a file or folder that is not a bag or is damaged."""
+    return BagReadError(f"{path}: not a readable bag ({reason})")
+
+
+def _damage(f, offset: int, err: Exception) -> str:
+    """Where and why an MCAP file cannot be read, for a record starting at ``offset`` whose
+    parsing raised ``err``: e.g. "chunk record at byte 43: decompression error"."""
+    from mcap.opcode import Opcode
+
+    if offset == 0:
+        return f"the file start: {_reason(err)}"
+    size = f.seek(0, 2)
+    f.seek(offset)
+    head = f.read(9)
+    if not head:
+        return f"byte {offset}: {_reason(err)}"
+    try:
+        name = Opcode(head[0]).name.lower().replace("_", " ") + " record"
+    except ValueError:
+        name = f"record of unknown opcode 0x{head[0]:02x}"
+    if len(head) < 9 or offset + 9 + int.from_bytes(head[1:], "little") > size:
+        return f"{name} at byte {offset}: the file ends inside it"
+    return f"{name} at byte {offset}: {_reason(err)}"
+
+
+def scan_mcap(path: Path) -> None:
+    """Read every record of one MCAP file from magic to magic, decompressing the chunks and
+    checking the chunk and data-section CRCs where the file has them; raise
+    :class:`BagReadError` naming the first record that cannot be read and its byte offset."""
+    from mcap.stream_reader import StreamReader
+
+    with path.open("rb") as f:
+        records = StreamReader(f, validate_crcs=True).records
+        while True:
+            offset = f.tell()
+            try:
+                next(records)
+            except StopIteration:
+                return
+            # Damaged bytes surface as whatever the parser or the decompressor trips on.
+            except Exception as err:
+                raise unreadable(path, _damage(f, offset, err)) from err
 
 
 @dataclass(frozen=True)
@@ -51,14 +107,32 @@ class BagReader:
     def __init__(self, path: str | Path):
         self.path = Path(path)
         if not self.path.exists():
-            raise BagReadError(f"bag {self.path} does not exist")
-        self._reader = AnyReader([self.path], default_typestore=hmocap_typestore())
+            raise BagReadError(f"{self.path}: does not exist")
+        self.summaryless = summaryless_view(self.path)
+        if self.summaryless is not None:
+            _log.warning("%s", self.repair_hint())
+        elif self.path.is_dir() and not (self.path / "metadata.yaml").is_file():
+            raise unreadable(self.path, "a folder without metadata.yaml")
+        try:
+            self._reader = AnyReader([self.summaryless or self.path], default_typestore=hmocap_typestore())
+        except Exception as err:  # rosbags raises several error types for what is not a bag
+            raise unreadable(self.path, _reason(err)) from err
+
+    def repair_hint(self) -> str:
+        """For a bag that did not close: what is read of it, and the command that makes it whole."""
+        if self.summaryless is None:
+            return ""
+        cut = self.summaryless.dropped_bytes
+        return (f"{self.path}: the recording did not close (no MCAP summary); read up to its last "
+                f"complete record{f', {cut} bytes of a cut record left out' if cut else ''}; "
+                f"`hmocap repair {self.path}` rewrites it whole")
 
     def open(self) -> BagReader:
         try:
             self._reader.open()
-        except Exception as err:  # rosbags raises several error types for a bad file
-            raise BagReadError(f"cannot read bag {self.path}: {err}") from err
+        except Exception as err:  # rosbags raises several error types for a damaged file
+            hint = self.repair_hint()
+            raise unreadable(self.path, _reason(err) + (f"; {hint}" if hint else "")) from err
         return self
 
     def close(self) -> None:
@@ -90,24 +164,43 @@ class BagReader:
             out[topic] = TopicInfo(topic, info.msgtype or "", info.msgcount, latched)
         return out
 
+    def check_topics(self, topics: Iterable[str]) -> None:
+        """Raise :class:`BagReadError` naming those of ``topics`` that the bag does not hold."""
+        available = {c.topic for c in self._reader.connections}
+        missing = sorted(set(topics) - available)
+        if missing:
+            raise BagReadError(f"{self.path}: no topic {', '.join(missing)} in the bag "
+                               f"(it has {', '.join(sorted(available)) or 'none'})")
+
     def messages(self, topics: Iterable[str] | None = None, raw: bool = False) -> Iterator[BagMessage]:
         """Messages in recording-time order, optionally only of ``topics``; decoded unless ``raw``."""
         wanted = None if topics is None else set(topics)
-        connections = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if wanted is not None:
-            missing = wanted - {c.topic for c in connections}
-            if missing:
-                raise BagReadError(f"bag {self.path} has no topic(s) {sorted(missing)}")
+            self.check_topics(wanted)
+        connections = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if not connections:
             return
+        n = 0
         try:
             for conn, log_ns, data in self._reader.messages(connections=connections):
                 msg = data if raw else self._reader.deserialize(data, conn.msgtype)
                 yield BagMessage(conn.topic, conn.msgtype, log_ns, msg)
-        except Exception as err:
-            if isinstance(err, BagReadError):
-                raise
-            raise BagReadError(f"bag {self.path} is corrupt or truncated: {err}") from err
+                n += 1
+        except Exception as err:  # rosbags raises several error types for a damaged file
+            raise unreadable(self.path, f"message {n + 1} in time order: {_reason(err)}") from err
+
+    def verify(self) -> None:
+        """Read the whole bag: every record of its MCAP files (:func:`scan_mcap`), then every
+        message, whose count per topic must match the bag's summary. Raises
+        :class:`BagReadError` naming the first part that cannot be read."""
+        files = [self.path] if self.path.is_file() else sorted(self.path.glob("*.mcap"))
+        for path in files:
+            if path.suffix == ".mcap":
+                scan_mcap(path)
+        counts = Counter(m.topic for m in self.messages(raw=True))
+        for topic, info in sorted(self.topics().items()):
+            if counts[topic] != info.count:
+                raise unreadable(self.path, f"{counts[topic]} of the {info.count} messages on {topic} read")
 
     def first(self, topic: str):
         """The first decoded message on ``topic`` (e.g. the latched ``camera_rig``), or None."""

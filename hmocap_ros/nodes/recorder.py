@@ -11,8 +11,12 @@ nothing that publisher sends is dropped for being unknown), the recorder logs
 ``receiving <topic> from N publisher(s)``: a script that starts a source after the recorder
 waits for that line.
 
-Ctrl-C or SIGTERM stops the recording: the node first takes every message already
-delivered, then flushes and closes the bag, and prints what it recorded.
+The bag is written at its final path and flushed at least once a second (see
+:mod:`hmocap_ros.io.bag_writer`): a recorder killed at any moment leaves a readable bag holding
+every message received up to its last flush, which ``hmocap repair`` makes whole. A bag that
+exists already is never overwritten. Ctrl-C or SIGTERM stops the recording: the node first
+takes every message already delivered, then flushes and closes the bag, and prints what it
+recorded. A write error (disk full) stops it too, with the bag kept as last flushed.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from hmocap_ros.io.bag_writer import BagWriter, QosProfile
+from hmocap_ros.io.bag_writer import BagWriteError, BagWriter, QosProfile
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
 
 # Topics of the ROS graph itself, never worth recording with --all.
@@ -44,6 +48,7 @@ class Recorder(Node):
         self._subs = {}
         self._matched: set[str] = set()
         self._unknown_types: set[str] = set()
+        self.write_error: BagWriteError | None = None
         self._discover()
         self.create_timer(0.1, self._discover)
 
@@ -97,12 +102,26 @@ class Recorder(Node):
 
     def _make_callback(self, topic: str, typename: str):
         def callback(data: bytes) -> None:
-            self.writer.write(topic, data, self.get_clock().now().nanoseconds, msgtype=typename)
+            if self.write_error is not None:
+                return
+            try:
+                self.writer.write(topic, data, self.get_clock().now().nanoseconds, msgtype=typename)
+            except BagWriteError as err:
+                self.write_error = err
+                self.get_logger().error(str(err))
 
         return callback
 
     def missing_topics(self) -> list[str]:
         return [t for t in self.requested if t not in self._subs]
+
+
+def _flush_if_due(node: Recorder) -> None:
+    try:
+        node.writer.flush_if_due()
+    except BagWriteError as err:
+        node.write_error = err
+        node.get_logger().error(str(err))
 
 
 def record(output: str, topics: list[str], record_all: bool = False, duration: float | None = None,
@@ -112,10 +131,14 @@ def record(output: str, topics: list[str], record_all: bool = False, duration: f
     With ``progress`` > 0, print ``written: N messages: /topic n, ...`` (the counts so far)
     whenever they changed, at most every ``progress`` seconds: a script waits on it for the
     outputs to come to rest."""
+    try:
+        writer = BagWriter(output).open()
+    except BagWriteError as err:
+        raise SystemExit(f"hmocap record: {err} (a recording cut short is made whole by "
+                         f"`hmocap repair {output}`); record to another name") from None
     flag = ShutdownFlag()
     rclpy.init(args=["hmocap_record", *(ros_args or [])], signal_handler_options=SignalHandlerOptions.NO)
     flag.install()
-    writer = BagWriter(output).open()
     node = Recorder(writer, topics, record_all)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
@@ -126,8 +149,10 @@ def record(output: str, topics: list[str], record_all: bool = False, duration: f
     shown = 0
     next_progress = time.monotonic()
     try:
-        while not flag.requested and (t_end is None or time.monotonic() < t_end):
+        while (not flag.requested and node.write_error is None
+               and (t_end is None or time.monotonic() < t_end)):
             executor.spin_once(timeout_sec=0.05)
+            _flush_if_due(node)
             if progress > 0 and time.monotonic() >= next_progress:
                 total = sum(writer.counts.values())
                 if total != shown:
@@ -137,13 +162,16 @@ def record(output: str, topics: list[str], record_all: bool = False, duration: f
                 next_progress = time.monotonic() + progress
         # Take what DDS has already delivered to us before closing the bag.
         drain_end = time.monotonic() + 0.3
-        while time.monotonic() < drain_end:
+        while time.monotonic() < drain_end and node.write_error is None:
             executor.spin_once(timeout_sec=0.02)
     finally:
         missing = node.missing_topics()
         node.destroy_node()
         writer.close()
         rclpy.try_shutdown()
+    if node.write_error is not None:
+        raise SystemExit(f"hmocap record: {node.write_error}; stopped recording (`hmocap info {output}` "
+                         f"lists what was kept; with space free again, `hmocap repair {output}` makes it whole)")
     if not quiet:
         for topic, count in sorted(writer.counts.items()):
             print(f"  {topic}: {count} messages")

@@ -13,11 +13,15 @@ discovery only; a best-effort subscriber drops messages from a publisher that it
 matched in turn, so the replay then waits ``--settle`` seconds more for the other side.
 When the replay falls behind (a loaded machine), it publishes the overdue messages at once:
 subscribers need a queue that holds such a burst (see ``nodes.common.sensor_qos``).
+
+A bag that cannot be read, a ``--topics`` entry the bag lacks or a rate that is not positive
+ends ``hmocap replay`` with one line on stderr and exit status 2, before ROS starts.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import rclpy
@@ -25,7 +29,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from hmocap_ros.io.bag_reader import BagReader
+from hmocap_ros.io.bag_reader import BagReader, BagReadError
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
 
 #: History of the reliable volatile publishers: a reliable subscriber that falls behind gets
@@ -70,58 +74,67 @@ def replay(bag: str, rate: float = 1.0, loop: bool = False, topics: list[str] | 
     """Publish the bag's messages at ``rate`` times the recorded pace; return counts per topic.
 
     With ``wait_subscribers`` > 0, wait (at most ``wait_timeout`` s) for that many subscribers on
-    every topic, then ``settle`` s more (see the module doc)."""
-    if rate <= 0:
-        raise ValueError(f"--rate must be positive, got {rate}")
-    flag = ShutdownFlag()
-    rclpy.init(args=["hmocap_replay", *(ros_args or [])], signal_handler_options=SignalHandlerOptions.NO)
-    flag.install()
-    counts: dict[str, int] = {}
-    try:
-        with BagReader(bag) as reader:
-            available = reader.topics()
-            wanted = available if not topics else {t: available[t] for t in topics if t in available}
-            for t in topics or []:
-                if t not in available:
-                    print(f"warning: {t} is not in {bag}; topics there: {', '.join(sorted(available))}")
+    every topic, then ``settle`` s more (see the module doc). The bag is opened and ``topics``
+    checked before ROS starts: ``ValueError`` for a rate that is not positive,
+    :class:`~hmocap_ros.io.bag_reader.BagReadError` for a bag that cannot be read or lacks one
+    of ``topics``."""
+    if not rate > 0:
+        raise ValueError(f"--rate must be positive, got {rate:g}")
+    with BagReader(bag) as reader:
+        available = reader.topics()
+        if topics:
+            reader.check_topics(topics)
+        wanted = {t: available[t] for t in topics} if topics else available
+        flag = ShutdownFlag()
+        rclpy.init(args=["hmocap_replay", *(ros_args or [])], signal_handler_options=SignalHandlerOptions.NO)
+        flag.install()
+        try:
             node = Replayer(wanted)
             if wait_subscribers > 0:
                 short = node.wait_for_subscribers(wait_subscribers, wait_timeout, flag)
                 if short and not quiet:
                     print(f"warning: no subscriber after {wait_timeout:.0f} s on: {', '.join(short)}")
-                end = time.monotonic() + settle
-                while time.monotonic() < end and not flag.requested:
-                    time.sleep(0.02)
+                _pause(settle, flag)
             if not quiet:
                 print(f"replaying {bag}: {len(node.publishers_by_topic)} topics at rate {rate:g}"
                       + (" (looping)" if loop else ""), flush=True)
-            counts = {t: 0 for t in node.publishers_by_topic}
-            while not flag.requested:
-                t0 = time.monotonic()
-                start_ns = None
-                for item in reader.messages(list(node.publishers_by_topic), raw=True):
-                    if flag.requested:
-                        break
-                    if start_ns is None:
-                        start_ns = item.log_time_ns
-                    due = t0 + (item.log_time_ns - start_ns) * 1e-9 / rate
-                    delay = due - time.monotonic()
-                    if delay > 0:
-                        time.sleep(delay)
-                    node.publishers_by_topic[item.topic].publish(item.msg)
-                    counts[item.topic] += 1
-                if not loop:
-                    break
+            counts = _publish(node, reader, rate, loop, flag)
             # Give DDS time to deliver the last messages before the publishers go away.
-            end = time.monotonic() + linger
-            while time.monotonic() < end and not flag.requested:
-                time.sleep(0.02)
+            _pause(linger, flag)
             node.destroy_node()
-    finally:
-        rclpy.try_shutdown()
+        finally:
+            rclpy.try_shutdown()
     if not quiet:
         for topic, count in sorted(counts.items()):
             print(f"  {topic}: {count} messages published")
+    return counts
+
+
+def _pause(seconds: float, flag: ShutdownFlag) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end and not flag.requested:
+        time.sleep(0.02)
+
+
+def _publish(node: Replayer, reader: BagReader, rate: float, loop: bool, flag: ShutdownFlag) -> dict[str, int]:
+    """Publish the messages of the node's topics with their recorded spacing divided by ``rate``
+    (again from the start while ``loop``); return counts per topic."""
+    counts = {t: 0 for t in node.publishers_by_topic}
+    while not flag.requested:
+        t0 = time.monotonic()
+        start_ns = None
+        for item in reader.messages(list(node.publishers_by_topic), raw=True):
+            if flag.requested:
+                break
+            if start_ns is None:
+                start_ns = item.log_time_ns
+            delay = t0 + (item.log_time_ns - start_ns) * 1e-9 / rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            node.publishers_by_topic[item.topic].publish(item.msg)
+            counts[item.topic] += 1
+        if not loop:
+            break
     return counts
 
 
@@ -142,6 +155,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
     topics = [t if t.startswith("/") else "/" + t for t in ns.topics] if ns.topics else None
-    replay(ns.bag, ns.rate, ns.loop, topics, ns.wait_subscribers, ns.wait_timeout, ns.linger, ros_args,
-           settle=ns.settle)
+    try:
+        replay(ns.bag, ns.rate, ns.loop, topics, ns.wait_subscribers, ns.wait_timeout, ns.linger, ros_args,
+               settle=ns.settle)
+    except (BagReadError, ValueError) as err:
+        print(f"hmocap replay: {err}", file=sys.stderr)
+        return 2
     return 0
