@@ -178,6 +178,14 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     repair.add_arguments(p)
     p.set_defaults(func=lambda ns, _ros_args: repair.main_from_args(ns))
 
+    from hmocap_ros.commands import export
+
+    p = sub.add_parser("export", help="write a bag's tracked motion as BVH, TRC or CSV",
+                       description="Write one body's motion of a bag (body_tracker's output, or the "
+                                   "simulator's ground truth) as a BVH, OpenSim TRC or CSV file.")
+    export.add_arguments(p)
+    p.set_defaults(func=lambda ns, _ros_args: export.main_from_args(ns))
+
     p = sub.add_parser("info", help="list a bag's topics, types and counts")
     p.add_argument("bag", help=".mcap file or rosbag2 directory")
     p.set_defaults(func=_cmd_info)
