@@ -7,13 +7,18 @@ and stop it with SIGINT, as a terminal would.
 
 from __future__ import annotations
 
+import logging
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+
+log = logging.getLogger(__name__)
 
 
 def loopback_dds_env(base: Mapping[str, str] | None = None, domain_id: int | None = None) -> dict[str, str]:
@@ -92,6 +97,42 @@ class NodeProcess:
 PERIODIC_TOPICS = ("/diagnostics", "/rosout", "/parameter_events")
 
 
+@dataclass(frozen=True)
+class ReplayResult(Mapping):
+    """What :func:`replay_through_nodes` ran and what came back.
+
+    A mapping of the processes (stopped) by name (``result["body_tracker"].output()``), with the
+    messages recorded per topic and the counts that were expected of the nodes.
+    """
+
+    procs: dict[str, NodeProcess]
+    recorded: dict[str, int] = field(default_factory=dict)
+    expected: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def unanswered(self) -> dict[str, int]:
+        """Per topic of ``expected`` that fell short, how many messages never came."""
+        return {t: n - self.recorded.get(t, 0) for t, n in self.expected.items() if self.recorded.get(t, 0) < n}
+
+    def __getitem__(self, name: str) -> NodeProcess:
+        return self.procs[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.procs)
+
+    def __len__(self) -> int:
+        return len(self.procs)
+
+
+_SUMMARY_LINE = re.compile(r"^  (/\S+): (\d+) messages$", re.MULTILINE)
+
+
+def _recorded(recorder: NodeProcess) -> dict[str, int]:
+    """Messages recorded per topic: the stopped recorder's summary, else its last progress line."""
+    counts = {topic: int(n) for topic, n in _SUMMARY_LINE.findall(recorder.output())}
+    return counts or _written(recorder)
+
+
 def _written(recorder: NodeProcess) -> dict[str, int]:
     """Messages recorded per topic so far, from the recorder's last ``--progress`` line."""
     lines = [ln for ln in recorder.output().splitlines() if ln.startswith("written: ")]
@@ -118,7 +159,7 @@ def replay_through_nodes(
     drain_timeout: float = 120.0,
     drain_topics: Sequence[str] | None = None,
     expect: Mapping[str, int] | None = None,
-) -> dict[str, NodeProcess]:
+) -> ReplayResult:
     """Replay ``bag`` into ``nodes`` (separate processes over DDS) while recording ``record_topics``.
 
     ``nodes`` are ``(name, module, args, ready_text)``: each is started with ``python -m module
@@ -132,8 +173,11 @@ def replay_through_nodes(
     recorded on ``drain_topics`` (default: the recorded topics but :data:`PERIODIC_TOPICS`) for
     ``settle`` seconds (all within ``drain_timeout`` s), then the recorder last, so it flushes
     everything. Give ``expect`` whenever the number of outputs is known: a node slower than
-    ``settle`` to its first output is otherwise stopped before it answered.
-    Returns the processes (stopped) so callers can read their logs.
+    ``settle`` to its first output is otherwise stopped before it answered, and the result
+    counts the frames the nodes never answered (:attr:`ReplayResult.unanswered`, also logged as
+    a warning).
+    Returns a :class:`ReplayResult`: the processes (stopped), so callers can read their logs,
+    and the messages recorded per topic.
     Raises RuntimeError, with the log of the process at fault, when something does not start.
     """
     procs: dict[str, NodeProcess] = {}
@@ -166,7 +210,11 @@ def replay_through_nodes(
             if name != "record":
                 proc.stop()
         recorder.stop()
-    return procs
+    result = ReplayResult(procs, _recorded(recorder), dict(expect or {}))
+    for topic, missing in result.unanswered.items():
+        log.warning("replay of %s: %s has %d of %d messages: %d frames never answered",
+                    Path(bag).name, topic, result.recorded.get(topic, 0), result.expected[topic], missing)
+    return result
 
 
 def _start_nodes(procs: dict[str, NodeProcess], nodes: Sequence[tuple[str, str, Sequence[str], str]],

@@ -38,13 +38,34 @@ than the last emitted set, or not newer than the last emitted frame of its key, 
 late; a repeated (key, stamp) is ignored as a duplicate. Memory is bounded: a key holding more than
 ``queue_size`` frames expires its oldest, at most ``queue_size`` frames per key wait in the
 expired pool (older groups are resolved first), and with ``max_delay_ns`` a frame that far behind
-the newest stamp seen expires too (the way to give up on a camera that stopped publishing, so that
-partial sets flow with bounded latency). :meth:`StampSynchronizer.flush` ends the stream.
+the newest stamp seen expires too. :meth:`StampSynchronizer.flush` ends the stream.
 
-Typical use (live node: one ``add`` per image callback; offline: :func:`synchronize`)::
+Giving up on a missing view
+---------------------------
+A camera that stopped publishing leaves its sets incomplete; two bounds let them out as partial
+sets (with ``allow_partial``):
 
-    sync = StampSynchronizer(rig.names, slop_ns=5_000_000, allow_partial=True, min_keys=3)
-    for stamp_ns, images in sync.add("cam_2", stamp_ns, image):
+* by stamp, ``max_delay_ns``: a frame expires once a frame that much newer has been added. This
+  needs no clock (offline streams), but the sets of the last ``max_delay_ns`` of a stream wait
+  for :meth:`~StampSynchronizer.flush`.
+* by arrival time, ``max_wait_ns``: ``add`` takes the arrival time of each frame (``now_ns``,
+  any monotonic clock in nanoseconds) and :meth:`~StampSynchronizer.poll`, called periodically
+  with the same clock, expires the frames of every group whose newest view arrived
+  ``max_wait_ns`` or longer ago (a group: queued frames of different keys within ``slop`` of each
+  other). Expired groups are emitted as in 4 once no queued frame can still join them; a key
+  without queued frames is then not waited for. A missing view therefore costs at most
+  ``max_wait_ns`` plus the polling period after the last view of its set arrived, also at the end
+  of a stream and on a live stream with a dead camera. A view arriving after its set has gone
+  out is dropped as ``late``.
+
+Typical use (live node: one ``add`` per image callback, ``poll`` on a timer; offline:
+:func:`synchronize`)::
+
+    sync = StampSynchronizer(rig.names, slop_ns=5_000_000, allow_partial=True, min_keys=3,
+                             max_wait_ns=200_000_000)
+    for stamp_ns, images in sync.add("cam_2", stamp_ns, image, now_ns=time.monotonic_ns()):
+        tracker.step(stamp_ns, images)
+    for stamp_ns, images in sync.poll(time.monotonic_ns()):  # every ~50 ms
         tracker.step(stamp_ns, images)
 """
 
@@ -79,7 +100,8 @@ class SyncStats:
     ``dropped`` counts frames never emitted, per key; ``drop_reasons`` per reason:
     ``late`` (older than what was already emitted), ``duplicate`` (key and stamp seen before),
     ``unmatched`` (no complete set and no partial set was allowed/big enough),
-    ``overflow`` (pushed out of a full queue), ``timeout`` (older than ``max_delay_ns``).
+    ``overflow`` (pushed out of a full queue), ``timeout`` (older than ``max_delay_ns``, or its
+    group waited ``max_wait_ns``).
     """
 
     received: int
@@ -100,6 +122,7 @@ class _Frame:
     key: Hashable
     item: Any
     reason: str = "unmatched"  # why it expired, for the counters if it is dropped
+    arrival: float = _INF  # arrival clock (ns) when added; inf: unknown, never waited out
 
 
 class StampSynchronizer:
@@ -112,6 +135,8 @@ class StampSynchronizer:
         allow_partial: emit expired frames as incomplete sets of at least ``min_keys`` keys.
         min_keys: smallest partial set (default: all keys but one, at least 1).
         max_delay_ns: expire frames this much older than the newest stamp seen (None: never).
+        max_wait_ns: with :meth:`poll`, expire the frames of a group whose newest view arrived
+            this long ago on the arrival clock (None: never).
         min_period_ns: a lower bound on the interval between two frames of one key (0: unknown);
             lets jittered sets out without waiting for the next frame.
     """
@@ -125,6 +150,7 @@ class StampSynchronizer:
         min_keys: int | None = None,
         max_delay_ns: int | None = None,
         min_period_ns: int = 0,
+        max_wait_ns: int | None = None,
     ) -> None:
         self.keys = tuple(keys)
         if not self.keys:
@@ -144,6 +170,9 @@ class StampSynchronizer:
         self.max_delay_ns = None if max_delay_ns is None else operator.index(max_delay_ns)
         if self.max_delay_ns is not None and self.max_delay_ns < 0:
             raise ValueError(f"max_delay_ns must be >= 0, got {max_delay_ns}")
+        self.max_wait_ns = None if max_wait_ns is None else operator.index(max_wait_ns)
+        if self.max_wait_ns is not None and self.max_wait_ns < 0:
+            raise ValueError(f"max_wait_ns must be >= 0, got {max_wait_ns}")
         self.min_period_ns = operator.index(min_period_ns)
         if self.min_period_ns < 0:
             raise ValueError(f"min_period_ns must be >= 0, got {min_period_ns}")
@@ -184,11 +213,16 @@ class StampSynchronizer:
             drop_reasons=dict(self._reasons),
         )
 
-    def add(self, key: Hashable, stamp_ns: int, item: Any) -> list[SyncedSet]:
-        """Offer one frame; returns the sets completed by it (often none, sometimes several)."""
+    def add(self, key: Hashable, stamp_ns: int, item: Any, now_ns: int | None = None) -> list[SyncedSet]:
+        """Offer one frame; returns the sets completed by it (often none, sometimes several).
+
+        ``now_ns`` is the frame's arrival time on the clock :meth:`poll` is given (None: the
+        frame is never given up on by :meth:`poll`).
+        """
         if key not in self._stamps:
             raise KeyError(f"unknown key {key!r}; expected one of {list(self.keys)}")
         stamp = operator.index(stamp_ns)
+        arrival = _INF if now_ns is None else operator.index(now_ns)
         self._received += 1
         stamps = self._stamps[key]
         i = bisect.bisect_left(stamps, stamp)
@@ -200,13 +234,31 @@ class StampSynchronizer:
             self._drop(key, "late")
             return []
         stamps.insert(i, stamp)
-        self._frames[key].insert(i, _Frame(stamp, key, item))
+        self._frames[key].insert(i, _Frame(stamp, key, item, arrival=arrival))
         self._watermark[key] = max(self._watermark[key], stamp)
         self._newest = max(self._newest, stamp)
         out: list[SyncedSet] = []
         if len(stamps) > self.queue_size:
             self._expire_head(key, "overflow")
         self._process(out, final=False)
+        return out
+
+    def poll(self, now_ns: int) -> list[SyncedSet]:
+        """Give up on the views missing from sets that waited ``max_wait_ns``; returns the sets out.
+
+        ``now_ns`` is on the clock of ``add``'s ``now_ns``. A queued frame expires when it and
+        every queued frame of another key within ``slop_ns`` of it arrived at or before
+        ``now_ns - max_wait_ns``; the expired groups then go out as partial sets (or are dropped
+        as ``timeout`` below ``min_keys``). Call it periodically, e.g. every ``max_wait_ns / 4``.
+        """
+        if self.max_wait_ns is None:
+            raise ValueError("poll needs max_wait_ns")
+        deadline = operator.index(now_ns) - self.max_wait_ns
+        for key in self.keys:
+            while self._stamps[key] and self._waited_out(self._frames[key][0], deadline):
+                self._expire_head(key, "timeout")
+        out: list[SyncedSet] = []
+        self._process(out, final=False, deadline=deadline)
         return out
 
     def flush(self) -> list[SyncedSet]:
@@ -232,14 +284,32 @@ class StampSynchronizer:
         bisect.insort(self._expired, dataclasses.replace(frame, reason=reason), key=lambda f: (f.stamp, self.keys.index(f.key)))
         self._seen_expired.add((key, frame.stamp))
 
+    def _waited_out(self, frame: _Frame, deadline: float) -> bool:
+        """Whether ``frame`` and the queued frames of other keys within the slop of it all
+        arrived at or before ``deadline``."""
+        if frame.arrival > deadline:
+            return False
+        slop = self.slop_ns
+        for key in self.keys:
+            if key == frame.key:
+                continue
+            stamps = self._stamps[key]
+            lo = bisect.bisect_left(stamps, frame.stamp - slop)
+            hi = bisect.bisect_right(stamps, frame.stamp + slop)
+            if any(f.arrival > deadline for f in self._frames[key][lo:hi]):
+                return False
+        return True
+
     def _next_possible(self, key, final: bool) -> float:
         """Lower bound on the stamp of a frame of ``key`` that has not arrived yet."""
         if final:
             return _INF
         return self._watermark[key] + max(self.min_period_ns, 1)
 
-    def _process(self, out: list, final: bool) -> None:
-        """Emit every set that can be decided now (``final``: no more frames will come)."""
+    def _process(self, out: list, final: bool, deadline: float | None = None) -> None:
+        """Emit every set that can be decided now (``final``: no more frames will come;
+        ``deadline``: from :meth:`poll`, expired groups whose frames all arrived by then are not
+        waited on for keys without queued frames)."""
         slop = self.slop_ns
         while True:
             if self.max_delay_ns is not None:
@@ -285,24 +355,32 @@ class StampSynchronizer:
                 self._stamps[key].pop(0)
                 self._frames[key].pop(0)
             self._emit(out, stamp, members, complete=True)
-        self._emit_expired(out, before=self._closed_before(final), force=False)
+        self._emit_expired(out, before=self._closed_before(final, deadline), force=False, deadline=deadline)
         while len(self._expired) > self.queue_size * len(self.keys):  # bounded memory
             self._emit_expired(out, before=self._expired[0].stamp + self.slop_ns + 1, force=True)
 
-    def _closed_before(self, final: bool) -> float:
-        """No frame that could still expire has a stamp below this (expired groups there are closed)."""
-        bound = min(
-            self._stamps[k][0] if self._stamps[k] else self._next_possible(k, final) for k in self.keys
-        )
+    def _closed_before(self, final: bool, deadline: float | None = None) -> float:
+        """No frame that could still expire has a stamp below this (expired groups there are closed).
+
+        With a ``deadline`` (:meth:`poll`), keys without queued frames are not waited for: the
+        groups that are emitted must then have arrived by the deadline (see :meth:`_emit_expired`).
+        """
+        def earliest(key) -> float:
+            if self._stamps[key]:
+                return self._stamps[key][0]
+            return _INF if deadline is not None else self._next_possible(key, final)
+
+        bound = min(earliest(k) for k in self.keys)
         if self.max_delay_ns is not None:
             bound = max(bound, self._newest - self.max_delay_ns)
         return bound
 
-    def _emit_expired(self, out: list, before: float, force: bool) -> None:
+    def _emit_expired(self, out: list, before: float, force: bool, deadline: float | None = None) -> None:
         """Group expired frames (step 4) and emit each group as a partial set, or drop it.
 
         Resolves the groups whose whole window ``[s0, s0 + slop]`` lies below ``before``, or with
         ``force`` every group that starts below ``before`` (from its frames below ``before``).
+        With a ``deadline``, only groups whose frames all arrived by then (and the groups before).
         """
         while self._expired:
             s0 = self._expired[0].stamp
@@ -315,6 +393,8 @@ class StampSynchronizer:
                     group[frame.key] = frame
                 else:
                     rest.append(frame)
+            if deadline is not None and any(f.arrival > deadline for f in group.values()):
+                break
             self._expired = rest
             for frame in group.values():
                 self._seen_expired.discard((frame.key, frame.stamp))

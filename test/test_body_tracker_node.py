@@ -89,6 +89,46 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path):
     assert {s.message for d in diags for s in d.msg.status if s.name.endswith("body_1")} == {"searching"}
 
 
+def test_every_frame_answered_with_a_camera_absent(tmp_path):
+    # The ground-truth silhouettes of three of the four cameras straight into the tracker: the
+    # sets of the missing camera go out after max_wait_ms, also the last ones of the stream.
+    present = CAMERAS[:3]
+    remaps = [a for c in present for a in ("-r", f"/{c}/foreground:=/ground_truth/{c}/silhouette")]
+    with BagReader(DEMO_BAG) as reader:
+        frames = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/cam_1/image_raw"])}
+        person = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/ground_truth/skeleton"])}
+    node = ("body_tracker", "hmocap_ros.nodes.body_tracker",
+            ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "method:=hpf-apo", "-p", "queue_depth:=100",
+             "-p", "max_wait_ms:=150.0", *FAST, *remaps], "kernels ready")
+    result = replay_through_nodes(
+        DEMO_BAG, [node], ["/joint_states", "/diagnostics"], tmp_path / "out.mcap", loopback_dds_env(),
+        tmp_path / "logs", replay_topics=[f"/ground_truth/{c}/silhouette" for c in present], replay_rate=0.5,
+        expect={"/diagnostics": len(frames), "/joint_states": len(person)}, settle=2.0)
+    log = result["body_tracker"].output()
+    assert "Traceback" not in log, log
+    assert result.unanswered == {}, (result.recorded, log)
+    with BagReader(tmp_path / "out.mcap") as reader:
+        answered = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/diagnostics"])}
+        dropped = {kv.value for m in reader.messages(["/diagnostics"]) for st in m.msg.status
+                   for kv in st.values if kv.key == "dropped"}
+        joints = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/joint_states"])}
+    assert answered == frames and joints == person
+    assert dropped == {"cam_4"}
+
+
+def test_replay_result_counts_unanswered_frames(tmp_path):
+    from hmocap_ros.processes import ReplayResult, _recorded
+
+    rec = NodeProcess("rec", [sys.executable, "-c", "print('written: 3 messages: /a 3')\n"
+                                                    "print('  /a: 3 messages\\n  /b: never published')"],
+                      {}, tmp_path)
+    assert rec.wait(30) == 0
+    result = ReplayResult({"rec": rec}, _recorded(rec), {"/a": 5, "/b": 1, "/c": 0})
+    rec.stop()
+    assert result["rec"] is rec and list(result) == ["rec"]
+    assert result.recorded == {"/a": 3} and result.unanswered == {"/a": 2, "/b": 1}
+
+
 BAD_INPUT = r"""
 import time, numpy as np, rclpy
 from rclpy.qos import QoSProfile, DurabilityPolicy

@@ -9,6 +9,7 @@ from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.segmentation import mask_scores
+from hmocap_ros.nodes.foreground_segmentation import is_colour
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
@@ -43,6 +44,8 @@ for i in range(12):                                  # valid frames: learn 5, th
     if i >= 5:
         img[8:16, 10:20] = (250, 30, 30)
     send(numpy_to_image(img, "rgb8", stamp, "cam_1", f)); stamp += 1
+for _ in range(3):                                   # mono after learning on colour
+    send(numpy_to_image(np.full((24, 32), 90, np.uint8), "mono8", stamp, "cam_1", f)); stamp += 1
 for _ in range(3):                                   # wrong size after learning
     send(numpy_to_image(np.zeros((12, 16, 3), np.uint8), "rgb8", stamp, "cam_1", f)); stamp += 1
 print("sent", flush=True)
@@ -82,6 +85,11 @@ def test_masks_for_every_frame_with_input_stamps(tmp_path):
     assert float(np.mean(scores.f1)) > 0.75, scores.f1
 
 
+def test_colour_and_mono_encodings():
+    assert is_colour("rgb8") and is_colour("bgr8") and is_colour("bgra16")
+    assert not is_colour("mono8") and not is_colour("mono16") and not is_colour("8UC1")
+
+
 RELEARN_CLIENT = r"""
 import rclpy
 from std_srvs.srv import Trigger
@@ -106,7 +114,7 @@ def test_bad_input_is_logged_and_survived(tmp_path):
         assert rec.wait_for_output("receiving /cam_1/foreground from", 60), rec.output()
         with NodeProcess("pub", [sys.executable, "-c", BAD_INPUT_PUBLISHER], env, tmp_path) as pub:
             assert pub.wait_for_output("sent", 60), pub.output()
-        # 12 valid frames -> 12 masks (5 empty while learning); the 7 bad ones are refused.
+        # 12 valid frames -> 12 masks (5 empty while learning); the 10 bad ones are refused.
         assert rec.wait_for_output("written: 12 messages", 30), rec.output()
         assert node.proc.poll() is None, node.output()       # still running
         with NodeProcess("relearn", [sys.executable, "-c", RELEARN_CLIENT], env, tmp_path) as client:
@@ -115,6 +123,7 @@ def test_bad_input_is_logged_and_survived(tmp_path):
         log = node.output()
     assert "16UC1" in log, log   # (the short-data error follows within the 5 s log throttle)
     assert "learnt at 32x24" in log, log
+    assert "cam_1/image_raw is mono8, the background was learnt from rgb8 frames: frame refused" in log, log
     with BagReader(tmp_path / "o.mcap") as reader:
         masks = [image_to_numpy(m.msg) for m in reader.messages()]
     assert len(masks) == 12

@@ -233,6 +233,115 @@ def test_random_streams_invariants_and_determinism(seed):
             assert len(first) == expected + pairs
 
 
+def test_poll_lets_out_the_end_of_a_stream_with_a_dead_camera():
+    # Real-time arrival (arrival = stamp + 2 ms); cam_3 dies after 10 frames. The stamp bound
+    # alone keeps the last max_delay of the stream; poll lets it out max_wait after arrival.
+    stamps = [i * PERIOD for i in range(30)]
+    stream = time_ordered(frames({"cam_1": stamps, "cam_2": stamps, "cam_3": stamps[:10]}))
+    wait = 100 * MS
+    sync = StampSynchronizer(KEYS, allow_partial=True, min_keys=2, max_delay_ns=3 * PERIOD, max_wait_ns=wait)
+    out = []
+    for key, stamp, item in stream:
+        out += sync.add(key, stamp, item, now_ns=stamp + 2 * MS)
+        out += sync.poll(stamp + 2 * MS)
+    assert len(out) < 30
+    last_arrival = stamps[-1] + 2 * MS
+    out += sync.poll(last_arrival + wait - 1)
+    assert out[-1].stamp_ns == stamps[-2]  # the last set's views have not waited max_wait yet
+    out += sync.poll(last_arrival + wait)
+    check_invariants(out, 0)
+    assert [s.stamp_ns for s in out] == stamps
+    assert [len(s.items) for s in out] == [3] * 10 + [2] * 20
+    assert sync.pending == 0 and sync.stats.dropped_total == 0
+    assert sync.flush() == []
+
+
+def test_poll_bounds_the_delay_of_a_live_stream_with_a_dead_camera():
+    # No stamp bound: every set after cam_3 died goes out by poll, within max_wait plus one
+    # polling period of the arrival of its last view.
+    wait, tick = 80 * MS, 20 * MS
+    stamps = [i * PERIOD for i in range(40)]
+    arrivals = sorted((s + 3 * MS, k, s) for k in KEYS for s in stamps if k != "cam_3" or s < 10 * PERIOD)
+    sync = StampSynchronizer(KEYS, allow_partial=True, min_keys=2, max_wait_ns=wait)
+    out_at = {}
+    now, i = 0, 0
+    while i < len(arrivals) or sync.pending:
+        now += tick
+        while i < len(arrivals) and arrivals[i][0] <= now:
+            arrival, key, stamp = arrivals[i]
+            out_at.update((s.stamp_ns, (now, s)) for s in sync.add(key, stamp, (key, stamp), now_ns=arrival))
+            i += 1
+        out_at.update((s.stamp_ns, (now, s)) for s in sync.poll(now))
+    assert sorted(out_at) == stamps
+    check_invariants([s for _, s in sorted(out_at.values(), key=lambda v: v[1].stamp_ns)], 0)
+    for stamp, (when, s) in out_at.items():
+        assert len(s.items) == (3 if stamp < 10 * PERIOD else 2)
+        if stamp >= 10 * PERIOD:
+            assert when - (stamp + 3 * MS) <= wait + tick
+
+
+def test_poll_waits_from_the_newest_view_and_drops_views_after_it():
+    sync = StampSynchronizer(KEYS, allow_partial=True, min_keys=1, max_wait_ns=100 * MS)
+    assert sync.add("cam_1", 0, "a0", now_ns=0) == []
+    assert sync.add("cam_2", 0, "b0", now_ns=80 * MS) == []
+    assert sync.poll(150 * MS) == []                                # cam_2 arrived 70 ms ago
+    assert sync.add("cam_3", 0, "c0", now_ns=160 * MS) == [SyncedSet(0, {"cam_1": "a0", "cam_2": "b0", "cam_3": "c0"})]
+    assert sync.add("cam_1", PERIOD, "a1", now_ns=200 * MS) == []
+    assert sync.poll(299 * MS) == []
+    assert sync.poll(300 * MS) == [SyncedSet(PERIOD, {"cam_1": "a1"})]
+    assert sync.add("cam_2", PERIOD, "b1", now_ns=310 * MS) == []   # its set has gone out
+    assert sync.stats.drop_reasons == {"late": 1}
+    assert sync.stats.complete_sets == 1 and sync.stats.partial_sets == 1 and sync.pending == 0
+
+
+def test_poll_below_min_keys_drops_as_timeout():
+    sync = StampSynchronizer(KEYS, allow_partial=True, min_keys=2, max_wait_ns=10 * MS)
+    sync.add("cam_1", 0, "a", now_ns=0)
+    assert sync.poll(10 * MS) == []
+    assert sync.pending == 0 and sync.stats.drop_reasons == {"timeout": 1}
+
+
+def test_poll_needs_max_wait_and_arrival_times():
+    with pytest.raises(ValueError):
+        StampSynchronizer(KEYS).poll(0)
+    with pytest.raises(ValueError):
+        StampSynchronizer(KEYS, max_wait_ns=-1)
+    sync = StampSynchronizer(KEYS, allow_partial=True, min_keys=1, max_wait_ns=MS)
+    sync.add("cam_1", 0, "a")  # no arrival time: poll never gives up on its set
+    assert sync.poll(10**12) == [] and sync.pending == 1
+    assert sync.flush() == [SyncedSet(0, {"cam_1": "a"})]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_random_streams_with_poll_invariants(seed):
+    """Jittered stamps, lost frames, random arrival delays and polls: every frame is emitted or
+    counted as dropped, sets keep the invariants, and views that arrive in time are never split."""
+    rng = np.random.default_rng(seed)
+    n, slop, wait = 50, 4 * MS, 60 * MS
+    arrivals = []
+    for k in KEYS:
+        stamps = np.arange(n) * PERIOD + rng.integers(-MS, MS, n)
+        keep = rng.random(n) > 0.15
+        delay = rng.integers(0, 30 * MS, n)  # always within max_wait of the set's first view
+        arrivals += [(int(s + d), k, int(s)) for s, d, ok in zip(stamps, delay, keep) if ok]
+    arrivals.sort()
+    sync = StampSynchronizer(KEYS, slop_ns=slop, allow_partial=True, min_keys=1, max_wait_ns=wait)
+    out = []
+    for arrival, key, stamp in arrivals:
+        out += sync.poll(arrival)
+        out += sync.add(key, stamp, (key, stamp), now_ns=arrival)
+    out += sync.poll(arrivals[-1][0] + wait)
+    assert sync.pending == 0
+    check_invariants(out, slop)
+    stats = sync.stats
+    assert sum(len(s.items) for s in out) + stats.dropped_total == len(arrivals)
+    assert stats.dropped_total == 0  # every view arrived within max_wait of its set's others
+    by_index = {}
+    for _, key, stamp in arrivals:
+        by_index.setdefault(round(stamp / PERIOD), set()).add(key)
+    assert sorted(len(s.items) for s in out) == sorted(len(v) for v in by_index.values())
+
+
 def test_synchronize_skips_other_keys_and_flushes():
     stream = [("cam_1", 0, "a"), ("imu", 0, "x"), ("cam_2", 0, "b"), ("cam_1", 10, "c")]
     out = list(synchronize(stream, ("cam_1", "cam_2"), allow_partial=True, min_keys=1))

@@ -28,6 +28,15 @@ Publications (all with the stamp of the frame set):
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray): per body state, seconds per frame, ESS
   and milliseconds per layer, time per stage, views used and dropped, and with ``dd-hpf`` the
   extremities detected.
+Synchronisation (:class:`~hmocap_ros.stamp_sync.StampSynchronizer`): a frame set goes to the
+tracker when every camera's mask of its stamp (within ``slop_ms``) is there, or, with a camera
+missing, ``max_wait_ms`` after its newest mask arrived (a steady-clock timer polls every
+``max_wait_ms / 4``) or once a mask ``max_wait_ms`` newer has come, with at least
+``min_views_to_sync`` views; a mask that arrives after its set went out is dropped. The wait
+counts only time the node is idle: masks queued while the tracker works on a frame are not given
+up on. So the last frames of a stream and a live stream with a dead camera are tracked with at
+most ``max_wait_ms`` (plus a timer period) of added delay.
+
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``,
 ``queue_depth``, ``seed``, ``body_id``, ``max_people`` and every setting of
 :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
@@ -53,6 +62,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
 from hmocap_interfaces.msg import CameraRig, Skeleton
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Image, JointState
 from visualization_msgs.msg import Marker, MarkerArray
@@ -76,8 +86,10 @@ class BodyTrackerNodeConfig:
     rig_file: str = param("", "Rig calibration YAML; empty = take the rig from the latched camera_rig topic.")
     slop_ms: float = param(5.0, "Largest stamp difference (ms) between the masks of one frame set.")
     min_views_to_sync: int = param(2, "Frame sets with at least this many cameras are processed when a "
-                                      "camera drops out (after max_wait_ms).")
-    max_wait_ms: float = param(200.0, "How long (ms) a frame set waits for a missing camera.")
+                                      "camera drops out (after max_wait_ms); 1 to the number of cameras.")
+    max_wait_ms: float = param(200.0, "How long (ms, > 0) a frame set waits for a missing camera after its "
+                                      "newest mask arrived (idle time of the node) or until a mask this "
+                                      "much newer arrives; then it is processed with the views it has.")
     queue_depth: int = param(5, "Masks queued per camera while the tracker is busy (best effort: older "
                                 "ones are dropped, so a live tracker works on recent frames; raise it "
                                 "when replaying a bag slowly and every frame must be tracked).")
@@ -107,6 +119,7 @@ class BodyTrackerNode(Node):
         self.last_shape = [None] * len(self.ids)
         self.last_state = ["searching"] * len(self.ids)
         self.frames = 0
+        self.busy_ns = 0  # time spent in _process: not waiting time for the synchroniser
         self.pub_skeleton = self.create_publisher(Skeleton, "skeleton", RESULT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "skeleton_markers", RESULT_QOS)
         # per body: (joint_states, body_shape); the first body's on the plain topics too
@@ -121,6 +134,12 @@ class BodyTrackerNode(Node):
                     self.create_publisher(BodyShapeMsg, f"humans/bodies/{body}/body_shape",
                                           LATCHED_QOS)))
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        if self.config.max_wait_ms <= 0:
+            self.get_logger().fatal(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
+            raise SystemExit(2)
+        # A steady clock: sets with a missing view go out on time whatever /clock does.
+        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.config.rig_file:
             try:
                 self._set_rig(load_rig(self.config.rig_file))
@@ -152,7 +171,8 @@ class BodyTrackerNode(Node):
         self.sync = StampSynchronizer(
             list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
-            min_keys=min(self.config.min_views_to_sync, len(rig)), max_delay_ns=int(self.config.max_wait_ms * 1e6))
+            min_keys=min(self.config.min_views_to_sync, len(rig)),
+            max_delay_ns=int(self.config.max_wait_ms * 1e6), max_wait_ns=int(self.config.max_wait_ms * 1e6))
         if first:
             # Subscribe before compiling: masks that arrive during the (cold-cache) warm-up
             # wait in the subscriptions' queues instead of being published to nobody.
@@ -209,12 +229,30 @@ class BodyTrackerNode(Node):
             mask = self._mono8(msg, f"{name}/foreground")
             if mask is None:
                 return
-            for synced in self.sync.add(name, stamp_to_ns(msg.header.stamp), mask):
+            for synced in self.sync.add(name, stamp_to_ns(msg.header.stamp), mask,
+                                        now_ns=self._idle_clock_ns()):
                 self._process(synced.stamp_ns, synced.items)
 
         return on_mask
 
+    def _idle_clock_ns(self) -> int:
+        """Steady time the node has not spent processing (the synchroniser's arrival clock)."""
+        return time.monotonic_ns() - self.busy_ns
+
+    def _poll_sync(self) -> None:
+        if self.sync is None:
+            return
+        for synced in self.sync.poll(self._idle_clock_ns()):
+            self._process(synced.stamp_ns, synced.items)
+
     def _process(self, stamp_ns: int, items: dict) -> None:
+        start = time.monotonic_ns()
+        try:
+            self._track(stamp_ns, items)
+        finally:
+            self.busy_ns += time.monotonic_ns() - start
+
+    def _track(self, stamp_ns: int, items: dict) -> None:
         log = self.get_logger()
         masks = []
         for cam in self.rig.cameras:

@@ -25,7 +25,12 @@ Parameters: ``cameras``, ``queue_depth``, ``diagnostics_period``, ``relearn_afte
 
 Frames of the wrong encoding or of a size other than the one learnt are refused with a
 logged error; after ``relearn_after_size_errors`` consecutive size errors the camera
-relearns at the new size (a camera driver was reconfigured).
+relearns at the new size (a camera driver was reconfigured). A mono frame (mono8, mono16)
+after a background learnt from colour frames, or a colour frame after a mono background, is
+refused too, with an error naming the camera and both encodings: against a background of the
+other kind every pixel would come out foreground. Colour encodings mix freely (bgr8 after rgb8
+is decoded to the same RGB). ``~/relearn`` learns the background anew from the frames that come
+next, whatever their encoding.
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
-from hmocap_ros.io.conversions import ConversionError, image_to_rgb, numpy_to_image
+from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to_rgb, numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.nodes.common import RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node, sensor_qos
 from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
@@ -60,11 +65,23 @@ class ForegroundNodeConfig:
                                      "(mono8, half resolution), for body_tracker's dd-hpf method.")
 
 
+def is_colour(encoding: str) -> bool:
+    """Whether frames of ``encoding`` carry colour (rgb8, bgra16, ...) rather than grey (mono8,
+    mono16, 8UC1); raises ConversionError for an unknown encoding."""
+    return encoding_layout(encoding).channels >= 3
+
+
 class _CameraState:
     def __init__(self, params: ForegroundParams):
         self.model = BackgroundModel(params)
         self.frames = 0
         self.seconds = 0.0
+        self.size_errors = 0
+        self.encoding: str | None = None  # of the frames the background is learnt from
+
+    def relearn(self) -> None:
+        self.model.relearn()
+        self.encoding = None
         self.size_errors = 0
 
 
@@ -103,13 +120,16 @@ class ForegroundSegmentation(Node):
             except ConversionError as err:
                 log.error(f"{name}/image_raw: {err}", throttle_duration_sec=5.0)
                 return
+            if state.encoding is not None and is_colour(msg.encoding) != is_colour(state.encoding):
+                log.error(f"{name}/image_raw is {msg.encoding}, the background was learnt from {state.encoding} "
+                          f"frames: frame refused (~/relearn learns it anew)", throttle_duration_sec=5.0)
+                return
             if state.model.shape is not None and rgb.shape[:2] != tuple(state.model.shape):
                 state.size_errors += 1
                 limit = self.config.relearn_after_size_errors
                 if limit and state.size_errors >= limit:
                     log.warning(f"{name}: image size changed to {rgb.shape[1]}x{rgb.shape[0]}; relearning")
-                    state.model.relearn()
-                    state.size_errors = 0
+                    state.relearn()
                 else:
                     log.error(f"{name}/image_raw is {rgb.shape[1]}x{rgb.shape[0]}, the background was learnt at "
                               f"{state.model.shape[1]}x{state.model.shape[0]}: frame refused",
@@ -122,8 +142,10 @@ class ForegroundSegmentation(Node):
                 mask = state.model.apply(rgb, stamp)
             except ValueError as err:  # e.g. a stamp older than the last (a bag restarted)
                 log.error(f"{name}: {err}; relearning", throttle_duration_sec=5.0)
-                state.model.relearn()
+                state.relearn()
                 return
+            if state.encoding is None:
+                state.encoding = msg.encoding
             skin = skin_probability(rgb, mask=mask) if name in self.skin_pubs else None
             state.seconds += time.perf_counter() - t0
             state.frames += 1
@@ -136,7 +158,7 @@ class ForegroundSegmentation(Node):
 
     def _relearn(self, _request, response):
         for state in self.cameras.values():
-            state.model.relearn()
+            state.relearn()
         response.success = True
         response.message = f"relearning the background of {len(self.cameras)} cameras"
         self.get_logger().info(response.message)
