@@ -98,6 +98,7 @@ COMMAND_GROUPS = {
         {
             "mocap": ("hmocap_ros.sim.mocap_dataset", "multi-view RGB bag of a retargeted BVH clip, with ground truth"),
             "gestures": ("hmocap_ros.sim.gesture_dataset", "depth bag of gestures among clutter, with ground truth"),
+            "calibration": ("hmocap_ros.sim.calibration_session", "multi-view bag of a ChArUco board carried through the room, with the true rig"),
         },
     ),
     "eval": (
@@ -185,6 +186,15 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                                    "simulator's ground truth) as a BVH, OpenSim TRC or CSV file.")
     export.add_arguments(p)
     p.set_defaults(func=lambda ns, _ros_args: export.main_from_args(ns))
+
+    from hmocap_ros.commands import calibrate
+
+    p = sub.add_parser("calibrate", help="calibrate the camera rig from a bag of a ChArUco board",
+                       description="Estimate every camera's intrinsics and pose in the room from a bag of "
+                                   "the room cameras seeing a ChArUco board carried through the room "
+                                   "(and laid on the floor first); write the rig YAML and a report.")
+    calibrate.add_arguments(p)
+    p.set_defaults(func=lambda ns, _ros_args: calibrate.main_from_args(ns))
 
     p = sub.add_parser("info", help="list a bag's topics, types and counts")
     p.add_argument("bag", help=".mcap file or rosbag2 directory")

@@ -1,0 +1,136 @@
+"""Rig calibration: bundle adjustment on exact synthetic observations, a rendered session
+against its true rig, and the bad inputs of ``hmocap calibrate``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hmocap_ros.calibration.board import BoardSpec
+from hmocap_ros.calibration.bundle_adjustment import bundle_adjust
+from hmocap_ros.calibration.geometry import rotation_angle_deg, rotation_matrices
+from hmocap_ros.calibration.observations import Observations
+from hmocap_ros.cli import main as hmocap
+from hmocap_ros.rig import load_rig
+from hmocap_ros.sim.calibration_path import board_poses
+from hmocap_ros.sim.mocap_rig import make_rig
+
+BOARD = ["--board", "5x4", "--square", "0.3", "--marker", "0.21"]
+
+
+def _synthetic(rig, spec, rng):
+    """Exact corner observations of a board carried for 12 s in front of ``rig``."""
+    t = np.arange(0.0, 12.0, 0.5)
+    R, o = board_poses(t, 1.0, spec.size_m, rng)
+    pts = spec.corner_points()
+    views = {}
+    for i in range(len(t)):
+        proj = rig.project(pts @ R[i].T + o[i])
+        for k, cam in enumerate(rig):
+            facing = (cam.R @ R[i][:, 2]) @ (cam.R @ o[i] + cam.t) > 0
+            vis = proj.visible[k] & facing
+            if vis.sum() >= 6:
+                views.setdefault((k, i), []).append((np.flatnonzero(vis), proj.pixels[k][vis]))
+    return Observations.from_views(views, len(rig), len(t)), R, o
+
+
+def test_bundle_adjustment_recovers_perturbed_rig():
+    rig = make_rig(3, 320, 240)
+    spec = BoardSpec()
+    rng = np.random.default_rng(3)
+    obs, R_board, t_board = _synthetic(rig, spec, rng)
+    K, R, t, D = rig.arrays()
+    # World = camera 0's frame (the gauge the adjustment holds).
+    R_w = R @ R[0].T
+    t_w = t - np.einsum("kij,j->ki", R_w, t[0])
+    Rb = np.einsum("ij,pjk->pik", R[0], R_board)
+    tb = t_board @ R[0].T + t[0]
+    R0 = rotation_matrices(rng.normal(0, 0.02, (3, 3))) @ R_w
+    R0[0] = np.eye(3)
+    t0 = t_w + np.r_[[[0, 0, 0]], rng.normal(0, 0.05, (2, 3))]
+    Rb0 = rotation_matrices(rng.normal(0, 0.02, (len(Rb), 3))) @ Rb
+    tb0 = tb + rng.normal(0, 0.05, tb.shape)
+    result = bundle_adjust(obs, spec.corner_points(), 0, R0, t0, Rb0, tb0, K, D[:, :5])
+    assert result.n_dropped == 0
+    assert np.abs(result.residuals).max() < 1e-6
+    assert np.abs(result.t_cam - t_w).max() < 1e-7
+    assert rotation_angle_deg(result.R_cam, R_w).max() < 1e-5
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> Path:
+    bag = tmp_path_factory.mktemp("cal") / "cal.mcap"
+    assert hmocap(["sim", "calibration", "--cameras", "3", "--seconds", "10", "--fps", "2",
+                   "--width", "320", "--height", "240", "--out", str(bag), "--quiet", *BOARD]) == 0
+    return bag
+
+
+def test_rendered_session_calibrates(session, tmp_path):
+    out = tmp_path / "rig.yaml"
+    assert hmocap(["calibrate", str(session), "--out", str(out), *BOARD]) == 0
+    truth = load_rig(session.with_name("cal_rig.yaml"))
+    estimated = load_rig(out)
+    assert estimated.names == truth.names
+    for cam in estimated:
+        assert np.linalg.norm(cam.position - truth[cam.name].position) < 0.02
+        assert rotation_angle_deg(cam.R, truth[cam.name].R) < 1.0
+    assert (tmp_path / "rig.report.txt").is_file() and (tmp_path / "rig.png").is_file()
+
+
+def _rewrite(src: Path, dst: Path, image_for) -> None:
+    """Copy a bag, with each camera image replaced by ``image_for(topic, rgb)``."""
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.bag_writer import LATCHED, VOLATILE, whole_bag
+    from hmocap_ros.io.images import image_to_rgb, numpy_to_image
+    from hmocap_ros.io.msg_factory import RosbagsFactory, stamp_to_ns
+    from hmocap_ros.io.typestore import hmocap_typestore
+
+    factory = RosbagsFactory(hmocap_typestore())
+    with BagReader(src) as reader, whole_bag(dst) as bag:
+        for name, info in reader.topics().items():
+            bag.add_topic(name, info.msgtype, LATCHED if info.latched else VOLATILE)
+        for item in reader.messages():
+            if item.topic.endswith("/image_raw"):
+                msg = item.msg
+                msg = numpy_to_image(image_for(item.topic, image_to_rgb(msg)), "rgb8",
+                                     stamp_to_ns(msg.header.stamp), msg.header.frame_id, factory)
+                bag.write(item.topic, msg, item.log_time_ns)
+            else:
+                bag.write(item.topic, item.msg, item.log_time_ns)
+
+
+def _fails(args, capsys, tmp_path) -> str:
+    out = tmp_path / "rig.yaml"
+    assert hmocap(["calibrate", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("rig")) == []
+    return err
+
+
+def test_bag_without_board(session, tmp_path, capsys):
+    blank = tmp_path / "blank.mcap"
+    _rewrite(session, blank, lambda topic, rgb: np.full_like(rgb, 128))
+    assert "no ChArUco marker" in _fails([str(blank), *BOARD], capsys, tmp_path)
+
+
+def test_board_of_other_dimensions(session, tmp_path, capsys):
+    err = _fails([str(session), "--board", "7x5", "--square", "0.3", "--marker", "0.21"], capsys, tmp_path)
+    assert "does not fit a 7x5" in err
+
+
+def test_camera_never_seeing_the_board(session, tmp_path, capsys):
+    blind = tmp_path / "blind.mcap"
+    _rewrite(session, blind, lambda topic, rgb: np.full_like(rgb, 128) if topic == "/cam_1/image_raw" else rgb)
+    out = tmp_path / "est.yaml"
+    assert hmocap(["calibrate", str(blind), "--out", str(out), *BOARD]) == 0
+    assert "cam_1: left out of the rig: never sees the board" in capsys.readouterr().out
+    assert load_rig(out).names == ("cam_2", "cam_3")
+    blind2 = tmp_path / "blind2.mcap"
+    _rewrite(blind, blind2, lambda topic, rgb: np.full_like(rgb, 128) if topic == "/cam_2/image_raw" else rgb)
+    for p in tmp_path.glob("est*"):
+        p.unlink()
+    err = _fails([str(blind2), *BOARD], capsys, tmp_path)
+    assert "a rig needs 2" in err
