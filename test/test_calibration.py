@@ -12,6 +12,8 @@ from hmocap_ros.calibration.board import BoardSpec
 from hmocap_ros.calibration.bundle_adjustment import bundle_adjust
 from hmocap_ros.calibration.geometry import rotation_angle_deg, rotation_matrices
 from hmocap_ros.calibration.observations import Observations
+from hmocap_ros.calibration.pipeline import calibrate_rig
+from hmocap_ros.calibration.room_frame import FLOOR_ROTATION
 from hmocap_ros.cli import main as hmocap
 from hmocap_ros.rig import load_rig
 from hmocap_ros.sim.calibration_path import board_poses
@@ -20,10 +22,11 @@ from hmocap_ros.sim.mocap_rig import make_rig
 BOARD = ["--board", "5x4", "--square", "0.3", "--marker", "0.21"]
 
 
-def _synthetic(rig, spec, rng):
-    """Exact corner observations of a board carried for 12 s in front of ``rig``."""
+def _synthetic(rig, spec, rng, floor_seconds=1.0):
+    """Exact corner observations of a board lying on the floor for ``floor_seconds``, then
+    carried until 12 s in front of ``rig``; one board pose per frame."""
     t = np.arange(0.0, 12.0, 0.5)
-    R, o = board_poses(t, 1.0, spec.size_m, rng)
+    R, o = board_poses(t, floor_seconds, spec.size_m, rng)
     pts = spec.corner_points()
     views = {}
     for i in range(len(t)):
@@ -57,6 +60,29 @@ def test_bundle_adjustment_recovers_perturbed_rig():
     assert np.abs(result.residuals).max() < 1e-6
     assert np.abs(result.t_cam - t_w).max() < 1e-7
     assert rotation_angle_deg(result.R_cam, R_w).max() < 1e-5
+
+
+def test_floor_frames_as_one_board_pose_give_the_room_frame():
+    rig = make_rig(4, 640, 480)
+    spec = BoardSpec()
+    obs, R_board, _ = _synthetic(rig, spec, np.random.default_rng(5), floor_seconds=2.0)
+    floor = np.flatnonzero(np.all(np.isclose(R_board, FLOOR_ROTATION), axis=(1, 2)))
+    assert len(floor) == 4 and len(np.unique(obs.camera[np.isin(obs.pose, floor)])) >= 2
+    # All floor frames become board pose 0, as ``hmocap calibrate`` groups them.
+    pose = np.full(obs.n_poses, -1)
+    pose[floor] = 0
+    carried = np.setdiff1d(np.arange(obs.n_poses), floor)
+    pose[carried] = np.arange(1, len(carried) + 1)
+    obs = Observations(obs.camera, pose[obs.pose], obs.corner, obs.pixels, obs.n_cameras,
+                       len(carried) + 1)
+    K, R, t, D = rig.arrays()
+    solution = calibrate_rig(obs, spec.corner_points(), K, D[:, :5], list(rig.names), floor_pose=0)
+    assert solution.cameras == [0, 1, 2, 3]
+    assert np.abs(solution.bundle.residuals).max() < 1e-6
+    assert np.abs(solution.t - t).max() < 1e-7
+    assert rotation_angle_deg(solution.R, R).max() < 1e-6
+    assert rotation_angle_deg(solution.R_board[0], FLOOR_ROTATION) < 1e-6
+    assert np.abs(solution.t_board[0]).max() < 1e-7
 
 
 @pytest.fixture(scope="module")

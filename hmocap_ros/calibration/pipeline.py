@@ -45,7 +45,9 @@ def calibrate_rig(obs: Observations, corner_points: np.ndarray, K: np.ndarray, D
                   refine_intrinsics: bool = False,
                   log: Callable[[str], None] = lambda line: None) -> RigSolution:
     """Camera poses in the room from the observations (module docstring); ``floor_pose`` is
-    the board pose lying on the floor (room frame from it), else ``room_camera`` gives it."""
+    the board pose lying on the floor, one pose for all the images of it so that every
+    camera's corners in every one of them constrain it (room frame from it), else
+    ``room_camera`` gives the room frame."""
     D = np.pad(np.asarray(D, float), ((0, 0), (0, 5)))[:, :5]
     poses = view_poses(obs, corner_points, K, D)
     cams, ref, edges = chain_cameras(poses, obs.n_cameras)
