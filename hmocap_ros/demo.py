@@ -36,7 +36,8 @@ GESTURE_BAG = DATA_DIR / "gestures_depth.mcap"
 
 #: body_tracker settings of the demo: the shipped bag is 160x120, so compare at full scale;
 #: every frame is queued (a live room would rather drop frames than lag).
-TRACKER_ARGS = ["-p", "working_scale:=1.0", "-p", "method:=dd-hpf", "-p", "queue_depth:=100"]
+TRACKER_ARGS = ["-p", "weighting.working_scale:=1.0", "-p", "method:=dd-hpf", "-p",
+                "queue_depth:=100"]
 
 
 def _cameras(bag: Path) -> list[str]:

@@ -164,6 +164,33 @@ def test_invalid_parameter_is_one_clear_line_and_exit_code_2(tmp_path):
     assert "Traceback" not in res.stderr
 
 
+def test_a_node_names_a_parameter_it_does_not_have():
+    """An outdated flat name of a grouped setting is reported with the names it may mean."""
+    import signal
+    import subprocess
+    import time
+
+    exe = Path(sys.executable).parent / "body_tracker"
+    if not exe.exists():
+        pytest.skip(f"{exe} not installed (run make setup)")
+    proc = subprocess.Popen([str(exe), "--ros-args", "-p", "working_scale:=1.0", "-p",
+                             f"rig_file:={DEMO_RIG}"], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=loopback_dds_env(domain_id=94))
+    lines = []
+    deadline = time.monotonic() + 60
+    try:
+        for line in proc.stdout:
+            lines.append(line)
+            if "unknown parameter" in line or time.monotonic() > deadline:
+                break
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+    text = "".join(lines)
+    assert "unknown parameter 'working_scale' ignored" in text, text
+    assert "weighting.working_scale" in text and "startup.working_scale" in text
+
+
 def test_every_hmocap_subcommand_answers_help(capsys):
     from hmocap_ros.cli import COMMAND_GROUPS, main
 

@@ -85,6 +85,20 @@ def declare_parameters(node: Node, config_cls):
     return from_flat(config_cls, values)
 
 
+def unknown_parameter_overrides(node: Node) -> list[str]:
+    """Parameters set for ``node`` (``-p``, ``--params-file``) that it never declared: a
+    misspelt or outdated name (a grouped setting is named with its group,
+    ``weighting.working_scale``), which rclpy would otherwise ignore without a word."""
+    declared = set(node._parameters)  # noqa: SLF001  (rclpy keeps no public list of overrides)
+    return sorted(name for name in node._parameter_overrides if name not in declared)
+
+
+def _suggestion(name: str, declared) -> str:
+    leaf = name.rsplit(".", 1)[-1]
+    near = [d for d in declared if d.rsplit(".", 1)[-1] == leaf]
+    return f" (did you mean {' or '.join(sorted(near))}?)" if near else ""
+
+
 def parameter_table(config_cls) -> str:
     """The parameters of a config dataclass as text: dotted name, type, default, description."""
     rows = []
@@ -154,6 +168,9 @@ def run_node(
         except ValueError as err:
             rclpy.logging.get_logger(node_name).fatal(f"cannot start: {err}")
             return 2
+        for name in unknown_parameter_overrides(node):
+            node.get_logger().error(f"unknown parameter {name!r} ignored"
+                                    + _suggestion(name, node._parameters))  # noqa: SLF001
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         while not flag.requested and rclpy.ok():
