@@ -21,4 +21,11 @@ def generate_launch_description():
                               description="Rig calibration YAML (intrinsics and camera poses)"),
         Node(package="hmocap_ros", executable="camera_rig_publisher", name="camera_rig_publisher",
              parameters=[os.path.join(config, "camera_rig_publisher.yaml"), {"rig_file": rig_file}]),
+        Node(package="hmocap_ros", executable="foreground_segmentation", name="foreground_segmentation",
+             parameters=[os.path.join(config, "foreground_segmentation.yaml")]),
+        # The rig comes from camera_rig_publisher on the latched camera_rig topic.
+        Node(package="hmocap_ros", executable="body_tracker", name="body_tracker",
+             parameters=[os.path.join(config, "body_tracker.yaml")]),
+        Node(package="hmocap_ros", executable="gesture_detection", name="gesture_detection",
+             parameters=[os.path.join(config, "gesture_detection.yaml")]),
     ])

@@ -2,21 +2,58 @@
 
 Set here, at import time, before any test imports rclpy, and inherited by the node
 processes the DDS tests start (see notes in README "Testing").
+
+Domain ids are taken with :func:`allocate_domain_id`: an id is held by an exclusive lock on
+``<temp dir>/hmocap_ros_dds_domain_<id>.lock`` for the life of the pytest process, so two
+pytest runs on one machine never share an id. A test that needs a domain apart from the run's
+asks the ``free_domain_id`` fixture for one.
 """
 
+import fcntl
 import os
+import random
+import tempfile
+from pathlib import Path
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 # One BLAS thread, as hmocap_ros/__init__.py sets (test modules import numpy before it).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
-# A domain of its own per pytest process, so parallel runs on one machine never cross
-# (Fast DDS ports stay valid for ids up to 101 on Linux).
-os.environ["ROS_DOMAIN_ID"] = str(os.environ.get("HMOCAP_TEST_DOMAIN_ID") or 1 + os.getpid() % 100)
+
+# Fast DDS ports stay valid for domain ids up to 101 on Linux.
+DOMAIN_IDS = range(1, 102)
+_held_domains: dict[int, object] = {}  # id -> the open lock file (closing it releases the id)
+_domain_order = random.Random(os.getpid()).sample(DOMAIN_IDS, len(DOMAIN_IDS))
+
+
+def allocate_domain_id() -> int:
+    """A ROS domain id no other pytest process on this machine holds, locked until this one exits."""
+    for domain_id in _domain_order:
+        if domain_id in _held_domains:
+            continue
+        lock = open(Path(tempfile.gettempdir()) / f"hmocap_ros_dds_domain_{domain_id}.lock", "w")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        _held_domains[domain_id] = lock
+        return domain_id
+    raise RuntimeError(f"every ROS domain id in {DOMAIN_IDS} is held by another test run")
+
+
+# A domain of its own per pytest process, so parallel runs on one machine never cross.
+os.environ["ROS_DOMAIN_ID"] = str(allocate_domain_id())
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
 
 
 import pytest  # noqa: E402  (after the environment above)
+
+
+@pytest.fixture
+def free_domain_id() -> int:
+    """A ROS domain id apart from the run's and from every other run's (held until the run ends)."""
+    return allocate_domain_id()
 
 
 @pytest.fixture(scope="session")

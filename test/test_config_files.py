@@ -1,12 +1,15 @@
-"""Every config/<node>.yaml loads and names only parameters its node declares; the launch file compiles.
+"""Every config/<node>.yaml loads and holds exactly the parameters its node declares, at their
+defaults; the launch file compiles and starts every node with its YAML.
 
 A node declares each leaf of its parameter dataclasses by its dotted name
 (:func:`hmocap_ros.params.flat_fields`); a YAML file nests the groups (``filter: sweeps: 2``
 is the parameter ``filter.sweeps``).
 """
 
+import ast
 import importlib
 import py_compile
+import re
 from pathlib import Path
 
 import pytest
@@ -63,22 +66,61 @@ def test_node_yaml_matches_declared_parameters(node):
         "every parameter needs a description"
 
 
-def test_body_tracker_yaml_nests_every_tracker_setting_at_its_default():
-    """config/body_tracker.yaml holds each TrackerParams leaf in its group, at its default
-    (an empty list, which has no type in ROS YAML, is left out)."""
+def test_body_tracker_yaml_nests_groups():
     from hmocap_ros.tracking.params import TrackerParams
 
     data = yaml.safe_load((ROOT / "config" / "body_tracker.yaml").read_text())
     tree = data["body_tracker"]["ros__parameters"]
     assert tree["filter"]["sweeps"] == TrackerParams().filter.sweeps  # nested, not dotted
-    params = dotted(tree)
-    for name, _, default, _ in flat_fields(TrackerParams):
-        if isinstance(default, (list, tuple)) and not default:
-            assert name not in params, name
-        else:
-            assert params[name] == default, name
+
+
+@pytest.mark.parametrize("node", sorted(NODE_CONFIGS))
+def test_node_yaml_holds_every_parameter_at_its_default(node):
+    """config/<node>.yaml holds each parameter the node declares, at the dataclass default
+    (an empty list, which has no type in ROS YAML, is left out)."""
+    params = dotted(yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())[node]["ros__parameters"])
+    spec = NODE_CONFIGS[node]
+    for module, cls_name in zip(spec[::2], spec[1::2], strict=True):
+        for name, _, default, _ in flat_fields(getattr(importlib.import_module(module), cls_name)):
+            if isinstance(default, (list, tuple)) and not default:
+                assert name not in params, f"{node}.yaml: {name} (an empty list) is set"
+            else:
+                assert name in params, f"{node}.yaml lacks {name} (default {default!r})"
+                value = params[name]
+                if isinstance(default, (list, tuple)):
+                    value, default = list(value), list(default)
+                assert value == default, f"{node}.yaml: {name} is {value!r}, the default is {default!r}"
 
 
 def test_launch_files_compile(tmp_path):
     for path in (ROOT / "launch").glob("*.py"):
         py_compile.compile(str(path), cfile=str(tmp_path / "x.pyc"), doraise=True)
+
+
+def _launched_nodes(path: Path) -> dict[str, dict]:
+    """The ``Node(...)`` actions of a launch file, read with ast (no launch package here):
+    executable -> {"name": ..., "package": ..., "configs": [YAML file names among its parameters]}."""
+    nodes = {}
+    for call in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(call, ast.Call) and getattr(call.func, "id", None) == "Node"):
+            continue
+        kwargs = {k.arg: k.value for k in call.keywords}
+        executable = ast.literal_eval(kwargs["executable"])
+        configs = [c.value for c in ast.walk(kwargs.get("parameters", ast.List(elts=[])))
+                   if isinstance(c, ast.Constant) and isinstance(c.value, str) and c.value.endswith(".yaml")]
+        nodes[executable] = {"name": ast.literal_eval(kwargs["name"]),
+                             "package": ast.literal_eval(kwargs["package"]), "configs": configs}
+    return nodes
+
+
+def test_launch_file_starts_every_node_with_its_config():
+    """launch/hmocap.launch.py starts each node executable of setup.py (every one but the
+    ``hmocap`` tool), under its own name, with its config/<node>.yaml."""
+    setup_py = (ROOT / "setup.py").read_text()
+    scripts = set(re.findall(r'^\s*"(\w+) = hmocap_ros\.nodes\.\w+:main",', setup_py, re.M))
+    assert scripts == set(NODE_CONFIGS)
+    launched = _launched_nodes(ROOT / "launch" / "hmocap.launch.py")
+    assert set(launched) == scripts
+    for executable, node in launched.items():
+        assert node["package"] == "hmocap_ros" and node["name"] == executable
+        assert node["configs"] == [f"{executable}.yaml"], node

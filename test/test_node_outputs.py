@@ -1,0 +1,119 @@
+"""The node outputs beside the main ones, over DDS on the shipped bags with small settings:
+body_tracker's ``skeleton_markers`` and per-body ``humans/bodies/<id>/body_shape``,
+gesture_detection's ``gestures/probability`` and foreground_segmentation's ``diagnostics``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hmocap_ros.demo import DEMO_BAG, DEMO_RIG, GESTURE_BAG
+from hmocap_ros.io import topics
+from hmocap_ros.io.bag_reader import BagReader
+from hmocap_ros.io.conversions import image_to_numpy
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.processes import loopback_dds_env, replay_through_nodes
+
+CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
+SMALL_TRACKER = ["-p", "filter.particles:=60", "-p", "filter.layers:=0", "-p", "startup.particles:=40",
+                 "-p", "startup.frames:=2", "-p", "weighting.working_scale:=1.0",
+                 "-p", "startup.working_scale:=1.0"]
+
+
+def _stamps(reader: BagReader, topic: str) -> list[int]:
+    return [stamp_to_ns(m.msg.header.stamp) for m in reader.messages([topic])]
+
+
+def test_body_tracker_markers_and_per_body_shape(tmp_path):
+    # The ground-truth silhouettes straight into the tracker (no foreground node), two body slots.
+    remaps = [a for c in CAMERAS for a in ("-r", f"/{c}/foreground:=/ground_truth/{c}/silhouette")]
+    node = ("body_tracker", "hmocap_ros.nodes.body_tracker",
+            ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "method:=hpf-apo", "-p", "queue_depth:=100",
+             "-p", "max_people:=2", *SMALL_TRACKER, *remaps], "kernels ready")
+    with BagReader(DEMO_BAG) as reader:
+        person = set(_stamps(reader, "/ground_truth/skeleton"))
+    out = tmp_path / "out.mcap"
+    result = replay_through_nodes(
+        DEMO_BAG, [node], ["/skeleton", "/skeleton_markers", "/humans/bodies/body_0/body_shape"], out,
+        loopback_dds_env(), tmp_path / "logs", replay_topics=[f"/ground_truth/{c}/silhouette" for c in CAMERAS],
+        replay_rate=0.5, expect={"/skeleton_markers": len(person) - 2}, settle=2.0)
+    log = result["body_tracker"].output()
+    assert "Traceback" not in log, log
+    with BagReader(out) as reader:
+        skeletons = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
+        markers = {stamp_to_ns(m.msg.markers[0].header.stamp): m.msg
+                   for m in reader.messages(["/skeleton_markers"])}
+        shapes = [m.msg for m in reader.messages(["/humans/bodies/body_0/body_shape"])]
+        shape_latched = reader.topics()["/humans/bodies/body_0/body_shape"].latched
+    assert len(markers) >= len(person) - 2 and set(markers) == set(skeletons)
+    for stamp, array in markers.items():
+        spheres, bones = array.markers
+        sk = skeletons[stamp]
+        assert (spheres.type, bones.type) == (spheres.SPHERE_LIST, bones.LINE_LIST)
+        assert spheres.ns == bones.ns == sk.body_id == "body_0"
+        assert spheres.header.frame_id == bones.header.frame_id == "room"
+        assert stamp_to_ns(bones.header.stamp) == stamp
+        np.testing.assert_allclose([[p.x, p.y, p.z] for p in spheres.points],
+                                   [[p.x, p.y, p.z] for p in sk.positions])
+        bone_count = sum(1 for parent in sk.parents if parent >= 0)
+        assert len(bones.points) == 2 * bone_count
+    assert shape_latched and shapes
+    shape = shapes[-1]
+    assert shape.body_id == "body_0" and stamp_to_ns(shape.header.stamp) in skeletons
+    assert len(shape.entity_names) > 0 and len(shape.bone_scale) > 0
+    assert 1.0 < shape.height < 2.3 and shape.global_scale > 0
+
+
+def test_gesture_probability_image_per_frame(tmp_path):
+    node = ("gesture_detection", "hmocap_ros.nodes.gesture_detection",
+            ["--ros-args", "-p", "publish_probability:=true"], "detecting gestures")
+    out = tmp_path / "out.mcap"
+    with BagReader(GESTURE_BAG) as reader:
+        depth = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages([topics.DEPTH_IMAGE])}
+    result = replay_through_nodes(GESTURE_BAG, [node], ["/gestures", "/gestures/probability"], out,
+                                  loopback_dds_env(), tmp_path / "logs",
+                                  replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], replay_rate=2.0,
+                                  expect={"/gestures/probability": len(depth)}, settle=2.0)
+    log = result["gesture_detection"].output()
+    assert "Traceback" not in log, log
+    with BagReader(out) as reader:
+        gestures = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/gestures"])}
+        prob = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/gestures/probability"])}
+    assert set(prob) == set(depth) == set(gestures)  # one image per depth frame, with its stamp
+    peaks = []
+    for stamp, msg in prob.items():
+        assert msg.encoding == "mono8" and msg.header.frame_id == depth[stamp].header.frame_id
+        image = image_to_numpy(msg)
+        assert 0 < msg.width <= depth[stamp].width and 0 < msg.height <= depth[stamp].height
+        peaks.append(int(image.max()))
+        for g in gestures[stamp].gestures:  # a detection lies on a high density
+            u = int(g.u * msg.width / depth[stamp].width)
+            v = int(g.v * msg.height / depth[stamp].height)
+            patch = image[max(v - 2, 0):v + 3, max(u - 2, 0):u + 3]
+            assert patch.max() > 0, (stamp, g.name)
+    assert max(peaks) > 100  # the held gestures show as densities near 1, not an empty image
+
+
+def test_foreground_diagnostics_count_frames_per_camera(tmp_path):
+    node = ("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
+            ["--ros-args", "-p", "cameras:=[cam_1,cam_2]", "-p", "learn_frames:=8", "-p", "publish_skin:=false",
+             "-p", "diagnostics_period:=0.2"], "segmenting")
+    cameras = ["cam_1", "cam_2"]
+    with BagReader(DEMO_BAG) as reader:
+        frames = reader.topics()["/cam_1/image_raw"].count
+    out = tmp_path / "out.mcap"
+    result = replay_through_nodes(DEMO_BAG, [node], [*(f"/{c}/foreground" for c in cameras), "/diagnostics"], out,
+                                  loopback_dds_env(), tmp_path / "logs",
+                                  replay_topics=[f"/{c}/image_raw" for c in cameras], replay_rate=0.5,
+                                  expect={f"/{c}/foreground": frames for c in cameras}, settle=1.0)
+    log = result["foreground_segmentation"].output()
+    assert "Traceback" not in log, log
+    with BagReader(out) as reader:
+        diags = [m.msg for m in reader.messages(["/diagnostics"])]
+    ours = [d for d in diags if d.status and d.status[0].name.startswith("foreground_segmentation")]
+    assert ours, diags
+    for d in ours:
+        assert [s.name for s in d.status] == [f"foreground_segmentation: {c}" for c in cameras]
+        assert [s.hardware_id for s in d.status] == cameras
+    last = {s.hardware_id: {kv.key: kv.value for kv in s.values} for s in ours[-1].status}
+    assert all(int(last[c]["frames"]) == frames and float(last[c]["ms_per_frame"]) > 0 for c in cameras), last
+    assert {s.message for s in ours[-1].status} == {"segmenting"}
