@@ -8,11 +8,12 @@ export PYTHONUNBUFFERED = 1
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test test-slow bench clean help
+.PHONY: setup demo test test-slow test-mutants bench clean help
 help:
 	@echo "make demo       set up if needed, run the demo on the shipped data"
 	@echo "make test       set up if needed, run the test suite"
 	@echo "make test-slow  long evaluations (marked slow)"
+	@echo "make test-mutants  deliberate breakages the accuracy tests must catch"
 	@echo "make bench      benchmark scripts"
 	@echo "make setup      only set up .venv (idempotent)"
 
@@ -27,6 +28,9 @@ test: setup
 
 test-slow: setup
 	$(PY) -m pytest -q -m slow
+
+test-mutants: setup
+	$(PY) -m pytest -q -p no:cacheprovider -m mutants test/test_mutants.py
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

@@ -307,7 +307,9 @@ def test_rejection_kernel_eq_2_13():
     assert np.all(out[:, 0] != 0.0)  # the unconstrained dimension always diffuses
 
 
-def test_anthropometry_estimation_reduces_entity_size_error(model, rig):
+@pytest.fixture(scope="module")
+def shape_estimate(model, rig):
+    """``(estimate, truth)`` BodyShapes: the start-up estimator on two frames of the subject."""
     shape = subject_shape()
     params = clip_poses(model, 0, 2, shape)
     masks, _ = render_masks(model, rig, params, shape)
@@ -319,13 +321,42 @@ def test_anthropometry_estimation_reduces_entity_size_error(model, rig):
     est.start(obs[0], hull)
     for o in obs:
         est.step(o)
-    true = entity_sizes(model, shape)
-    err_est = np.abs(entity_sizes(model, est.shape()) - true).mean()
-    err_neutral = np.abs(entity_sizes(model, None) - true).mean()
-    assert err_est < 0.75 * err_neutral
+    return est.shape(), shape
+
+
+def scaled_to_height(model, shape: BodyShape) -> BodyShape:
+    """The model's proportions scaled to the stature of ``shape``: a fit of the global scale
+    alone, no entity estimated."""
+    neutral = BodyShape.neutral()
+    scale = shape.height(model) / neutral.height(model)
+    return BodyShape(neutral.bone_scale, neutral.radial_scale, scale)
+
+
+def size_error(model, estimate, truth) -> float:
+    """Mean absolute entity size error (metres)."""
+    return float(np.abs(entity_sizes(model, estimate) - entity_sizes(model, truth)).mean())
+
+
+def test_anthropometry_estimation_beats_the_model_proportions(model, shape_estimate):
+    """The estimated body against the model's own proportions (31 mm mean entity error for
+    the subject; the estimate 16 mm)."""
+    estimate, truth = shape_estimate
+    err_est = size_error(model, estimate, truth)
+    assert err_est < 0.6 * size_error(model, None, truth), err_est
+    assert err_est < 0.022, err_est
     # global scale and entity factors trade off (a longer leg or a bigger body); the stature
     # they give together is what the silhouettes fix
-    assert est.shape().height(model) == pytest.approx(shape.height(model), abs=0.03)
+    assert estimate.height(model) == pytest.approx(truth.height(model), abs=0.03)
+
+
+@pytest.mark.xfail(strict=True, reason="the per-entity estimation does not yet beat a fit of "
+                   "the stature alone (16 mm against 15 mm mean entity error)")
+def test_anthropometry_estimation_beats_a_fit_of_the_stature_alone(model, shape_estimate):
+    """The estimated body against the model scaled to the subject's true height: what the
+    per-entity factors add."""
+    estimate, truth = shape_estimate
+    baseline = size_error(model, scaled_to_height(model, truth), truth)
+    assert size_error(model, estimate, truth) < 0.9 * baseline
 
 
 def _column_hull(columns) -> Hull:
@@ -766,22 +797,61 @@ def small_tracker(model, rig, shape=None, settings: dict | None = None):
     return BodyTracker(model, rig, params, np.random.default_rng(0), shape=shape)
 
 
+def joint_errors_mm(estimate, truth) -> np.ndarray:
+    """Per-frame, per-joint 3D error (F, J) in millimetres."""
+    return 1000.0 * np.linalg.norm(np.asarray(estimate) - np.asarray(truth), axis=-1)
+
+
+def image_free_errors(model, params, joints, shape=None) -> dict:
+    """Errors (F, J) mm of two answers that never look at the images: the rest A-pose stood at
+    the true root position, and the sequence's mean joint positions held still."""
+    skel = model.skeleton
+    a_pose = np.tile(rest_pose(skel), (len(params), 1))
+    a_pose[:, skel.translation_dofs] = params[:, skel.translation_dofs]
+    _, a_joints = model.pose(a_pose, shape)
+    return {"a_pose": joint_errors_mm(a_joints, joints),
+            "mean_pose": joint_errors_mm(np.mean(joints, axis=0)[None], joints)}
+
+
+def arm_joints(model, name: str) -> list:
+    return [model.joint_index(f"{side}_{name}") for side in ("l", "r")]
+
+
+#: wrist error bound (mm) per rendered mesh: the coarse mesh's forearms are thinner
+WRIST_BOUND = {"tracking": 80.0, "tracking_coarse": 120.0}
+
+
 @pytest.mark.parametrize("mesh", ["tracking", "tracking_coarse"])
 def test_tracker_follows_a_short_sequence(model, rig, mesh):
+    """Eight frames at a small budget against answers that ignore the images (A-pose at the
+    true root: 107 mm mean, 432 mm wrists; the mean pose: 36 mm, 138 mm wrists, 70 mm
+    elbows). Today: 25 / 30 mm mean, 56 / 90 mm wrists, 39 / 37 mm elbows (fine / coarse
+    mesh); without the arm layers' weighting the fine mesh's wrists are 105 mm."""
     shape = subject_shape()
     params = clip_poses(model, 60, 8, shape, position=(-0.4, 0.3), heading=-1.0)
     masks, joints = render_masks(model, rig, params, shape)  # the 2,400-triangle body
     tracker = small_tracker(model, rig, shape=shape, settings={"weighting.mesh": mesh})
-    errors, states = [], []
+    estimates, states = [], []
     for f in range(len(masks)):
         res = tracker.update(list(masks[f]), STAMP0 + f * 40_000_000)
         states.append(res.state)
         assert res.has_pose and res.joints.shape == (19, 3)
-        errors.append(1000 * np.linalg.norm(res.joints - joints[f], axis=1).mean())
+        estimates.append(res.joints)
         assert res.timings["evaluations"] > 0 and res.timings["total"] > 0
     # with the shape known, the start-up (hull, Powell, one layered run) takes one frame
     assert states[0] in ("initialising", "tracking") and states[-1] == "tracking"
-    assert np.mean(errors) < 60.0, errors
+    err = joint_errors_mm(estimates, joints)
+    base = image_free_errors(model, params, joints, shape)
+    wrists, elbows = arm_joints(model, "wrist"), arm_joints(model, "elbow")
+    figures = {"mean": err.mean(), "wrist": err[:, wrists].mean(), "elbow": err[:, elbows].mean(),
+               **{f"{k}_{part}": v[:, idx].mean() for k, v in base.items()
+                  for part, idx in (("mean", slice(None)), ("wrist", wrists), ("elbow", elbows))}}
+    assert figures["mean"] < 45.0, figures
+    assert figures["mean"] < 0.5 * figures["a_pose_mean"], figures
+    assert figures["mean"] < 0.95 * figures["mean_pose_mean"], figures
+    assert figures["wrist"] < WRIST_BOUND[mesh], figures
+    assert figures["wrist"] < 0.75 * figures["mean_pose_wrist"], figures
+    assert figures["elbow"] < 0.75 * figures["mean_pose_elbow"], figures
     assert len(res.layers) == tracker.schedule.n_weightings
     assert all(1.0 <= e <= 120 for e in res.ess)
 
@@ -867,7 +937,10 @@ def test_tracker_survives_dropped_cameras_empty_frames_and_no_person(model, rig)
     dropped[2] = np.zeros((5, 5), np.uint8)  # wrong size: dropped too
     res = tracker.update(dropped, STAMP0 + 10)
     assert res.has_pose and res.views == (0, 3) and res.dropped == (1, 2)
-    assert np.linalg.norm(res.joints - joints[2], axis=1).mean() < 0.1
+    # two views left: better than the A-pose at the true root
+    err = joint_errors_mm(res.joints, joints[2]).mean()
+    base = image_free_errors(model, params, joints, shape)["a_pose"][2].mean()
+    assert err < 0.6 * base and err < 80.0, (err, base)  # today 59 mm against 134 mm
     res = tracker.update(empty, STAMP0 + 11)  # the person left
     assert res.state == "searching" and not res.has_pose
     assert tracker.shape is not None  # the shape is kept for a while

@@ -267,11 +267,21 @@ def test_dd_hpf_tracks_with_detector_maps_and_runs_without(model, rig, rest):
     errors = []
     for f in range(3):
         res = tracker.update(list(masks), STAMP0 + f, list(maps))
-        errors.append(np.linalg.norm(res.joints - truth, axis=1).mean())
+        errors.append(np.linalg.norm(res.joints - truth, axis=1))
     assert res.state == "tracking" and res.extremities is not None
     assert res.extremities.found[[0, 1]].all() and res.timings["detection"] > 0
     assert not res.extremities.found[3:].any()  # the tracker's detector leaves the feet out
-    assert errors[-1] < 0.08, errors
+    # against the A-pose at the true root and heading: the raised arms are what it misses
+    a_pose = rest_pose(model.skeleton).copy()
+    for dof in ("root_tx", "root_ty", "root_tz", "root_yaw"):
+        a_pose[model.skeleton.dof_index(dof)] = params[model.skeleton.dof_index(dof)]
+    base = np.linalg.norm(model.pose(a_pose[None])[1][0] - truth, axis=1)
+    wrists = [model.joint_index("l_wrist"), model.joint_index("r_wrist")]
+    figures = {"mean": errors[-1].mean(), "wrist": errors[-1][wrists].mean(),
+               "a_pose_mean": base.mean(), "a_pose_wrist": base[wrists].mean()}
+    # today 19 mm mean and 34 mm wrists; the A-pose 79 mm and 485 mm
+    assert figures["mean"] < 0.04 and figures["mean"] < 0.5 * figures["a_pose_mean"], figures
+    assert figures["wrist"] < 0.08 and figures["wrist"] < 0.3 * figures["a_pose_wrist"], figures
     # without maps (a foreground node that does not publish them) it runs as hpf-apo
     res = tracker.update(list(masks), STAMP0 + 10)
     assert res.state == "tracking" and res.extremities is None

@@ -21,6 +21,23 @@ DEMO = DATA / "demo" / "gestures_depth.mcap"
 SHIPPED = DATA / "gesture_forest.npz"
 
 
+def shuffled_votes(seed: int = 0):
+    """A ``forest_grid_votes`` whose votes are the forest's own, moved at random among the
+    grid pixels with depth: a detector that knows how often each class is voted (its prior)
+    but not where."""
+    from hmocap_ros.gestures import grid_votes
+
+    rng = np.random.default_rng(seed)
+
+    def votes(flat, padded, stride):
+        class_map, grid_depth = grid_votes.forest_grid_votes(flat, padded, stride)
+        valid = class_map >= 0
+        class_map[valid] = rng.permutation(class_map[valid])
+        return class_map, grid_depth
+
+    return votes
+
+
 def _args(module, argv):
     parser = argparse.ArgumentParser()
     module.add_arguments(parser)
@@ -43,7 +60,7 @@ def test_average_precision_all_point_interpolated():
     assert ge.average_precision([], [], 3)[0] == 0.0
 
 
-def test_train_then_eval_end_to_end(tmp_path, tiny_bag, capsys):
+def test_train_then_eval_end_to_end(tmp_path, tiny_bag, capsys, monkeypatch):
     model = tmp_path / "tiny.npz"
     argv = [tiny_bag, "--out", model, "--trees", 2, "--depth", 8, "--samples-per-class", 300, "--quiet"]
     assert train_gestures.main_from_args(_args(train_gestures, argv)) == 0
@@ -66,6 +83,10 @@ def test_train_then_eval_end_to_end(tmp_path, tiny_bag, capsys):
     assert result["tolerance_px"] == pytest.approx(2.5)
     assert set(result["per_class"]) == set(GESTURE_CLASSES)
     assert 0.0 <= result["mean_ap"] <= 1.0 and result["fps"] > 0
+    # on its own training frames, against the same votes moved at random (today 1.0 against 0.0)
+    monkeypatch.setattr("hmocap_ros.gestures.detection.forest_grid_votes", shuffled_votes())
+    prior = ge.evaluate_gestures(ge.read_gesture_bag(tiny_bag), forest)
+    assert result["mean_ap"] > 0.8 and result["mean_ap"] > prior["mean_ap"] + 0.5, (result["mean_ap"], prior["mean_ap"])
     for c in result["per_class"].values():
         assert 0.0 <= c["ap"] <= 1.0 and c["true_positives"] <= c["positives"]
         assert len(c["pr"]["precision"]) == len(c["pr"]["recall"]) == c["detections"]
@@ -91,9 +112,11 @@ def test_forest_offsets_follow_the_focal_length():
     assert forest.for_focal(f0)[0] is forest
 
 
-def test_shipped_forest_detects_gestures_on_the_demo_bag():
+def test_shipped_forest_detects_gestures_on_the_demo_bag(monkeypatch):
     """The shipped forest (trained at 640x480, fx 575) on the 320x240 demo bag (fx 287.5): the
-    detector halves its offsets; held-out subjects and rooms."""
+    detector halves its offsets; held-out subjects and rooms. A detector that outputs nothing
+    scores 0; the forest's votes moved at random (the class prior without the image) score 0.0
+    against the forest's 0.99."""
     forest = load_forest(SHIPPED)
     assert forest.class_names == ("background",) + GESTURE_CLASSES
     assert SHIPPED.stat().st_size < 2_500_000
@@ -104,6 +127,9 @@ def test_shipped_forest_detects_gestures_on_the_demo_bag():
     assert result["offset_scale"] == pytest.approx(0.5)
     assert result["mean_ap"] > 0.8, result["mean_ap"]
     assert all(c["ap"] > 0.5 for c in result["per_class"].values()), {k: c["ap"] for k, c in result["per_class"].items()}
+    monkeypatch.setattr("hmocap_ros.gestures.detection.forest_grid_votes", shuffled_votes())
+    prior = ge.evaluate_gestures(ge.read_gesture_bag(DEMO), forest)
+    assert result["mean_ap"] > prior["mean_ap"] + 0.5, (result["mean_ap"], prior["mean_ap"])
 
 
 def test_corrupt_model_and_missing_bag_give_clear_errors(tmp_path, capsys):

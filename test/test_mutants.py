@@ -1,0 +1,184 @@
+"""Mutation check (``make test-mutants``): deliberate breakages of the method, each of which
+must make the accuracy tests that guard it fail.
+
+Each mutant is a monkeypatch of the real code. A mutant's check runs its catching tests in a
+pytest of their own with this module loaded as a plugin (``-p test_mutants``) and the mutant
+named in ``HMOCAP_MUTANT``; the plugin applies the patch before any test runs. The check
+passes when every catching test fails. The table in ``docs/development.md`` lists the mutants
+and the tests that catch them.
+"""
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parent
+ENV = "HMOCAP_MUTANT"
+
+#: the arm blocks of the hierarchical schedules (tracking.body_layers.BODY_BLOCKS)
+ARM_BLOCKS = {"l_shoulder", "r_shoulder", "l_elbow", "r_elbow"}
+
+
+def arm_weighting_off(mp: pytest.MonkeyPatch) -> None:
+    """The arm layers of the hierarchical schedules weigh every particle alike."""
+    from hmocap_ros.tracking import body_tracker
+
+    real = body_tracker.layer_weight_fn
+
+    def layer_weight_fn(fitness, model, schedule, *args, **kwargs):
+        weight = real(fitness, model, schedule, *args, **kwargs)
+        arms = {k for k, blocks in enumerate(schedule.layer_blocks) if ARM_BLOCKS & set(blocks)}
+
+        def mutant(particles, layer):
+            return np.zeros(len(particles)) if layer in arms else weight(particles, layer)
+
+        return mutant
+
+    mp.setattr(body_tracker, "layer_weight_fn", layer_weight_fn)
+
+
+def tracker_ignores_images(mp: pytest.MonkeyPatch) -> None:
+    """The tracker's weighting returns one constant cost, whatever the silhouettes."""
+    from hmocap_ros.tracking import body_tracker
+
+    def layer_weight_fn(*args, **kwargs):
+        return lambda particles, layer: np.zeros(len(particles))
+
+    mp.setattr(body_tracker, "layer_weight_fn", layer_weight_fn)
+
+
+def foreground_ignores_images(mp: pytest.MonkeyPatch) -> None:
+    """The background model answers an empty mask for every frame."""
+    from hmocap_ros.segmentation.background_model import BackgroundModel
+
+    real = BackgroundModel.apply
+
+    def apply(self, rgb, stamp_ns):
+        return np.zeros_like(real(self, rgb, stamp_ns))
+
+    mp.setattr(BackgroundModel, "apply", apply)
+
+
+def entity_scales_frozen(mp: pytest.MonkeyPatch) -> None:
+    """The start-up estimates the global scale only: every per-entity factor stays 1."""
+    from hmocap_ros.tracking.anthropometry_estimation import SHAPE_KEYS, AnthropometryEstimator
+
+    real = AnthropometryEstimator._clip
+
+    def _clip(self, x):
+        x = real(self, x)
+        g = self.n_pose + SHAPE_KEYS.index("global")
+        scale = x[:, g].copy()
+        x[:, self.n_pose:] = 1.0
+        x[:, g] = scale
+        return x
+
+    mp.setattr(AnthropometryEstimator, "_clip", _clip)
+
+
+def forest_votes_shuffled(mp: pytest.MonkeyPatch) -> None:
+    """The gesture forest's votes moved at random among the pixels with depth."""
+    from test_gesture_cli import shuffled_votes
+
+    mp.setattr("hmocap_ros.gestures.detection.forest_grid_votes", shuffled_votes(1))
+
+
+def shadow_suppression_off(mp: pytest.MonkeyPatch) -> None:
+    """The background model's shadow test never runs, whatever the parameters say."""
+    from hmocap_ros.segmentation import background_model
+
+    real = background_model.classify_and_update
+    shadow = 9  # the ``shadow`` flag among classify_and_update's arguments
+
+    def classify_and_update(*args):
+        args = list(args)
+        args[shadow] = False
+        return real(*args)
+
+    mp.setattr(background_model, "classify_and_update", classify_and_update)
+
+
+@dataclass(frozen=True)
+class Mutant:
+    apply: Callable[[pytest.MonkeyPatch], None]
+    catching: tuple  # test node ids (relative to test/) that must fail under the mutant
+    survives: str = ""  # why no test catches it today ("" when caught)
+
+
+TRACKING = "test_body_tracking.py::"
+MUTANTS = {
+    "arm_weighting_off": Mutant(arm_weighting_off, (
+        TRACKING + "test_tracker_follows_a_short_sequence[tracking]",)),
+    "tracker_ignores_images": Mutant(tracker_ignores_images, (
+        TRACKING + "test_tracker_follows_a_short_sequence[tracking]",
+        TRACKING + "test_tracker_follows_a_short_sequence[tracking_coarse]",
+        TRACKING + "test_tracker_survives_dropped_cameras_empty_frames_and_no_person",
+        "test_detector_driven.py::test_dd_hpf_tracks_with_detector_maps_and_runs_without")),
+    "foreground_ignores_images": Mutant(foreground_ignores_images, (
+        "test_segmentation.py::test_moving_blob_f1_after_learning",
+        "test_segmentation.py::test_foreground_beats_naive_differencing_with_shadows_and_light_changes")),
+    "entity_scales_frozen": Mutant(entity_scales_frozen, (
+        TRACKING + "test_anthropometry_estimation_beats_the_model_proportions",
+        TRACKING + "test_anthropometry_estimation_beats_a_fit_of_the_stature_alone"),
+        survives="the per-entity estimation does not yet beat a fit of the stature alone: "
+                 "freezing it loses nothing the tests can see"),
+    "forest_votes_shuffled": Mutant(forest_votes_shuffled, (
+        "test_gesture_cli.py::test_shipped_forest_detects_gestures_on_the_demo_bag",)),
+    "shadow_suppression_off": Mutant(shadow_suppression_off, (
+        "test_segmentation.py::test_cast_shadow_is_not_foreground",
+        "test_segmentation.py::test_foreground_beats_naive_differencing_with_shadows_and_light_changes")),
+}
+
+_patch: pytest.MonkeyPatch | None = None
+
+
+def pytest_configure(config) -> None:
+    """Plugin hook (``-p test_mutants``): apply the mutant named in ``HMOCAP_MUTANT``."""
+    global _patch
+    name = os.environ.get(ENV)
+    if name:
+        _patch = pytest.MonkeyPatch()
+        MUTANTS[name].apply(_patch)
+
+
+def pytest_unconfigure(config) -> None:
+    if _patch is not None:
+        _patch.undo()
+
+
+def run_under_mutant(name: str) -> tuple[set, str]:
+    """Run the mutant's catching tests with the mutant applied: (failed node ids, output)."""
+    env = {**os.environ, ENV: name,
+           "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+    ids = [str(HERE / node) for node in MUTANTS[name].catching]
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                           "-p", "test_mutants", "-m", "", "-rfEX", *ids],
+                          cwd=HERE.parent, env=env, capture_output=True, text=True, timeout=900)
+    out = proc.stdout + proc.stderr
+    # "FAILED test/<file>::<test>" (a strict expected failure that passes is one too)
+    failed = {m.group(1) for m in re.finditer(r"^FAILED test/(\S+)", out, re.M)}
+    return failed, out
+
+
+def _params():
+    for name, mutant in MUTANTS.items():
+        marks = [pytest.mark.mutants]
+        if mutant.survives:
+            marks.append(pytest.mark.xfail(strict=True, reason=mutant.survives))
+        yield pytest.param(name, marks=marks, id=name)
+
+
+@pytest.mark.parametrize("name", list(_params()))
+def test_mutant_is_caught(name):
+    failed, out = run_under_mutant(name)
+    assert "error" not in out.splitlines()[-1].lower(), out[-3000:]  # failures, not crashes
+    missed = [node for node in MUTANTS[name].catching if node not in failed]
+    assert not missed, f"{name} passes {missed}:\n{out[-3000:]}"
