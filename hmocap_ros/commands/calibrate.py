@@ -131,38 +131,27 @@ def _check_board(session: _Session, spec, bag: Path) -> list:
     return [v for v, f in zip(views, fits) if f <= _MAX_FIT_PX]
 
 
-def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path]:
-    """The whole command (module docstring) but the error handling; returns the files written."""
-    from hmocap_ros.calibration.initialisation import estimate_intrinsics
-    from hmocap_ros.calibration.observations import Observations
-    from hmocap_ros.calibration.pipeline import calibrate_rig
-    from hmocap_ros.calibration.report import camera_rows, report_text, save_rig_picture
-    from hmocap_ros.camera_model import PinholeCamera
-    from hmocap_ros.rig import Rig, save_rig
-    from hmocap_ros.sim.calibration_session import board_from_args
-
-    spec = board_from_args(ns)
-    if ns.every < 1:
-        raise ValueError("--every must be 1 or more")
-    bag, out = Path(ns.bag), Path(ns.out)
-    session = _read(bag, spec, ns.every, log)
-    views = _check_board(session, spec, bag)
-    names = session.names
-    seen = {c: sum(1 for v in views if v[0] == c) for c in range(len(names))}
-    for c, name in enumerate(names):
-        log(f"  {name}: board in {seen[c]} of {session.n_images.get(c, 0)} images")
+def _group_views(session, views, floor_seconds: float, use_floor: bool) -> tuple[dict, int]:
+    """Detections grouped by (camera, board pose): pose 0 is the board lying on the floor
+    (every image of the first ``floor_seconds`` when the room frame comes from it), then one
+    pose per frame set. Returns the groups and the number of poses."""
     stamps = np.array(sorted({s for _, s, _ in session.detections}))
     frame_of = dict(zip(stamps, np.concatenate([[0], np.cumsum(np.diff(stamps) > _SLOP_NS)])))
-    floor_end = stamps[0] + int(ns.floor_seconds * 1e9)
-    use_floor = ns.room_frame == "floor"
-    pose_of = {}
+    floor_end = stamps[0] + int(floor_seconds * 1e9)
+    pose_of: dict = {}
     grouped: dict = {}
     for c, s, d in views:
         f = frame_of[s]
         key = 0 if (use_floor and s < floor_end) else pose_of.setdefault(f, len(pose_of) + 1)
         grouped.setdefault((c, key), []).append((d.ids, d.pixels))
-    obs = Observations.from_views(grouped, len(names), len(pose_of) + 1)
-    corner_points = spec.corner_points()
+    return grouped, len(pose_of) + 1
+
+
+def _intrinsics(ns, session, names, seen, grouped, corner_points, log):
+    """Per camera K (3, 3) and D (5,): from the bag's camera_info when given and of the
+    images' size, else estimated from its board views. Returns (K, D, any estimated)."""
+    from hmocap_ros.calibration.initialisation import estimate_intrinsics
+
     K = np.zeros((len(names), 3, 3))
     D = np.zeros((len(names), 5))
     estimated = False
@@ -182,7 +171,59 @@ def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path
             except ValueError as err:
                 raise ValueError(f"{name}: {err}") from None
             estimated = True
-            log(f"  {name}: intrinsics estimated, fx {K[c, 0, 0]:.1f} fy {K[c, 1, 1]:.1f}, RMS {rms:.3f} px")
+            log(f"  {name}: intrinsics estimated, fx {K[c, 0, 0]:.1f} fy {K[c, 1, 1]:.1f}, "
+                f"RMS {rms:.3f} px")
+    return K, D, estimated
+
+
+def _write_outputs(out: Path, rig, text: str, solution, bag: Path, room: str,
+                   total: float) -> tuple[Path, Path]:
+    """The rig YAML, the report and the picture, each written whole or not at all."""
+    from hmocap_ros.calibration.report import save_rig_picture
+    from hmocap_ros.rig import save_rig
+
+    stem = out.name[:-len(out.suffix)] if out.suffix else out.name
+    report_path, picture_path = out.with_name(f"{stem}.report.txt"), out.with_name(f"{stem}.png")
+    tmp = [p.with_name(f".{p.name}.partial") for p in (out, report_path, picture_path)]
+    try:
+        save_rig(rig, tmp[0], header=f"Calibrated by hmocap calibrate from {bag.name}; {room}; "
+                                     f"reprojection RMS {total:.3f} px.")
+        tmp[1].write_text(text)
+        save_rig_picture(tmp[2].with_suffix(".png"), list(rig.names), solution.R, solution.t,
+                         solution.t_board, f"{bag.name}: {len(rig)} cameras, RMS {total:.3f} px")
+        os.replace(tmp[2].with_suffix(".png"), picture_path)
+        os.replace(tmp[1], report_path)
+        os.replace(tmp[0], out)
+    finally:
+        for p in (*tmp, tmp[2].with_suffix(".png")):
+            p.unlink(missing_ok=True)
+    return report_path, picture_path
+
+
+def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path]:
+    """The whole command (module docstring) but the error handling; returns the files written."""
+    from hmocap_ros.calibration.observations import Observations
+    from hmocap_ros.calibration.pipeline import calibrate_rig
+    from hmocap_ros.calibration.report import camera_rows, report_text
+    from hmocap_ros.camera_model import PinholeCamera
+    from hmocap_ros.rig import Rig
+    from hmocap_ros.sim.calibration_session import board_from_args
+
+    spec = board_from_args(ns)
+    if ns.every < 1:
+        raise ValueError("--every must be 1 or more")
+    bag, out = Path(ns.bag), Path(ns.out)
+    session = _read(bag, spec, ns.every, log)
+    views = _check_board(session, spec, bag)
+    names = session.names
+    seen = {c: sum(1 for v in views if v[0] == c) for c in range(len(names))}
+    for c, name in enumerate(names):
+        log(f"  {name}: board in {seen[c]} of {session.n_images.get(c, 0)} images")
+    use_floor = ns.room_frame == "floor"
+    grouped, n_poses = _group_views(session, views, ns.floor_seconds, use_floor)
+    obs = Observations.from_views(grouped, len(names), n_poses)
+    corner_points = spec.corner_points()
+    K, D, estimated = _intrinsics(ns, session, names, seen, grouped, corner_points, log)
     room_camera = None
     if not use_floor:
         if ns.room_frame not in names:
@@ -200,28 +241,14 @@ def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path
     cameras = []
     for j, c in enumerate(solution.cameras):
         w, h = session.sizes[c]
-        cameras.append(PinholeCamera(name=names[c], width=w, height=h, K=solution.K[j], D=solution.D[j],
-                                     R=solution.R[j], t=solution.t[j]))
+        cameras.append(PinholeCamera(name=names[c], width=w, height=h, K=solution.K[j],
+                                     D=solution.D[j], R=solution.R[j], t=solution.t[j]))
     rig = Rig("room", tuple(cameras))
     rows = camera_rows(names, solution, session.n_images, seen)
     total = float(np.sqrt(np.mean(np.sum(solution.bundle.residuals ** 2, axis=1))))
     room = "board on the floor" if use_floor else f"camera {ns.room_frame}"
     text = report_text(rows, total, room)
-    stem = out.name[:-len(out.suffix)] if out.suffix else out.name
-    report_path, picture_path = out.with_name(f"{stem}.report.txt"), out.with_name(f"{stem}.png")
-    tmp = [p.with_name(f".{p.name}.partial") for p in (out, report_path, picture_path)]
-    try:
-        save_rig(rig, tmp[0], header=f"Calibrated by hmocap calibrate from {bag.name}; {room}; "
-                                     f"reprojection RMS {total:.3f} px.")
-        tmp[1].write_text(text)
-        save_rig_picture(tmp[2].with_suffix(".png"), list(rig.names), solution.R, solution.t,
-                         solution.t_board, f"{bag.name}: {len(rig)} cameras, RMS {total:.3f} px")
-        os.replace(tmp[2].with_suffix(".png"), picture_path)
-        os.replace(tmp[1], report_path)
-        os.replace(tmp[0], out)
-    finally:
-        for p in (*tmp, tmp[2].with_suffix(".png")):
-            p.unlink(missing_ok=True)
+    report_path, picture_path = _write_outputs(out, rig, text, solution, bag, room, total)
     log(text.rstrip())
     return out, report_path, picture_path
 
