@@ -445,3 +445,17 @@ def test_rest_pose_helper(tracking):
     p = tracking.rest_pose(shapes)
     assert p.shape == (3, tracking.skeleton.n_dofs)
     np.testing.assert_allclose(p[:, :3], apply_shape(tracking, shapes).joints[:, 0])
+
+
+def test_body_shape_from_named_entities():
+    from hmocap_ros.body import ENTITY_NAMES, BodyShape
+
+    shape = BodyShape.from_named(["legs", "head"], [1.1, 0.9], [1.2, 0.8], 1.05)
+    assert shape.entity("legs") == (1.1, 1.2) and shape.entity("head") == (0.9, 0.8)
+    others = [n for n in ENTITY_NAMES if n not in ("legs", "head")]
+    assert all(shape.entity(n) == (1.0, 1.0) for n in others)
+    assert float(shape.global_scale) == 1.05
+    with pytest.raises(ValueError, match="unknown body entities tail"):
+        BodyShape.from_named(["tail"], [1.0], [1.0])
+    with pytest.raises(ValueError, match="2 entity names for 1 bone"):
+        BodyShape.from_named(["legs", "head"], [1.0], [1.0, 1.0])

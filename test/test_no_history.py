@@ -1,9 +1,9 @@
 """The product states what is, never how it came to be (STYLE.md, habit 13).
 
-Scans every text file that git tracks for the vocabulary of work rounds and tuning rules
-("stop 27", "since stop 15", "rule F", "tuning rule", "round 3"): that history belongs in
-commit messages, not in code, docs, config or parameter descriptions. Fails with file:line of
-every hit.
+Scans every text file that git tracks for the vocabulary of work rounds and of the rules
+settings were chosen by (:data:`PATTERNS`; the phrases each must and must not match are in
+the tests below): that history belongs in commit messages, not in code, docs, config or
+parameter descriptions. Fails with file:line of every hit.
 """
 from __future__ import annotations
 
@@ -23,21 +23,21 @@ SKIPPED_SUFFIXES = (
     ".bvh", ".obj", ".ply", ".stl", ".json", ".csv", ".pkl", ".bin", ".zip", ".tar.gz", ".gz",
 )
 
-# A number after "stop" that is a quantity ("stops 3 frames later", "stop 2 s") is plain English.
+# A number after the word that is a quantity (frames, seconds, a unit) is plain English.
 _NOT_A_QUANTITY = r"(?!\d)(?![.,]?\d*\s*(?:%|mm|cm|m\b|ms|s\b|px|fps|frames?|seconds?|minutes?|times|degrees))"
 
 PATTERNS = {
-    # "stop 27", "stops 11-13", "Stop 14's machine"; not "the filter stops", not "non-stop".
+    # the word followed by a round's number; not the verb, not "non-stop"
     "work round (stop N)": re.compile(r"(?<![-\w])stops?\s+\d+" + _NOT_A_QUANTITY, re.IGNORECASE),
-    # "the stop-12 row", "stop-15 baseline".
+    # the hyphenated form of the same
     "work round (stop-N)": re.compile(r"(?<![-\w])stop-\d+", re.IGNORECASE),
-    # "until stop", "since stop" (with or without its number).
+    # a round named as a point in time, with or without its number
     "work round (until/since stop)": re.compile(r"\b(?:until|since)\s+stops?\b", re.IGNORECASE),
-    # "rule F", "rules B and D": the letter is a capital, so "as a rule a filter ..." passes.
+    # a lettered rule: the letter is a capital, so "as a rule a filter ..." passes
     "tuning rule (rule X)": re.compile(r"\b(?i:rules?)\s+[A-F]\b"),
     "tuning rule": re.compile(r"\btuning\s+rules?\b", re.IGNORECASE),
-    # "round 3", "rounds 2-4" of work; not "rounded", "round(x, 2)", "one mining round" or an
-    # option such as "--mining-rounds 1".
+    # a numbered round; not "rounded", "round(x, 2)", "one mining round" or an option such as
+    # "--mining-rounds 1"
     "work round (round N)": re.compile(r"(?<![-\w])rounds?\s+\d+", re.IGNORECASE),
     "work round": re.compile(r"\bwork\s+rounds?\b", re.IGNORECASE),
 }

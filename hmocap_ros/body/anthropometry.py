@@ -64,6 +64,24 @@ class BodyShape:
         shape = (len(ENTITY_NAMES),) if n is None else (n, len(ENTITY_NAMES))
         return cls(np.ones(shape), np.ones(shape), 1.0 if n is None else np.ones(n))
 
+    @classmethod
+    def from_named(cls, names, bone_scale, radial_scale, global_scale=1.0) -> "BodyShape":
+        """A shape from scales given per named entity (a BodyShape message's fields); the
+        entities not named keep scale 1. ValueError on an unknown name or unequal lengths."""
+        names = [str(n) for n in names]
+        bone_scale, radial_scale = np.asarray(bone_scale), np.asarray(radial_scale)
+        if not len(names) == len(bone_scale) == len(radial_scale):
+            raise ValueError(f"{len(names)} entity names for {len(bone_scale)} bone and "
+                             f"{len(radial_scale)} radial scales")
+        unknown = [n for n in names if n not in ENTITY_NAMES]
+        if unknown:
+            raise ValueError(f"unknown body entities {', '.join(unknown)} (the model has "
+                             f"{', '.join(ENTITY_NAMES)})")
+        index = [ENTITY_NAMES.index(n) for n in names]
+        bone, radial = np.ones(len(ENTITY_NAMES)), np.ones(len(ENTITY_NAMES))
+        bone[index], radial[index] = bone_scale, radial_scale
+        return cls(bone, radial, float(global_scale))
+
     @property
     def batched(self) -> bool:
         return self.bone_scale.ndim == 2

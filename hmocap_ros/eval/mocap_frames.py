@@ -61,21 +61,9 @@ class BagFrames:
         return np.isfinite(self.truth).all(axis=(1, 2))
 
 
-def _body_shape_from_msg(msg):
-    from hmocap_ros.body import ENTITY_NAMES, BodyShape
-
-    names = list(msg.entity_names)
-    bone = np.ones(len(ENTITY_NAMES))
-    radial = np.ones(len(ENTITY_NAMES))
-    for k, n in enumerate(names):
-        if n in ENTITY_NAMES:
-            bone[ENTITY_NAMES.index(n)] = float(msg.bone_scale[k])
-            radial[ENTITY_NAMES.index(n)] = float(msg.radial_scale[k])
-    return BodyShape(bone, radial, float(msg.global_scale))
-
-
 def _read_truth(reader, available, bag) -> tuple[dict, tuple, object]:
     """The ground-truth skeletons by stamp, their joint names, and the subject's shape."""
+    from hmocap_ros.body import BodyShape
     from hmocap_ros.io import topics
     from hmocap_ros.io.msg_factory import stamp_to_ns
 
@@ -92,7 +80,8 @@ def _read_truth(reader, available, bag) -> tuple[dict, tuple, object]:
     if topics.GT_BODY_SHAPE in available:
         shape_msg = reader.first(topics.GT_BODY_SHAPE)
         if shape_msg is not None:
-            body_shape = _body_shape_from_msg(shape_msg)
+            body_shape = BodyShape.from_named(shape_msg.entity_names, shape_msg.bone_scale,
+                                              shape_msg.radial_scale, shape_msg.global_scale)
     return truth_by_stamp, joint_names, body_shape
 
 

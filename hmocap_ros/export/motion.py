@@ -196,7 +196,7 @@ def _read_joint_states(reader, topic: str | None) -> tuple:
 
 def _read_shapes(reader, topic: str | None, body_id: str) -> tuple:
     """``(stamp_ns, BodyShape)`` of ``body_id``'s body-shape messages, in stamp order."""
-    from hmocap_ros.body.anthropometry import ENTITY_NAMES, BodyShape
+    from hmocap_ros.body.anthropometry import BodyShape
     from hmocap_ros.io.msg_factory import stamp_to_ns
 
     if topic is None:
@@ -206,13 +206,9 @@ def _read_shapes(reader, topic: str | None, body_id: str) -> tuple:
         msg = item.msg
         if str(msg.body_id) not in (body_id, ""):
             continue
-        names = tuple(str(n) for n in msg.entity_names)
-        if names != ENTITY_NAMES:
-            raise ExportError(f"{reader.path}: the body shape on {topic} has the entities {', '.join(names)}, "
-                              f"not the body model's ({', '.join(ENTITY_NAMES)})")
         try:
-            shape = BodyShape(np.asarray(msg.bone_scale), np.asarray(msg.radial_scale),
-                              float(msg.global_scale), names)
+            shape = BodyShape.from_named(msg.entity_names, msg.bone_scale, msg.radial_scale,
+                                         msg.global_scale)
         except ValueError as err:
             raise ExportError(f"{reader.path}: the body shape on {topic}: {err}") from None
         shapes.append((stamp_to_ns(msg.header.stamp), shape))
