@@ -36,4 +36,4 @@ bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 clean:
-	rm -rf out msg_defs/build build *.egg-info
+	rm -rf out msg_defs/build msg_defs_tf2/build build *.egg-info

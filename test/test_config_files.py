@@ -1,5 +1,6 @@
 """Every config/<node>.yaml loads and holds exactly the parameters its node declares, at their
-defaults; the launch file compiles and starts every node with its YAML.
+defaults, under ``/**`` (so a node in a namespace or under another name reads it); the launch
+file compiles and starts the pipeline, every node with its YAML.
 
 A node declares each leaf of its parameter dataclasses by its dotted name
 (:func:`hmocap_ros.params.flat_fields`); a YAML file nests the groups (``filter: sweeps: 2``
@@ -10,6 +11,8 @@ import ast
 import importlib
 import py_compile
 import re
+import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -46,8 +49,8 @@ def test_every_node_yaml_is_known():
 @pytest.mark.parametrize("node", sorted(NODE_CONFIGS))
 def test_node_yaml_matches_declared_parameters(node):
     data = yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())
-    assert list(data) == [node]
-    params = dotted(data[node]["ros__parameters"])
+    assert list(data) == ["/**"]  # every node name and namespace
+    params = dotted(data["/**"]["ros__parameters"])
     spec = NODE_CONFIGS[node]
     fields = {}
     for module, cls_name in zip(spec[::2], spec[1::2], strict=True):
@@ -70,7 +73,7 @@ def test_body_tracker_yaml_nests_groups():
     from hmocap_ros.tracking.params import TrackerParams
 
     data = yaml.safe_load((ROOT / "config" / "body_tracker.yaml").read_text())
-    tree = data["body_tracker"]["ros__parameters"]
+    tree = data["/**"]["ros__parameters"]
     assert tree["filter"]["sweeps"] == TrackerParams().filter.sweeps  # nested, not dotted
 
 
@@ -78,7 +81,7 @@ def test_body_tracker_yaml_nests_groups():
 def test_node_yaml_holds_every_parameter_at_its_default(node):
     """config/<node>.yaml holds each parameter the node declares, at the dataclass default
     (an empty list, which has no type in ROS YAML, is left out)."""
-    params = dotted(yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())[node]["ros__parameters"])
+    params = dotted(yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())["/**"]["ros__parameters"])
     spec = NODE_CONFIGS[node]
     for module, cls_name in zip(spec[::2], spec[1::2], strict=True):
         for name, _, default, _ in flat_fields(getattr(importlib.import_module(module), cls_name)):
@@ -124,3 +127,131 @@ def test_launch_file_starts_every_node_with_its_config():
     for executable, node in launched.items():
         assert node["package"] == "hmocap_ros" and node["name"] == executable
         assert node["configs"] == [f"{executable}.yaml"], node
+
+
+#: The pipeline hmocap.launch.py starts, in order.
+PIPELINE = ["camera_rig_publisher", "foreground_segmentation", "extremity_detection", "body_tracker",
+            "gesture_detection"]
+
+
+def test_launch_file_starts_the_pipeline_in_order():
+    tree = ast.parse((ROOT / "launch" / "hmocap.launch.py").read_text())
+    executables = [ast.literal_eval(k.value) for call in ast.walk(tree)
+                   if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "Node"
+                   for k in call.keywords if k.arg == "executable"]
+    assert executables == PIPELINE
+
+
+class _Stub:
+    """A launch action or substitution of the stub launch packages: keeps its arguments."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+class _LaunchConfiguration(_Stub):
+    def perform(self, context):
+        return context[self.args[0]]
+
+
+def _run_launch_file(monkeypatch, path: Path, **arguments):
+    """Run a launch file against stub launch/launch_ros packages (none in the venv): its declared
+    arguments, and the Node actions it makes with ``arguments`` over their defaults."""
+    modules = {
+        "ament_index_python": types.ModuleType("ament_index_python"),
+        "ament_index_python.packages": types.SimpleNamespace(get_package_share_directory=lambda _: str(ROOT)),
+        "launch": types.SimpleNamespace(LaunchDescription=_Stub),
+        "launch.actions": types.SimpleNamespace(DeclareLaunchArgument=_Stub, OpaqueFunction=_Stub,
+                                                IncludeLaunchDescription=_Stub),
+        "launch.conditions": types.SimpleNamespace(IfCondition=_Stub),
+        "launch.launch_description_sources": types.SimpleNamespace(PythonLaunchDescriptionSource=_Stub),
+        "launch.substitutions": types.SimpleNamespace(LaunchConfiguration=_LaunchConfiguration),
+        "launch_ros": types.ModuleType("launch_ros"),
+        "launch_ros.actions": types.SimpleNamespace(Node=_Stub),
+    }
+    for name, module in modules.items():
+        monkeypatch.setitem(sys.modules, name, module)
+    namespace = {"__name__": "launch_file", "__file__": str(path)}
+    exec(compile(path.read_text(), str(path), "exec"), namespace)
+    description = namespace["generate_launch_description"]()
+    declared = {a.args[0]: a.kwargs["default_value"] for a in description.args[0]
+                if a.kwargs.get("default_value") is not None}
+    context = {**declared, **arguments}
+    nodes = []
+    for action in description.args[0]:
+        if "function" in action.kwargs:
+            nodes += action.kwargs["function"](context)
+        elif "executable" in action.kwargs:
+            nodes.append(action)
+    return declared, nodes
+
+
+def test_launch_file_runs_the_pipeline_from_a_rig_file(monkeypatch, tmp_path):
+    """The rig's camera names reach foreground_segmentation and its path camera_rig_publisher;
+    the namespace, the gesture node's depth remaps and sim time follow the arguments."""
+    from hmocap_ros.rig import Rig, load_rig, save_rig
+
+    example = load_rig(ROOT / "config" / "rig_example.yaml")
+    rig_file = tmp_path / "two_cameras.yaml"
+    save_rig(Rig("room", tuple(example[:2])), rig_file)
+    declared, nodes = _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py", rig_file=str(rig_file),
+                                       namespace="room_1", depth_namespace="/camera/camera/depth",
+                                       depth_image="image_rect_raw", use_sim_time="true")
+    assert {"rig_file", "namespace", "gestures", "depth_namespace", "depth_image", "use_sim_time"} <= set(declared)
+    assert declared["gestures"] == "true" and declared["depth_namespace"] == "depth"
+    by_name = {n.kwargs["executable"]: n.kwargs for n in nodes}
+    assert list(by_name) == PIPELINE
+    for executable, node in by_name.items():
+        assert node["namespace"] == "room_1" and node["name"] == executable
+        files = [p for p in node["parameters"] if isinstance(p, str)]
+        assert files == [str(ROOT / "config" / f"{executable}.yaml")]
+        assert {"use_sim_time": True} in node["parameters"]
+    assert {"rig_file": str(rig_file)} in by_name["camera_rig_publisher"]["parameters"]
+    assert {"cameras": list(example.names[:2])} in by_name["foreground_segmentation"]["parameters"]
+    gestures = by_name["gesture_detection"]
+    assert gestures["condition"].args[0].args[0] == "gestures"  # leave it out with gestures:=false
+    assert dict(gestures["remappings"]) == {"depth/image_raw": "/camera/camera/depth/image_rect_raw",
+                                            "depth/camera_info": "/camera/camera/depth/camera_info"}
+    # the defaults: the package's example rig, the depth camera in depth/ of the namespace
+    _, nodes = _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py")
+    by_name = {n.kwargs["executable"]: n.kwargs for n in nodes}
+    assert {"cameras": list(example.names)} in by_name["foreground_segmentation"]["parameters"]
+    assert dict(by_name["gesture_detection"]["remappings"])["depth/image_raw"] == "depth/image_raw"
+    assert by_name["body_tracker"]["namespace"] == ""
+
+
+def test_launch_file_names_a_bad_rig_file_in_one_line(monkeypatch, tmp_path):
+    with pytest.raises(RuntimeError, match="hmocap.launch.py: .*missing.yaml"):
+        _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py", rig_file=str(tmp_path / "missing.yaml"))
+
+
+def test_realsense_example_feeds_gesture_detection_the_camera_depth(monkeypatch):
+    _, nodes = _run_launch_file(monkeypatch, ROOT / "launch" / "realsense_gestures.launch.py")
+    (node,) = [n.kwargs for n in nodes if n.kwargs.get("executable") == "gesture_detection"]
+    assert dict(node["remappings"]) == {"depth/image_raw": "/camera/camera/depth/image_rect_raw",
+                                        "depth/camera_info": "/camera/camera/depth/camera_info"}
+    assert {"depth_unit_m": 0.0} in node["parameters"]
+
+
+NAMESPACED_NODE = r"""
+import sys, rclpy
+from rclpy.node import Node
+rclpy.init(args=["x", "--ros-args", "-r", "__ns:=/room_2", "-r", "__node:=gestures_left", "--params-file", sys.argv[1]])
+node = Node("gesture_detection", automatically_declare_parameters_from_overrides=True)
+print(node.get_fully_qualified_name(), node.get_parameter("stride").value, node.get_parameter("model_file").value)
+node.destroy_node(); rclpy.shutdown()
+"""
+
+
+def test_yaml_applies_to_a_node_in_a_namespace_under_another_name(tmp_path, free_domain_id):
+    import subprocess
+
+    from hmocap_ros.processes import loopback_dds_env
+
+    text = (ROOT / "config" / "gesture_detection.yaml").read_text()
+    params = tmp_path / "gestures.yaml"
+    params.write_text(re.sub(r"(?m)^(\s+stride:) \d+$", r"\1 3", text))
+    res = subprocess.run([sys.executable, "-c", NAMESPACED_NODE, str(params)], capture_output=True, text=True,
+                         timeout=60, env=loopback_dds_env(domain_id=free_domain_id))
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["/room_2/gestures_left", "3"], res.stdout

@@ -148,3 +148,120 @@ def test_forest_file_round_trip_keeps_the_focal_length(tmp_path):
     forest = load_forest(SHIPPED)
     save_forest(forest, tmp_path / "copy.npz")
     assert load_forest(tmp_path / "copy.npz").meta["training"]["focal_px"] == forest.meta["training"]["focal_px"]
+
+
+def _unannotated_copy(path: Path, depth_topic: str, scale: int = 1) -> None:
+    """The demo bag's depth frames and camera_info under a driver's topic names, without its
+    ground truth; depth values multiplied by ``scale`` (8: raw 1/8 mm values of an SR305)."""
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.bag_writer import BagWriter
+    from hmocap_ros.io.conversions import image_to_numpy, numpy_to_image
+    from hmocap_ros.io.msg_factory import RosbagsFactory, stamp_to_ns
+
+    factory = RosbagsFactory()
+    info_topic = depth_topic.rsplit("/", 1)[0] + "/camera_info"
+    with BagReader(DEMO) as reader, BagWriter(path) as bag:
+        for m in reader.messages([topics.DEPTH_IMAGE, topics.DEPTH_INFO]):
+            if m.topic == topics.DEPTH_INFO:
+                bag.write(info_topic, m.msg, m.log_time_ns, msgtype="sensor_msgs/msg/CameraInfo")
+                continue
+            depth = image_to_numpy(m.msg).astype(np.uint32) * scale
+            assert depth.max() < 65536
+            msg = numpy_to_image(depth.astype(np.uint16), "16UC1", stamp_to_ns(m.msg.header.stamp),
+                                 m.msg.header.frame_id, factory)
+            bag.write(depth_topic, msg, m.log_time_ns)
+
+
+def test_eval_gestures_without_ground_truth_writes_the_detections(tmp_path, capsys):
+    """A depth recording without ground truth (a driver's topic names, as a RealSense bag):
+    the detections of every frame and their summary instead of an error; the same as
+    ``--no-truth`` on the annotated bag, and most annotated gestures are among them."""
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.msg_factory import stamp_to_ns
+
+    depth_topic = "/camera/camera/depth/image_rect_raw"
+    bag = tmp_path / "realsense.mcap"
+    _unannotated_copy(bag, depth_topic)
+    out = tmp_path / "detections.json"
+    assert ge.main_from_args(_args(ge, [bag, "--json", out, "--depth-topic", depth_topic])) == 0
+    printed = capsys.readouterr()
+    assert "no ground truth" in printed.out and "detections in" in printed.out and not printed.err
+    result = json.loads(out.read_text())
+    assert result["mode"] == "detections" and result["info_topic"] == "/camera/camera/depth/camera_info"
+    assert result["focal_px"] == pytest.approx(287.5) and result["image_size"] == [320, 240]
+    with BagReader(DEMO) as reader:
+        truth = {stamp_to_ns(m.msg.header.stamp): list(m.msg.gestures) for m in reader.messages([topics.GT_GESTURES])}
+    frames = result["per_frame"]
+    assert [f["stamp_ns"] for f in frames] == sorted(truth)            # every frame, in stamp order
+    summary = result["summary"]
+    assert summary["frames"] == len(truth) and set(summary["per_gesture"]) == set(GESTURE_CLASSES)
+    assert summary["detections"] == sum(len(f["gestures"]) for f in frames)
+    assert summary["detections"] == sum(c["detections"] for c in summary["per_gesture"].values())
+    hits = labelled = 0
+    for f in frames:
+        for g in truth[f["stamp_ns"]]:
+            if g.position_valid:
+                labelled += 1
+                hits += any(d["class_id"] == g.class_id and np.hypot(d["u"] - g.u, d["v"] - g.v) <= 5.0
+                            for d in f["gestures"])
+    assert labelled > 20 and hits >= 0.6 * labelled, (hits, labelled)   # a detector finding nothing: 0
+    # --no-truth on the annotated bag: the same detections
+    same = tmp_path / "no_truth.json"
+    assert ge.main_from_args(_args(ge, [DEMO, "--json", same, "--no-truth"])) == 0
+    assert json.loads(same.read_text())["per_frame"] == frames
+
+
+def test_eval_gestures_warns_of_a_wrong_depth_unit(tmp_path, capsys):
+    """Raw 1/8 mm values (SR305) read as millimetres: a warning naming depth_unit_m 0.000125;
+    with that setting, the detections of the millimetre bag."""
+    bag = tmp_path / "sr305.mcap"
+    _unannotated_copy(bag, "/depth/image_raw", scale=8)
+    out = tmp_path / "wrong.json"
+    assert ge.main_from_args(_args(ge, [bag, "--json", out])) == 0
+    err = capsys.readouterr().err
+    assert "depth_unit_m 0.000125 would put it at" in err and len(err.strip().splitlines()) == 1, err
+    assert "depth_unit_m" in json.loads(out.read_text())["depth_unit_warning"]
+    right = tmp_path / "right.json"
+    assert ge.main_from_args(_args(ge, [bag, "--json", right, "--param", "depth_unit_m=0.000125"])) == 0
+    assert not capsys.readouterr().err
+    mm = tmp_path / "mm.json"
+    assert ge.main_from_args(_args(ge, [DEMO, "--json", mm, "--no-truth"])) == 0
+    assert json.loads(right.read_text())["per_frame"] == json.loads(mm.read_text())["per_frame"]
+    assert json.loads(right.read_text())["summary"]["detections"] > 10
+
+
+def test_implausible_depth():
+    from hmocap_ros.gestures.depth_units import implausible_depth
+    from hmocap_ros.gestures.params import DepthFormat
+
+    mm = np.full((48, 64), 1500, np.uint16)
+    mm[:10] = 0                                                # invalid pixels do not count
+    assert implausible_depth(mm, DepthFormat()) == ""
+    assert "0.000125" in implausible_depth(mm * 8, DepthFormat())          # 12 m: 1/8 mm values
+    assert implausible_depth(mm * 8, DepthFormat(unit_m=0.000125)) == ""
+    metres = np.full((48, 64), 1.5, np.float32)
+    assert implausible_depth(metres, DepthFormat()) == ""                  # 32FC1: metres by REP 118
+    assert "depth_unit_m 1 would" in implausible_depth(metres, DepthFormat(unit_m=0.001))  # 1.5 mm
+    assert "depth_unit_m 0.001 would" in implausible_depth(mm, DepthFormat(unit_m=1.0))    # 1.5 km
+    assert implausible_depth(np.zeros((48, 64), np.uint16), DepthFormat()) == ""           # no depth: no verdict
+    nan = np.full((48, 64), np.nan, np.float32)
+    assert implausible_depth(nan, DepthFormat()) == ""
+
+
+def test_eval_gestures_on_a_bag_without_depth_is_one_line(tmp_path, capsys):
+    from hmocap_ros.io.bag_writer import BagWriter
+    from hmocap_ros.io.msg_factory import RosbagsFactory
+
+    bag = tmp_path / "text.mcap"
+    with BagWriter(bag) as writer:
+        writer.write("/note", RosbagsFactory().make("std_msgs/msg/String", data="x"), 1)
+    assert ge.main_from_args(_args(ge, [bag, "--json", tmp_path / "r.json"])) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no /depth/image_raw" in err[0] and "--depth-topic" in err[0], err
+    assert ge.main_from_args(_args(ge, [DEMO, "--json", tmp_path / "r.json", "--depth-topic", "/other"])) == 2
+    assert "--no-truth" in capsys.readouterr().err
+    assert ge.main_from_args(_args(ge, [DEMO, "--json", tmp_path / "r.json", "--param", "stride=x"])) == 2
+    assert "--param" in capsys.readouterr().err
+    assert not (tmp_path / "r.json").exists()

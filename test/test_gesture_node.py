@@ -130,3 +130,50 @@ def test_bad_input_is_logged_and_survived(tmp_path):
     # the NaN frame and the 5 valid frames are answered; nothing before the forest, nor bad frames
     assert len(answers) == 6, len(answers)
     assert all(not g.position_valid for a in answers for g in a.gestures)
+
+
+UNIT_PUBLISHER = r"""
+import time, numpy as np, rclpy
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import Image
+from hmocap_ros.io.conversions import numpy_to_image
+from hmocap_ros.io.msg_factory import RclpyFactory
+rclpy.init()
+node = rclpy.create_node("unit_publisher")
+pub = node.create_publisher(Image, "/depth/image_raw", QoSProfile(depth=50))
+end = time.monotonic() + 30
+while pub.get_subscription_count() < 1 and time.monotonic() < end:
+    time.sleep(0.05)
+time.sleep(0.5)
+f = RclpyFactory()
+scene = np.full((120, 160), 2500, np.uint16)     # 2.5 m in millimetres
+scene[40:80, 60:100] = 1800
+stamp = 1
+for depth in [scene] * 3 + [scene * 8] * 5:      # then raw 1/8 mm values (SR305) as 16UC1
+    pub.publish(numpy_to_image(depth, "16UC1", stamp * 40_000_000, "depth_optical_frame", f))
+    stamp += 1
+    time.sleep(0.1)
+print("sent", flush=True)
+time.sleep(1.0)
+"""
+
+
+def test_depth_in_the_wrong_unit_is_warned_of_once(tmp_path):
+    env = loopback_dds_env()
+    node = NodeProcess.module("gd", "hmocap_ros.nodes.gesture_detection",
+                              ["--ros-args", "-p", "publish_probability:=false"], env, tmp_path)
+    try:
+        assert node.wait_for_output("detecting gestures with", 60), node.output()
+        pub = NodeProcess("pub", [sys.executable, "-c", UNIT_PUBLISHER], env, tmp_path)
+        assert pub.wait_for_output("sent", 60), pub.output()
+        assert node.wait_for_output("median valid depth", 30), node.output()
+        pub.stop()
+        assert node.proc.poll() is None, node.output()
+    finally:
+        node.stop()
+    log = node.output()
+    warnings = [line for line in log.splitlines() if "median valid depth" in line]
+    assert len(warnings) == 1, log
+    assert "WARN" in warnings[0] and "median valid depth 20 m" in warnings[0], warnings[0]
+    assert "depth_unit_m 0.000125 would put it at 2.50 m" in warnings[0], warnings[0]
+    assert "Traceback" not in log

@@ -226,3 +226,75 @@ def test_every_hmocap_subcommand_answers_help(capsys):
 
 def test_demo_bag_is_shipped():
     assert DEMO_BAG.is_file() and DEMO_RIG.is_file()
+
+
+CLOCK_LISTENER = r"""
+import json, sys, time, rclpy
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+n, last_ns = int(sys.argv[1]), int(sys.argv[2])
+rclpy.init()
+node = rclpy.create_node("clock_listener", parameter_overrides=[Parameter("use_sim_time", value=True)])
+clocks, joints = [], []
+node.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec),
+                         QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+node.create_subscription(JointState, "/joints",
+                         lambda m: joints.append([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec,
+                                                  node.get_clock().now().nanoseconds]), QoSProfile(depth=100))
+print("listening", flush=True)
+end = time.monotonic() + 60
+while (len(joints) < n or not clocks or clocks[-1] != last_ns) and time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.05)
+print("RESULT " + json.dumps({"clocks": clocks, "joints": joints}), flush=True)
+"""
+
+
+def test_replay_publishes_clock_from_the_bag_stamps(tmp_path):
+    """``hmocap replay --clock 50``: /clock runs on the bag's time line (from its first to its
+    last stamp, never back, at about 50 Hz of replay time) and a node with use_sim_time reads
+    each frame's stamp as its time when the frame arrives."""
+    import json
+
+    n, spacing_ns, first_ns = 12, 100_000_000, 5_000_000_000
+    factory = RosbagsFactory()
+    src = tmp_path / "src.mcap"
+    with BagWriter(src) as bag:
+        for i in range(n):
+            stamp = first_ns + spacing_ns * i
+            msg = factory.make("sensor_msgs/msg/JointState", header=make_header(factory, stamp, "room"),
+                               name=["j"], position=np.array([i], float), velocity=np.zeros(0), effort=np.zeros(0))
+            bag.write("/joints", msg, stamp)
+    last_ns = first_ns + spacing_ns * (n - 1)
+    env = loopback_dds_env()
+    with NodeProcess("listener", [sys.executable, "-c", CLOCK_LISTENER, str(n), str(last_ns)], env, tmp_path) as lis:
+        assert lis.wait_for_output("listening", 60), lis.output()
+        with NodeProcess.module("play", "hmocap_ros.cli", ["replay", str(src), "--clock", "50",
+                                                           "--wait-subscribers", "1"], env, tmp_path) as play:
+            assert play.wait(60) == 0, play.output()
+            assert "/clock at 50 Hz" in play.output(), play.output()
+        assert lis.wait_for_output("RESULT", 70), lis.output()
+    result = json.loads(lis.output().split("RESULT ", 1)[1].splitlines()[0])
+    clocks, joints = np.array(result["clocks"]), np.array(result["joints"])
+    assert len(joints) == n, lis.output()
+    assert clocks.min() >= first_ns and clocks[-1] == last_ns
+    assert np.all(np.diff(clocks) >= 0)
+    # 1.1 s of replay at 50 Hz: about 55 ticks (best effort on loopback loses few)
+    assert 25 <= len(clocks) <= 120, len(clocks)
+    stamps, sim_now = joints[:, 0], joints[:, 1]
+    assert np.all(np.abs(sim_now - stamps) < spacing_ns), (sim_now - stamps) / 1e6  # within a frame
+
+
+def test_replay_clock_refuses_a_bad_frequency_and_a_bag_with_clock(tmp_path, capsys):
+    from hmocap_ros import cli
+
+    factory = RosbagsFactory()
+    src = tmp_path / "clock.mcap"
+    with BagWriter(src) as bag:
+        bag.write("/clock", factory.make("rosgraph_msgs/msg/Clock"), 1)
+    assert cli.main(["replay", str(src), "--clock", "0"]) == 2
+    assert "--clock must be a positive frequency" in capsys.readouterr().err
+    assert cli.main(["replay", str(src), "--clock"]) == 2
+    err = capsys.readouterr().err
+    assert "holds a /clock topic" in err and len(err.strip().splitlines()) == 1

@@ -1,6 +1,9 @@
 #!/usr/bin/env python
 """Write config/<node>.yaml from a node's parameter dataclasses (defaults and descriptions).
 
+The parameters sit under ``/**`` (every node name and namespace), so the file serves a node
+started in a namespace or under another name as well as the plain one.
+
     .venv/bin/python tools/write_node_config.py foreground_segmentation \
         hmocap_ros.nodes.foreground_segmentation:ForegroundNodeConfig hmocap_ros.segmentation:ForegroundParams
 """
@@ -53,7 +56,10 @@ def main(argv=None) -> None:
     bad = [s for s in specs if s.count(":") != 1]
     if bad:
         ap.error(f"expected module:Class, got {bad}")
-    lines = [f"# Parameters of {node} (see `{node} --help`).", f"{node}:", "  ros__parameters:"]
+    # Under the wildcard /**, not the node's name: a node started in a namespace or under another
+    # name (launch files, several instances) reads the file all the same.
+    lines = [f"# Parameters of {node} (see `{node} --help`), for any node name and namespace.",
+             "/**:", "  ros__parameters:"]
     for spec in specs:
         module, name = spec.split(":")
         cls = getattr(importlib.import_module(module), name)

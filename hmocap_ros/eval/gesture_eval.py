@@ -18,8 +18,18 @@ everything else is the node's defaults, with the forest's offsets and the pixel 
 rescaled to the bag's focal length (``GestureDetector(..., focal_px=...)``), so one forest
 serves 320x240 and 640x480 cameras.
 
+Without ground truth (a bag with no ``/ground_truth/gestures``, e.g. a recording of a real
+camera, or ``--no-truth``), :func:`detect_gestures` runs the detector with the node's settings
+(``DetectorParams`` defaults and ``--param`` overrides) over the depth frames of ``--depth-topic``
+in stamp order, streaming (one frame held at a time), and the JSON holds what the
+``gesture_detection`` node would have published: the detections of every frame (stamp,
+gesture, score, volume, pixel and depth) and a summary (frames, frames with a detection,
+detections and mean score per gesture). The CameraInfo beside the depth topic gives the focal
+length; without one the camera is taken for the forest's training camera at the image width.
+
 Also here: :func:`read_gesture_bag` / :func:`read_gesture_bags`, the one reader of annotated
-depth bags that training (``hmocap train gestures``) shares.
+depth bags that training (``hmocap train gestures``) shares, and :func:`~hmocap_ros.gestures.depth_units.implausible_depth`,
+the depth-unit check of the node and of the detections.
 """
 
 from __future__ import annotations
@@ -35,16 +45,20 @@ from pathlib import Path
 
 import numpy as np
 
+from hmocap_ros.gestures.depth_units import implausible_depth
 from hmocap_ros.gestures.detection import GestureDetector
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.gestures.trees import Forest
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
-from hmocap_ros.io.conversions import image_to_numpy
+from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.params import field_overrides, from_flat
 
-__all__ = ["DEFAULT_MODEL", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE", "average_precision",
-           "evaluate_gestures", "read_gesture_bag", "read_gesture_bags", "add_arguments", "main_from_args"]
+__all__ = ["DEFAULT_MODEL", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE",
+           "average_precision", "detect_gestures", "evaluate_gestures", "read_gesture_bag",
+           "read_gesture_bags", "add_arguments", "main_from_args"]
 
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
 REFERENCE_WIDTH = 640
@@ -243,6 +257,102 @@ def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams |
     }
 
 
+def _info_topic(depth_topic: str) -> str:
+    """``camera_info`` beside a depth image topic (``/camera/depth/image_rect_raw`` ->
+    ``/camera/depth/camera_info``), as camera drivers publish it."""
+    return depth_topic.rsplit("/", 1)[0] + "/camera_info"
+
+
+def detect_gestures(path, forest: Forest, params: DetectorParams | None = None,
+                    depth_topic: str = topics.DEPTH_IMAGE, info_topic: str | None = None) -> dict:
+    """The detections of the ``gesture_detection`` node on every frame of ``depth_topic`` of a
+    bag with no ground truth (module docstring); a JSON-able dict. ``GestureBagError`` for a
+    bag that cannot be read or has no depth frames there."""
+    params = params if params is not None else DetectorParams()
+    info_topic = info_topic or _info_topic(depth_topic)
+    path = Path(path)
+    detector = GestureDetector(forest, params)
+    frames, per_class, size, focal, warning, notes = [], {}, None, None, "", []
+    seconds = 0.0
+    try:
+        with BagReader(path) as reader:
+            available = reader.topics()
+            if depth_topic not in available:
+                depth_like = sorted(t for t, i in available.items() if i.msgtype == "sensor_msgs/msg/Image")
+                raise GestureBagError(f"{path}: no {depth_topic} (image topics: {', '.join(depth_like) or 'none'}); "
+                                      f"name the depth topic with --depth-topic")
+            if info_topic in available:
+                stream = reader.frame_sets([depth_topic, info_topic])
+            else:
+                notes.append(f"no {info_topic}: the camera is taken for the forest's training camera at "
+                             f"the image width, depths and pixels only")
+                stream = ((stamp_to_ns(m.msg.header.stamp), {depth_topic: m.msg})
+                          for m in reader.messages([depth_topic]))
+            for stamp, msgs in stream:
+                info = msgs.get(info_topic)
+                if info is not None and float(info.k[0]) > 0:
+                    focal = float(info.k[0])
+                    detector.set_focal(focal)
+                try:
+                    depth = image_to_numpy(msgs[depth_topic])
+                except ConversionError as err:
+                    raise GestureBagError(f"{path}: {depth_topic} at stamp {stamp}: {err}") from err
+                if size is None:
+                    size = [int(depth.shape[1]), int(depth.shape[0])]
+                if not warning:
+                    warning = implausible_depth(depth, params.depth_format)
+                t0 = time.perf_counter()
+                try:
+                    detections = detector.update(depth, int(stamp))
+                except ValueError as err:
+                    raise GestureBagError(f"{path}: {depth_topic} at stamp {stamp}: {err}") from err
+                seconds += time.perf_counter() - t0
+                frames.append({"stamp_ns": int(stamp), "gestures": [
+                    {"name": d.name, "class_id": int(d.class_id), "score": round(float(d.score), 4),
+                     "volume": round(float(d.volume), 4), "u": round(float(d.u), 2), "v": round(float(d.v), 2),
+                     "depth_m": round(float(d.depth_m), 4)} for d in detections]})
+                for d in detections:
+                    c = per_class.setdefault(d.name, {"detections": 0, "score_sum": 0.0, "first_stamp_ns": int(stamp)})
+                    c["detections"] += 1
+                    c["score_sum"] += float(d.score)
+                    c["last_stamp_ns"] = int(stamp)
+    except BagReadError as err:
+        raise GestureBagError(str(err)) from err
+    except FileNotFoundError as err:
+        raise GestureBagError(f"{err.filename}: no such bag") from err
+    if not frames:
+        raise GestureBagError(f"{path}: no depth frame on {depth_topic}"
+                              + (f" with a {info_topic} of the same stamp" if info_topic in available else ""))
+    per_gesture = {}
+    for name in forest.class_names[1:]:
+        c = per_class.get(name)
+        per_gesture[name] = ({"detections": c["detections"], "frames": c["detections"],
+                              "mean_score": round(c["score_sum"] / c["detections"], 4),
+                              "first_stamp_ns": c["first_stamp_ns"], "last_stamp_ns": c["last_stamp_ns"]}
+                             if c else {"detections": 0, "frames": 0})
+    return {
+        "mode": "detections",
+        "bag": str(path),
+        "depth_topic": depth_topic,
+        "info_topic": info_topic if info_topic in available else None,
+        "image_size": size,
+        "focal_px": focal,
+        "model_focal_px": forest.training_focal_px,
+        "summary": {
+            "frames": len(frames),
+            "frames_with_detections": sum(1 for f in frames if f["gestures"]),
+            "detections": sum(len(f["gestures"]) for f in frames),
+            "duration_s": (frames[-1]["stamp_ns"] - frames[0]["stamp_ns"]) * 1e-9,
+            "per_gesture": per_gesture,
+        },
+        "depth_unit_warning": warning,
+        "notes": notes,
+        "fps": len(frames) / seconds if seconds > 0 else 0.0,
+        "detector_params": dataclasses.asdict(detector.active_params),
+        "per_frame": frames,
+    }
+
+
 def plot_pr(result: dict, path, title: str = "") -> None:
     """Precision-recall curves per gesture into a PNG."""
     import matplotlib
@@ -267,11 +377,37 @@ def plot_pr(result: dict, path, title: str = "") -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("bag", help="annotated depth bag (hmocap sim gestures layout)")
+    parser.add_argument("bag", help="depth bag: annotated (hmocap sim gestures layout) for precision-recall, "
+                                    "or any depth recording for the detections alone")
     parser.add_argument("--model", default=str(DEFAULT_MODEL),
                         help="gesture forest (.npz; default: the shipped hmocap_ros/data/gesture_forest.npz)")
-    parser.add_argument("--json", required=True, help="write the results (JSON) here")
-    parser.add_argument("--plot", help="write the precision-recall curves (PNG) here")
+    parser.add_argument("--json", required=True,
+                        help="write the results (JSON) here: precision-recall with ground truth, else the "
+                             "detections of every frame and their summary")
+    parser.add_argument("--plot", help="write the precision-recall curves (PNG) here (with ground truth)")
+    parser.add_argument("--no-truth", action="store_true",
+                        help="write the detections (as gesture_detection publishes them) even when the bag "
+                             "has ground truth; a bag without /ground_truth/gestures gets them anyway")
+    parser.add_argument("--depth-topic", default=topics.DEPTH_IMAGE,
+                        help=f"depth image topic for the detections (default {topics.DEPTH_IMAGE}); its "
+                             "camera_info is the topic beside it")
+    parser.add_argument("--param", action="append", metavar="KEY=VALUE",
+                        help="a detector setting by name, e.g. depth_unit_m=0.000125 (repeatable; "
+                             "gesture_detection --help lists them); with ground truth it applies on top "
+                             "of the lowered thresholds of the precision-recall sweep")
+
+
+def _print_detections(result: dict) -> None:
+    summary = result["summary"]
+    for note in result["notes"]:
+        print(f"note: {note}")
+    if result["depth_unit_warning"]:
+        print(f"warning: {result['depth_topic']}: {result['depth_unit_warning']}", file=sys.stderr)
+    for name, c in summary["per_gesture"].items():
+        mean = f", mean score {c['mean_score']:.2f}" if c["detections"] else ""
+        print(f"  {name:10s} {c['detections']:5d} detections{mean}")
+    print(f"{summary['detections']} detections in {summary['frames_with_detections']} of {summary['frames']} "
+          f"frames ({summary['duration_s']:.1f} s of {result['depth_topic']}); {result['fps']:.1f} frames/s")
 
 
 def main_from_args(ns) -> int:
@@ -281,11 +417,45 @@ def main_from_args(ns) -> int:
         print(f"error: cannot load the gesture forest {ns.model}: {err}", file=sys.stderr)
         return 2
     try:
+        overrides = field_overrides(DetectorParams, ns.param, "detector parameter")
+        node_params = from_flat(DetectorParams, overrides)
+    except (ValueError, TypeError) as err:
+        print(f"error: --param: {err}", file=sys.stderr)
+        return 2
+    try:
+        with BagReader(ns.bag) as reader:
+            has_truth = topics.GT_GESTURES in reader.topics()
+    except BagReadError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as err:
+        print(f"error: {err.filename}: no such bag", file=sys.stderr)
+        return 2
+    if has_truth and not ns.no_truth and ns.depth_topic != topics.DEPTH_IMAGE:
+        print(f"error: the ground truth of {ns.bag} belongs to {topics.DEPTH_IMAGE}: add --no-truth to "
+              f"detect on {ns.depth_topic}", file=sys.stderr)
+        return 2
+    if ns.no_truth or not has_truth:
+        if not ns.no_truth:
+            print(f"no ground truth ({topics.GT_GESTURES}) in {ns.bag}: writing the detections")
+        try:
+            result = detect_gestures(ns.bag, forest, node_params, ns.depth_topic)
+        except (GestureBagError, ValueError) as err:  # ValueError: settings the forest cannot use
+            print(f"error: {err}", file=sys.stderr)
+            return 2
+        result["model"] = str(ns.model)
+        Path(ns.json).write_text(json.dumps(result, indent=1) + "\n")
+        _print_detections(result)
+        return 0
+    try:
         data = read_gesture_bag(ns.bag)
     except GestureBagError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    result = evaluate_gestures(data, forest)
+    params = None
+    if overrides:
+        params = from_flat(DetectorParams, {"min_score": SWEEP_MIN_SCORE, "min_volume": 0.0, **overrides})
+    result = evaluate_gestures(data, forest, params)
     result["model"] = str(ns.model)
     Path(ns.json).write_text(json.dumps(result, indent=1) + "\n")
     if ns.plot:

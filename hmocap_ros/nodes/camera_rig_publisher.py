@@ -1,18 +1,26 @@
-"""camera_rig_publisher: the room's calibration on the ROS graph (there is no tf2 here).
+"""camera_rig_publisher: the room's calibration on the ROS graph, as a message and as tf2 frames.
 
 Loads a rig YAML (intrinsics + camera poses in the room frame, see ``config/rig_example.yaml``)
-and publishes it once, latched; for every image of a rig camera it publishes that camera's
-CameraInfo with the image's stamp, as a camera driver's info manager would, after checking
-that the image has the calibrated size.
+and publishes it latched, both as one ``CameraRig`` message and as the static transforms room
+frame -> each camera's optical frame on ``/tf_static``; for every image of a rig camera it
+publishes that camera's CameraInfo with the image's stamp, as a camera driver's info manager
+would, after checking that the image has the calibrated size.
 
 Subscriptions:
   ``<camera>/image_raw`` (sensor_msgs/Image, sensor-data QoS with a queue of ``queue_depth``),
-  for each rig camera.
+  for each served camera.
 Publications:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the whole rig.
+  ``/tf_static`` (tf2_msgs/TFMessage, reliable, transient local, keep last 1, as tf2's static
+  broadcaster): the rig's room frame (``frame_id`` of the rig file) -> ``<camera>_optical_frame``
+  (the camera's ``frame_id``: x right, y down, z forward) for every rig camera, and with
+  ``z_up_frame`` that frame (+Z up) -> the room frame (+Y up); see :mod:`hmocap_ros.io.tf`.
+  Only with ``publish_tf``.
   ``<camera>/camera_info`` (sensor_msgs/CameraInfo, reliable, keep last ``queue_depth``):
   intrinsics, stamp and frame of each image.
 Parameters: see :class:`CameraRigPublisherConfig` (``camera_rig_publisher --help``).
+``rig_file`` and ``cameras`` may be changed at run time: the new rig is loaded and published
+again (``camera_rig`` and ``/tf_static``), or the change is refused with the reason.
 """
 
 from __future__ import annotations
@@ -20,27 +28,37 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from hmocap_interfaces.msg import CameraRig
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
+from tf2_msgs.msg import TFMessage
 
 from hmocap_ros.config_files import find_config_file
 from hmocap_ros.io.conversions import dict_to_camera_info
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
+from hmocap_ros.io.tf import TF_STATIC_TOPIC, rig_transforms, tf_message
 from hmocap_ros.nodes.common import LATCHED_QOS, declare_parameters, param, run_node, sensor_qos
-from hmocap_ros.rig import RigError, load_rig, rig_to_msg
+from hmocap_ros.rig import Rig, RigError, load_rig, rig_to_msg
 
 NODE_NAME = "camera_rig_publisher"
 
 
 @dataclass(frozen=True)
 class CameraRigPublisherConfig:
-    rig_file: str = param("", "Rig calibration YAML; empty = the package's config/rig_example.yaml.")
-    cameras: list[str] = param([], "Rig cameras to serve (names); empty = every camera of the rig.")
+    rig_file: str = param("", "Rig calibration YAML; empty = the package's config/rig_example.yaml. "
+                              "Settable at run time.")
+    cameras: list[str] = param([], "Rig cameras to serve (names); empty = every camera of the rig. "
+                                   "Settable at run time.")
     check_image_size: bool = param(True, "Refuse (log an error, publish no CameraInfo for) images "
                                          "whose size differs from the calibration.")
     queue_depth: int = param(25, "Images queued per camera while the node is busy, and CameraInfo messages kept "
                                  "for a slow reliable subscriber; 25 holds one second at 25 fps.")
+    publish_tf: bool = param(True, "Publish the room frame -> camera optical frame transforms of every rig "
+                                   "camera on /tf_static (latched, as tf2's static broadcaster).")
+    z_up_frame: str = param("", "When set (e.g. 'map'), /tf_static also holds this frame as the parent of "
+                                "the room frame, with +Z up (REP 103) where the room has +Y up: a fixed "
+                                "frame for RViz's floor grid. Empty = the room frame is the root.")
 
 
 class CameraRigPublisher(Node):
@@ -48,33 +66,89 @@ class CameraRigPublisher(Node):
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, CameraRigPublisherConfig)
         self.factory = RclpyFactory()
-        path = self.config.rig_file or str(find_config_file("rig_example.yaml"))
+        self.rig_pub = self.create_publisher(CameraRig, "camera_rig", LATCHED_QOS)
+        self.tf_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED_QOS) if self.config.publish_tf else None
+        self.rig: Rig | None = None
+        self.path = ""
+        self.served: dict[str, tuple] = {}  # camera -> (CameraInfo dict, publisher, subscription)
+        self.rig_file, self.cameras = self.config.rig_file, list(self.config.cameras)
         try:
-            self.rig = load_rig(path)
-        except (RigError, OSError) as err:
+            rig, path = self._load(self.config.rig_file)
+            self._serve(rig, path, self.config.cameras)
+        except ValueError as err:  # RigError included
             self.get_logger().fatal(f"cannot load the rig: {err}")
             raise SystemExit(2) from err
-        names = self.config.cameras or list(self.rig.names)
-        unknown = [n for n in names if n not in self.rig.names]
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    # -- rig ----------------------------------------------------------------------------
+
+    @staticmethod
+    def _load(rig_file: str) -> tuple[Rig, str]:
+        if rig_file:
+            return load_rig(rig_file), rig_file
+        path = find_config_file("rig_example.yaml")
+        if path is None:
+            raise RigError("no rig_file given and the package's config/rig_example.yaml is not installed")
+        return load_rig(path), str(path)
+
+    def _serve(self, rig: Rig, path: str, cameras: list[str]) -> None:
+        """Publish ``rig`` (latched message and static transforms) and serve the CameraInfo of
+        ``cameras`` (empty = all); cameras no longer served lose their subscription.
+        ``ValueError`` (nothing changed) for frames tf2 cannot take (``z_up_frame`` = the room)."""
+        transforms = rig_transforms(rig, self.config.z_up_frame) if self.tf_pub is not None else []
+        names = list(cameras) or list(rig.names)
+        unknown = [n for n in names if n not in rig.names]
         if unknown:
             self.get_logger().error(f"cameras {unknown} are not in {path}; serving the others")
-        self.cameras = {c.name: c for c in self.rig.cameras if c.name in names}
-        stamp = self.get_clock().now().nanoseconds
-        self.rig_pub = self.create_publisher(CameraRig, "camera_rig", LATCHED_QOS)
-        self.rig_pub.publish(rig_to_msg(self.rig, stamp, self.factory))
-        self.info_pubs = {}
-        self.info_dicts = {}
+        wanted = [n for n in rig.names if n in names]
+        for name in [n for n in self.served if n not in wanted]:
+            _, pub, sub = self.served.pop(name)
+            self.destroy_subscription(sub)
+            self.destroy_publisher(pub)
         depth = max(1, self.config.queue_depth)
-        info_qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
-        for name, camera in self.cameras.items():
-            self.info_dicts[name] = camera.to_camera_info_dict()
-            self.info_pubs[name] = self.create_publisher(CameraInfo, f"{name}/camera_info", info_qos)
-            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), sensor_qos(depth))
-        self.get_logger().info(f"serving rig {path} ({len(self.cameras)} cameras: {', '.join(self.cameras)})")
+        for name in wanted:
+            info = rig[name].to_camera_info_dict()
+            if name in self.served:
+                self.served[name] = (info, *self.served[name][1:])
+                continue
+            pub = self.create_publisher(CameraInfo, f"{name}/camera_info",
+                                        QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE))
+            sub = self.create_subscription(Image, f"{name}/image_raw", self._callback(name), sensor_qos(depth))
+            self.served[name] = (info, pub, sub)
+        self.rig, self.path = rig, path
+        stamp = self.get_clock().now().nanoseconds
+        self.rig_pub.publish(rig_to_msg(rig, stamp, self.factory))
+        frames = ""
+        if self.tf_pub is not None:
+            self.tf_pub.publish(tf_message(transforms, stamp, self.factory))
+            frames = f"; {TF_STATIC_TOPIC}: " + ", ".join(f"{t.parent} -> {t.child}" for t in transforms)
+        self.get_logger().info(f"serving rig {path} ({len(wanted)} cameras: {', '.join(wanted)}){frames}")
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        changed = {p.name: p.value for p in params}
+        fixed = sorted(set(changed) & {"check_image_size", "queue_depth", "publish_tf", "z_up_frame"})
+        if fixed:
+            return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: read at start, restart the node")
+        if not {"rig_file", "cameras"} & set(changed):
+            return SetParametersResult(successful=True)
+        rig_file = str(changed.get("rig_file", self.rig_file) or "")
+        cameras = list(changed.get("cameras", self.cameras) or [])
+        try:
+            rig, path = self._load(rig_file)
+            self._serve(rig, path, cameras)
+        except ValueError as err:  # RigError included
+            reason = f"cannot load the rig: {err}"
+            self.get_logger().error(f"{reason}; still serving {self.path}")
+            return SetParametersResult(successful=False, reason=reason)
+        self.rig_file, self.cameras = rig_file, cameras
+        return SetParametersResult(successful=True)
 
     def _callback(self, name: str):
         def on_image(msg: Image) -> None:
-            info = self.info_dicts[name]
+            served = self.served.get(name)
+            if served is None:
+                return
+            info = served[0]
             if self.config.check_image_size and (msg.width, msg.height) != (info["width"], info["height"]):
                 self.get_logger().error(
                     f"{name}/image_raw is {msg.width}x{msg.height} but the rig calibrates "
@@ -83,7 +157,7 @@ class CameraRigPublisher(Node):
                 )
                 return
             out = dict_to_camera_info(info, stamp_to_ns(msg.header.stamp), self.factory)
-            self.info_pubs[name].publish(out)
+            served[1].publish(out)
 
         return on_image
 

@@ -19,6 +19,11 @@ Parameters: ``model_file`` (may be changed at run time: the new forest is loaded
 change is refused with the reason), ``publish_probability``, ``queue_depth`` and every field of
 :class:`~hmocap_ros.gestures.DetectorParams` (``gesture_detection --help``).
 
+Depth in the wrong unit is warned of once: when the median valid depth of a frame, read with
+``depth_unit_m``, lies outside 0.2 to 8 m (raw 1/8 mm SR300/SR305 values published as 16UC1
+read 8 times too far, metres read as millimetres 1000 times too near), one warning names the
+median and a unit that fits (:func:`~hmocap_ros.gestures.depth_units.implausible_depth`).
+
 Bad input is logged (throttled) and the node keeps running: a wrong encoding, data shorter
 than its step, a frame without valid depth (NaN depth is "no depth" by REP 118), an image
 whose size differs from camera_info (no 3D positions), no camera_info yet (the camera is
@@ -40,6 +45,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from hmocap_ros.camera_model import PinholeCamera
+from hmocap_ros.gestures.depth_units import implausible_depth
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
 from hmocap_ros.io.conversions import ConversionError, camera_info_to_dict, image_to_numpy, numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
@@ -82,6 +88,7 @@ class GestureDetection(Node):
         self.camera: PinholeCamera | None = None
         self.frames = 0
         self.seconds = 0.0
+        self.unit_warned = False
         self.pub = self.create_publisher(GestureArray, "gestures", RESULT_QOS)
         self.prob_pub = (self.create_publisher(Image, "gestures/probability", SENSOR_QOS)
                          if self.config.publish_probability else None)
@@ -154,6 +161,11 @@ class GestureDetection(Node):
         except ConversionError as err:
             log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
             return
+        if not self.unit_warned:
+            reason = implausible_depth(depth, self.params.depth_format)
+            if reason:
+                log.warning(f"depth/image_raw: {reason}")
+                self.unit_warned = True
         camera = self.camera
         if camera is None:
             log.warning("no depth/camera_info yet: assuming the forest's training camera at this image width; "

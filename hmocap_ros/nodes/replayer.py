@@ -4,8 +4,15 @@ Publications: every topic of the bag (or those of ``--topics``), with the bag's 
 types, published as the stored serialized bytes (nothing is decoded): topics recorded as
 latched are published transient-local (reliable, keep last 1), the others reliable with
 keep-last ``VOLATILE_DEPTH``, which best-effort subscribers (sensor-data QoS) accept too.
+With ``--clock [HZ]`` (as ``ros2 bag play --clock``): ``/clock`` (rosgraph_msgs/Clock,
+reliable, keep last 1, which best-effort subscribers such as rclpy's time source accept),
+the playback time on the bag's time line: the first message's log time when the replay
+starts, then advancing with the replay at ``HZ`` (default 40) until the last message's log
+time, never ahead of the next message to publish; our bags log every message at its
+``header.stamp``, so nodes started with ``-p use_sim_time:=true`` see the time of the frames
+they receive. With ``--loop`` the clock goes back to the start at each pass.
 Subscriptions: none. Parameters: none (command-line options ``--rate``, ``--loop``,
-``--topics``, ``--wait-subscribers``, ``--settle``).
+``--topics``, ``--wait-subscribers``, ``--settle``, ``--clock``).
 
 Starting a replay into freshly started nodes: ``--wait-subscribers N`` holds the first message
 until every replayed topic has N matched subscriptions. That is the publisher's side of DDS
@@ -14,8 +21,9 @@ matched in turn, so the replay then waits ``--settle`` seconds more for the othe
 When the replay falls behind (a loaded machine), it publishes the overdue messages at once:
 subscribers need a queue that holds such a burst (see ``nodes.common.sensor_qos``).
 
-A bag that cannot be read, a ``--topics`` entry the bag lacks or a rate that is not positive
-ends ``hmocap replay`` with one line on stderr and exit status 2, before ROS starts.
+A bag that cannot be read, a ``--topics`` entry the bag lacks, a rate or clock frequency that
+is not positive, or ``--clock`` for a replay that holds a ``/clock`` topic itself ends
+``hmocap replay`` with one line on stderr and exit status 2, before ROS starts.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
 
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
@@ -35,14 +44,20 @@ from hmocap_ros.nodes.common import ShutdownFlag, message_class
 #: History of the reliable volatile publishers: a reliable subscriber that falls behind gets
 #: the messages again from it, so it must hold a burst: two seconds of a 25 fps topic.
 VOLATILE_DEPTH = 50
+#: Frequency (Hz) of /clock with a bare ``--clock``, as ``ros2 bag play --clock``.
+DEFAULT_CLOCK_HZ = 40.0
+CLOCK_TOPIC = "/clock"
 
 
 class Replayer(Node):
     """Holds one publisher per replayed topic."""
 
-    def __init__(self, topics: dict):
+    def __init__(self, topics: dict, clock: bool = False):
         super().__init__("hmocap_replay")
         self.publishers_by_topic = {}
+        self.clock_pub = (self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+                          if clock else None)
+        self.clock_ns: int | None = None
         for topic, info in topics.items():
             try:
                 cls = message_class(info.msgtype)
@@ -55,6 +70,15 @@ class Replayer(Node):
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if info.latched else DurabilityPolicy.VOLATILE,
             )
             self.publishers_by_topic[topic] = self.create_publisher(cls, topic, qos)
+
+    def publish_clock(self, stamp_ns: int) -> None:
+        """Publish ``stamp_ns`` on /clock (with ``--clock``)."""
+        if self.clock_pub is None:
+            return
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        self.clock_pub.publish(msg)
+        self.clock_ns = int(stamp_ns)
 
     def wait_for_subscribers(self, count: int, timeout: float, flag: ShutdownFlag) -> list[str]:
         """Wait until every volatile topic has ``count`` subscribers; return the topics still short."""
@@ -70,8 +94,11 @@ class Replayer(Node):
 
 def replay(bag: str, rate: float = 1.0, loop: bool = False, topics: list[str] | None = None,
            wait_subscribers: int = 0, wait_timeout: float = 10.0, linger: float = 0.5,
-           ros_args: list[str] | None = None, quiet: bool = False, settle: float = 1.0) -> dict[str, int]:
+           ros_args: list[str] | None = None, quiet: bool = False, settle: float = 1.0,
+           clock_hz: float | None = None) -> dict[str, int]:
     """Publish the bag's messages at ``rate`` times the recorded pace; return counts per topic.
+
+    With ``clock_hz``, publish the playback time on /clock at that frequency (module doc).
 
     With ``wait_subscribers`` > 0, wait (at most ``wait_timeout`` s) for that many subscribers on
     every topic, then ``settle`` s more (see the module doc). The bag is opened and ``topics``
@@ -80,16 +107,21 @@ def replay(bag: str, rate: float = 1.0, loop: bool = False, topics: list[str] | 
     of ``topics``."""
     if not rate > 0:
         raise ValueError(f"--rate must be positive, got {rate:g}")
+    if clock_hz is not None and not 0 < clock_hz < float("inf"):
+        raise ValueError(f"--clock must be a positive frequency in Hz, got {clock_hz:g}")
     with BagReader(bag) as reader:
         available = reader.topics()
         if topics:
             reader.check_topics(topics)
         wanted = {t: available[t] for t in topics} if topics else available
+        if clock_hz is not None and CLOCK_TOPIC in wanted:
+            raise ValueError(f"{bag} holds a {CLOCK_TOPIC} topic: replay it without --clock, or leave it out "
+                             f"with --topics")
         flag = ShutdownFlag()
         rclpy.init(args=["hmocap_replay", *(ros_args or [])], signal_handler_options=SignalHandlerOptions.NO)
         flag.install()
         try:
-            node = Replayer(wanted)
+            node = Replayer(wanted, clock=clock_hz is not None)
             if wait_subscribers > 0:
                 short = node.wait_for_subscribers(wait_subscribers, wait_timeout, flag)
                 if short and not quiet:
@@ -97,8 +129,9 @@ def replay(bag: str, rate: float = 1.0, loop: bool = False, topics: list[str] | 
                 _pause(settle, flag)
             if not quiet:
                 print(f"replaying {bag}: {len(node.publishers_by_topic)} topics at rate {rate:g}"
-                      + (" (looping)" if loop else ""), flush=True)
-            counts = _publish(node, reader, rate, loop, flag)
+                      + (" (looping)" if loop else "")
+                      + (f", {CLOCK_TOPIC} at {clock_hz:g} Hz" if clock_hz is not None else ""), flush=True)
+            counts = _publish(node, reader, rate, loop, flag, None if clock_hz is None else 1.0 / clock_hz)
             # Give DDS time to deliver the last messages before the publishers go away.
             _pause(linger, flag)
             node.destroy_node()
@@ -116,26 +149,52 @@ def _pause(seconds: float, flag: ShutdownFlag) -> None:
         time.sleep(0.02)
 
 
-def _publish(node: Replayer, reader: BagReader, rate: float, loop: bool, flag: ShutdownFlag) -> dict[str, int]:
+def _publish(node: Replayer, reader: BagReader, rate: float, loop: bool, flag: ShutdownFlag,
+             clock_period: float | None = None) -> dict[str, int]:
     """Publish the messages of the node's topics with their recorded spacing divided by ``rate``
-    (again from the start while ``loop``); return counts per topic."""
+    (again from the start while ``loop``), and with ``clock_period`` the playback time on
+    /clock every ``clock_period`` seconds; return counts per topic."""
     counts = {t: 0 for t in node.publishers_by_topic}
     while not flag.requested:
         t0 = time.monotonic()
-        start_ns = None
+        start_ns = last_ns = None
         for item in reader.messages(list(node.publishers_by_topic), raw=True):
             if flag.requested:
                 break
             if start_ns is None:
                 start_ns = item.log_time_ns
-            delay = t0 + (item.log_time_ns - start_ns) * 1e-9 / rate - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
+                node.publish_clock(start_ns)
+            due = t0 + (item.log_time_ns - start_ns) * 1e-9 / rate
+            if clock_period is None:
+                delay = due - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            else:
+                _tick_clock_until(node, due, t0, start_ns, item.log_time_ns, rate, clock_period)
             node.publishers_by_topic[item.topic].publish(item.msg)
             counts[item.topic] += 1
+            last_ns = item.log_time_ns
+        if last_ns is not None and clock_period is not None:
+            node.publish_clock(last_ns)
         if not loop:
             break
     return counts
+
+
+def _tick_clock_until(node: Replayer, due: float, t0: float, start_ns: int, next_ns: int, rate: float,
+                      period: float) -> None:
+    """Sleep until the monotonic time ``due``, publishing the playback time on /clock every
+    ``period`` s meanwhile, never beyond ``next_ns`` (the log time of the next message)."""
+    next_tick = time.monotonic()
+    while True:
+        now = time.monotonic()
+        if now >= next_tick:
+            playback_ns = start_ns + int((now - t0) * rate * 1e9)
+            node.publish_clock(max(node.clock_ns or start_ns, min(playback_ns, next_ns)))
+            next_tick = now + period
+        if now >= due:
+            return
+        time.sleep(max(0.0, min(due, next_tick) - now))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -151,13 +210,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "subscribers to match the replay in turn (default 1)")
     parser.add_argument("--linger", type=float, default=0.5,
                         help="seconds to keep publishers alive after the last message")
+    parser.add_argument("--clock", type=float, nargs="?", const=DEFAULT_CLOCK_HZ, default=None, metavar="HZ",
+                        help="publish the playback time (the bag's stamps) on /clock at HZ "
+                             f"(default {DEFAULT_CLOCK_HZ:g}), as `ros2 bag play --clock`, for nodes run "
+                             "with -p use_sim_time:=true")
 
 
 def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
     topics = [t if t.startswith("/") else "/" + t for t in ns.topics] if ns.topics else None
     try:
         replay(ns.bag, ns.rate, ns.loop, topics, ns.wait_subscribers, ns.wait_timeout, ns.linger, ros_args,
-               settle=ns.settle)
+               settle=ns.settle, clock_hz=ns.clock)
     except (BagReadError, ValueError) as err:
         print(f"hmocap replay: {err}", file=sys.stderr)
         return 2

@@ -1,0 +1,206 @@
+"""Coordinate frames for tf2: rig cameras and rotations as ``geometry_msgs/TransformStamped``.
+
+No rclpy here: :class:`FrameTransform` is a parent -> child transform in plain numbers, built
+from a rig camera (:func:`camera_transform`, :func:`rig_transforms`) or from a rotation matrix
+and a translation (:func:`frame_transform`); :func:`to_transform_stamped` and
+:func:`tf_message` build the messages through a message factory
+(``hmocap_ros.io.msg_factory``: ``RclpyFactory`` in a node, ``RosbagsFactory`` for bags).
+
+Conventions (tf2, REP 103 and REP 105)
+--------------------------------------
+A transform with ``header.frame_id = parent`` and ``child_frame_id = child`` holds the child
+frame's pose in the parent frame: ``translation`` is the child's origin in parent
+coordinates and ``rotation`` the unit quaternion ``(x, y, z, w)`` that rotates vectors given
+in child coordinates into parent coordinates, so ``p_parent = R p_child + t``.
+
+The rig's room frame (``frame_id`` of the rig file, ``room`` by default) is a fixed world frame
+(the role of ``map`` in REP 105) in metres with +Y up and the floor at y = 0. A camera's
+``<name>_optical_frame`` follows the REP 103 optical convention: x right, y down, z forward
+(the viewing direction). For tools that expect +Z up (RViz's grid, a robot's ``map``), the
+rotation :data:`Y_UP_TO_Z_UP` places the room in a +Z-up parent frame: room +Y is the parent's
++Z, room +X the parent's +X, room +Z the parent's -Y.
+
+Static transforms go on ``/tf_static`` (:data:`TF_STATIC_TOPIC`) as one ``tf2_msgs/TFMessage``
+holding every transform of the publisher, reliable and transient-local with a history of one,
+as tf2's static broadcaster publishes them: a listener that starts later still gets them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "FrameTransform",
+    "TF_STATIC_TOPIC",
+    "TF_TOPIC",
+    "TF_MESSAGE_TYPE",
+    "Y_UP_TO_Z_UP",
+    "camera_transform",
+    "frame_transform",
+    "from_transform_stamped",
+    "quaternion_to_rotation",
+    "rig_transforms",
+    "rotation_to_quaternion",
+    "tf_message",
+    "to_transform_stamped",
+]
+
+#: Topic of the static transforms (transient local, keep last 1: one message with all of them).
+TF_STATIC_TOPIC = "/tf_static"
+#: Topic of the transforms that change over time.
+TF_TOPIC = "/tf"
+#: ROS type of the messages on both.
+TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
+
+#: Largest deviation of R^T R from I (and of det R from 1) accepted as a rotation.
+ROTATION_TOLERANCE = 1e-6
+
+#: Quaternion (x, y, z, w) of the rotation that takes room (+Y up) vectors into a +Z-up frame:
+#: +90 degrees about X (room +Y -> +Z, room +Z -> -Y).
+Y_UP_TO_Z_UP = (float(np.sqrt(0.5)), 0.0, 0.0, float(np.sqrt(0.5)))
+
+
+def rotation_to_quaternion(rotation) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(x, y, z, w)``, ``w >= 0``, of a 3x3 rotation matrix.
+
+    Raises ``ValueError`` for a matrix that is not a finite proper rotation (orthonormal with
+    determinant +1 within :data:`ROTATION_TOLERANCE`).
+    """
+    R = np.asarray(rotation, dtype=np.float64)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise ValueError(f"a rotation must be a finite 3x3 matrix, got shape {R.shape}")
+    if (np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOLERANCE
+            or abs(np.linalg.det(R) - 1.0) > ROTATION_TOLERANCE):
+        raise ValueError(f"not a rotation matrix (orthonormal, det +1): {R.tolist()}")
+    # Shepperd's method: take the largest of 4w^2, 4x^2, 4y^2, 4z^2 for a stable square root.
+    trace = np.trace(R)
+    diagonal = np.diag(R)
+    k = int(np.argmax([trace, *diagonal]))
+    if k == 0:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        q = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1], 0.25 * s * s]) / s
+    else:
+        i = k - 1
+        j, m = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
+        q = np.empty(4)
+        q[i] = 0.25 * s
+        q[j] = (R[j, i] + R[i, j]) / s
+        q[m] = (R[m, i] + R[i, m]) / s
+        q[3] = (R[m, j] - R[j, m]) / s
+    q /= np.linalg.norm(q)
+    if q[3] < 0:
+        q = -q
+    return tuple(float(v) for v in q)
+
+
+def quaternion_to_rotation(quaternion_xyzw) -> np.ndarray:
+    """3x3 rotation matrix of a quaternion ``(x, y, z, w)`` (normalised first; ``ValueError``
+    for a zero or non-finite one)."""
+    q = np.asarray(quaternion_xyzw, dtype=np.float64)
+    norm = float(np.linalg.norm(q)) if q.shape == (4,) else 0.0
+    if not (np.isfinite(norm) and norm > 0):
+        raise ValueError(f"a quaternion must be 4 finite numbers (x, y, z, w), not all zero: {quaternion_xyzw!r}")
+    x, y, z, w = q / norm
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+@dataclass(frozen=True)
+class FrameTransform:
+    """The pose of frame ``child`` in frame ``parent``: ``p_parent = R(rotation) p_child + translation``."""
+
+    parent: str
+    child: str
+    translation: tuple[float, float, float]
+    rotation: tuple[float, float, float, float]  # unit quaternion (x, y, z, w)
+
+    def __post_init__(self) -> None:
+        for name in ("parent", "child"):
+            value = getattr(self, name)
+            if not isinstance(value, str) or not value:
+                raise ValueError(f"frame transform: {name} frame must be a non-empty string, got {value!r}")
+        if self.parent == self.child:
+            raise ValueError(f"frame transform: parent and child are both {self.parent!r}")
+        t = np.asarray(self.translation, dtype=np.float64)
+        q = np.asarray(self.rotation, dtype=np.float64)
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise ValueError(f"frame transform {self.parent} -> {self.child}: translation must be 3 finite numbers")
+        if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 1e-6:
+            raise ValueError(f"frame transform {self.parent} -> {self.child}: rotation must be a unit quaternion (x, y, z, w)")
+        object.__setattr__(self, "translation", tuple(float(v) for v in t))
+        object.__setattr__(self, "rotation", tuple(float(v) for v in q))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """4x4 homogeneous matrix taking child coordinates to parent coordinates."""
+        out = np.eye(4)
+        out[:3, :3] = quaternion_to_rotation(self.rotation)
+        out[:3, 3] = self.translation
+        return out
+
+    def apply(self, points_child) -> np.ndarray:
+        """Points (..., 3) in child coordinates -> parent coordinates."""
+        points = np.asarray(points_child, dtype=np.float64)
+        return points @ quaternion_to_rotation(self.rotation).T + np.asarray(self.translation)
+
+
+def frame_transform(parent: str, child: str, rotation, translation) -> FrameTransform:
+    """:class:`FrameTransform` from a child -> parent rotation matrix (3x3) and the child's
+    origin in the parent frame."""
+    return FrameTransform(parent, child, tuple(np.asarray(translation, np.float64).reshape(3)),
+                          rotation_to_quaternion(rotation))
+
+
+def camera_transform(camera, parent: str) -> FrameTransform:
+    """The optical frame of a rig camera (:class:`~hmocap_ros.pinhole_camera.PinholeCamera`:
+    its ``frame_id``, centre ``position`` and optical -> room rotation ``R_wc``) in ``parent``,
+    the rig's room frame."""
+    return frame_transform(parent, camera.frame_id, camera.R_wc, camera.position)
+
+
+def rig_transforms(rig, z_up_frame: str = "") -> list[FrameTransform]:
+    """Room frame -> optical frame of each camera of ``rig``, in rig order; with ``z_up_frame``,
+    first ``z_up_frame`` -> room (:data:`Y_UP_TO_Z_UP`, same origin)."""
+    out = []
+    if z_up_frame:
+        out.append(FrameTransform(z_up_frame, rig.frame_id, (0.0, 0.0, 0.0), Y_UP_TO_Z_UP))
+    out += [camera_transform(camera, rig.frame_id) for camera in rig.cameras]
+    return out
+
+
+def to_transform_stamped(transform: FrameTransform, stamp_ns: int, factory):
+    """``geometry_msgs/msg/TransformStamped`` of ``transform`` at ``stamp_ns``, built with
+    ``factory.make`` (an rclpy message or a rosbags dataclass)."""
+    from hmocap_ros.io.msg_factory import make_header
+
+    tx, ty, tz = transform.translation
+    qx, qy, qz, qw = transform.rotation
+    return factory.make(
+        "geometry_msgs/msg/TransformStamped",
+        header=make_header(factory, int(stamp_ns), transform.parent),
+        child_frame_id=transform.child,
+        transform=factory.make(
+            "geometry_msgs/msg/Transform",
+            translation=factory.make("geometry_msgs/msg/Vector3", x=tx, y=ty, z=tz),
+            rotation=factory.make("geometry_msgs/msg/Quaternion", x=qx, y=qy, z=qz, w=qw),
+        ),
+    )
+
+
+def tf_message(transforms, stamp_ns: int, factory):
+    """``tf2_msgs/msg/TFMessage`` holding ``transforms`` (:class:`FrameTransform`), all at
+    ``stamp_ns``."""
+    return factory.make(TF_MESSAGE_TYPE,
+                        transforms=[to_transform_stamped(t, stamp_ns, factory) for t in transforms])
+
+
+def from_transform_stamped(msg) -> FrameTransform:
+    """:class:`FrameTransform` of a ``TransformStamped`` (rclpy message or rosbags dataclass)."""
+    t, q = msg.transform.translation, msg.transform.rotation
+    return FrameTransform(msg.header.frame_id, msg.child_frame_id, (t.x, t.y, t.z), (q.x, q.y, q.z, q.w))
