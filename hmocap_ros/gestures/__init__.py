@@ -12,6 +12,11 @@
 - :mod:`~hmocap_ros.gestures.detection`: per-frame localization: votes, Parzen density,
   temporal smoothing (eq. 3.4), volume test (eq. 3.5).
 - :mod:`~hmocap_ros.gestures.forest_file`: the versioned ``.npz`` forest file format.
+- :mod:`~hmocap_ros.gestures.online_forest` and :mod:`~hmocap_ros.gestures.online_statistics`:
+  online random forests (sec. 3.3.1, alg. 6): Poisson bagging, leaf statistics, splits.
+- :mod:`~hmocap_ros.gestures.hard_negatives`: hard negatives mined on the fly (sec. 3.3.2).
+- :mod:`~hmocap_ros.gestures.trainer`: the interactive trainer's state machine (sec. 3.4.1).
+- :mod:`~hmocap_ros.gestures.depth_units`: whether a depth stream is in the unit it is read with.
 
 Typical use::
 
@@ -37,14 +42,16 @@ from hmocap_ros.gestures.params import (
     PatchParams,
     TrainParams,
 )
+from hmocap_ros.gestures.online_forest import OnlineForest, train_online_on_frames
+from hmocap_ros.gestures.params import OnlineParams, OnlineTrainParams
 from hmocap_ros.gestures.patches import SampleSet, collect_samples, mine_hard_negatives
 from hmocap_ros.gestures.tree_growth import grow_tree
 from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
 
 __all__ = [
     "DepthFormat", "Detection", "DetectorParams", "FeatureParams", "Forest", "ForestFileError", "ForestParams",
-    "GestureDetector", "PatchParams", "PendingTests", "SampleSet", "TrainParams", "Tree", "TreeReport",
+    "GestureDetector", "OnlineForest", "OnlineParams", "OnlineTrainParams", "PatchParams", "PendingTests", "SampleSet", "TrainParams", "Tree", "TreeReport",
     "collect_samples", "depth_to_metres", "evaluate_tests", "grow_tree", "load_forest", "mine_hard_negatives",
     "random_offsets", "read_header", "save_forest", "train_forest", "train_forest_on_frames",
-    "train_forest_on_samples",
+    "train_forest_on_samples", "train_online_on_frames",
 ]

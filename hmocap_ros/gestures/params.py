@@ -6,6 +6,8 @@
 - :class:`ForestParams`: offline forest growth and boosted tree-by-tree learning (sec. 3.2.1, 3.2.3).
 - :class:`TrainParams`: the four above, what :func:`hmocap_ros.gestures.train_forest` takes.
 - :class:`DetectorParams`: per-frame localization (sec. 3.2.4), what the node declares.
+- :class:`OnlineParams`: online forest growth (sec. 3.3.1, alg. 6) and on-the-fly negatives (sec. 3.3.2).
+- :class:`OnlineTrainParams`: depth, tests, patches and online parameters: what the online trainer takes.
 
 The fields carry a ``description`` in their metadata, so a node can declare them as ROS
 parameters without this module importing rclpy. Lengths are metres; offsets and radii that
@@ -281,3 +283,84 @@ class DetectorParams:
                        parzen_sigma_px=self.parzen_sigma_px * s,
                        volume_radius_px_m=self.volume_radius_px_m * s,
                        suppression_radius_px_m=self.suppression_radius_px_m * s, reference_focal_px=0.0)
+
+
+NEGATIVE_MODES = ("hard", "random")
+
+
+@dataclass(frozen=True)
+class OnlineParams:
+    """Online random forest (thesis sec. 3.3.1, alg. 6) and on-the-fly negatives (sec. 3.3.2)."""
+
+    n_trees: int = param(15, "Trees T of the forest (>= 1).")
+    max_depth: int = param(20, "Maximum depth D of a tree (root = 0), 1 to 64: leaves at D keep no candidate tests.")
+    n_tests: int = param(
+        32, "Random offset pairs (u, v) drawn per leaf (>= 1), each with n_thresholds thresholds: "
+            "the leaf's candidate tests (eq. 3.6) are n_tests x n_thresholds.")
+    n_thresholds: int = param(
+        4, "Random thresholds per offset pair (>= 1), uniform in +-2 kappa (the range of a clipped "
+           "test, eq. 3.6).")
+    alpha: float = param(
+        300.0, "alpha: a leaf splits only after it has seen more than this many samples (>= 0, "
+               "Poisson-weighted, its own samples, not those handed down).")
+    beta: float = param(
+        0.0, "beta: ... and only on a test whose information gain (eq. 3.2, nats) exceeds this (>= 0).")
+    poisson_lambda: float = param(
+        1.0, "lambda of online bagging (>= 0): each tree takes each sample k ~ Poisson(lambda) times "
+             "(alg. 6).")
+    negatives: str = param(
+        "hard", "Negatives of background frames: 'hard' = drawn around each class's density maximum "
+                "of the current forest (sec. 3.3.2); 'random' = as many, anywhere in the frame.")
+    n_frame_negatives: int = param(
+        256, "N_neg (>= 0): negatives drawn on a background frame per gesture class whose density "
+             "maximum is 1; round(N_neg * max p) for a maximum max p.")
+    hard_half_size_px_m: float = param(
+        40.0, "Half side (pixel*metres, > 0) of the square around a density maximum m_c in which its "
+              "negatives are drawn: value/d pixels at m_c's depth d (40 = +-20 px at 2 m).")
+    stride: int = param(4, "Grid step (pixels, 1 to 64) of the forest votes on background frames, as the detector's.")
+    parzen_sigma_px: float = param(
+        6.0, "Standard deviation (pixels, >= 0) of the Parzen kernel of those votes, as the detector's.")
+
+    def __post_init__(self):
+        _check([(self.n_trees >= 1, "n_trees must be >= 1"),
+                (1 <= self.max_depth <= 64, "max_depth must be in [1, 64]"),
+                (self.n_tests >= 1 and self.n_thresholds >= 1, "need n_tests, n_thresholds >= 1"),
+                (self.alpha >= 0.0 and self.beta >= 0.0, "need alpha >= 0 and beta >= 0"),
+                (self.poisson_lambda >= 0.0, "poisson_lambda must be >= 0"),
+                (self.negatives in NEGATIVE_MODES, f"negatives must be one of {NEGATIVE_MODES}"),
+                (self.n_frame_negatives >= 0, "n_frame_negatives must be >= 0"),
+                (self.hard_half_size_px_m > 0.0, "hard_half_size_px_m must be > 0"),
+                (1 <= self.stride <= 64, "stride must be in [1, 64]"),
+                (self.parzen_sigma_px >= 0.0, "parzen_sigma_px must be >= 0")],
+               "OnlineParams")
+
+    @property
+    def n_candidates(self) -> int:
+        """Candidate tests per leaf (offset pairs x thresholds)."""
+        return self.n_tests * self.n_thresholds
+
+
+@dataclass(frozen=True)
+class OnlineTrainParams:
+    """Everything the online trainer (:mod:`hmocap_ros.gestures.online_forest`) needs besides data."""
+
+    depth: DepthFormat = field(default_factory=DepthFormat)
+    features: FeatureParams = field(default_factory=FeatureParams)
+    patches: PatchParams = field(default_factory=PatchParams)
+    online: OnlineParams = field(default_factory=OnlineParams)
+
+    def __post_init__(self):
+        _check([(self.depth.max_depth_m < self.features.background_depth_m,
+                 "depth.max_depth_m must be below features.background_depth_m")], "OnlineTrainParams")
+
+    def for_focal(self, focal_px: float) -> "OnlineTrainParams":
+        """These parameters with the pixel sizes, given for f = :data:`REFERENCE_FOCAL_PX`, scaled
+        to a camera of focal length ``focal_px`` (as :meth:`TrainParams.for_focal`)."""
+        s = float(focal_px) / REFERENCE_FOCAL_PX
+        f, p, o = self.features, self.patches, self.online
+        return replace(self, features=replace(f, patch_half_size_px_m=f.patch_half_size_px_m * s),
+                       patches=replace(p, box_half_size_px_m=p.box_half_size_px_m * s,
+                                       near_half_size_px_m=p.near_half_size_px_m * s),
+                       online=replace(o, hard_half_size_px_m=o.hard_half_size_px_m * s,
+                                      stride=int(min(64, max(1, round(o.stride * s)))),
+                                      parzen_sigma_px=o.parzen_sigma_px * s))
