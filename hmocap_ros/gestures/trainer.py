@@ -1,0 +1,410 @@
+"""The interactive gesture trainer (thesis sec. 3.4.1, fig. 3.10 and 3.11) as a library state machine.
+
+A user stands in front of a depth camera and follows instructions; every depth frame goes
+through :meth:`Trainer.on_frame`, which learns from it according to the state and returns a
+:class:`TrainerStatus` (what a display shows, fig. 3.11). States, per round:
+
+1. ``do_gesture``: the user is asked to do the gesture centred in the box (no learning);
+2. ``update_positive``: the user keeps it in the box with small pose variations; positive
+   patches around the box centre update the online forest (sec. 3.3.1,
+   :func:`~hmocap_ros.gestures.patches.collect_samples` with the box centre as the annotated
+   point, so the frame's other pixels are its negatives, as offline);
+3. ``release``: the user releases the gesture (no learning);
+4. ``do_negatives``: the user moves and does other gestures; negatives are mined on the fly
+   where the forest as it stands fires (sec. 3.3.2,
+   :func:`~hmocap_ros.gestures.hard_negatives.frame_negatives`);
+
+repeated ``rounds`` times, then ``testing`` (the forest only detects), then ``done``. The
+machine is driven by the frames' stamps (integer nanoseconds): a state lasts its duration
+(:class:`TrainerParams`) from the stamp it began at; a state's end is the next one's start, so
+a late or dropped frame never stretches the session. ``idle`` (before :meth:`Trainer.start`
+and after :meth:`Trainer.cancel`) and ``done`` only detect.
+
+**Automatic threshold** (sec. 3.4.1, "Obtaining the threshold"): on each ``update_positive``
+frame ``th+_i`` is the detector's score (smoothed density p', eq. 3.4) of the taught gesture
+at its maximum inside the box; on each ``do_negatives`` frame ``th-_i`` is its maximum over the
+whole frame. Each is an exponential moving average ``th^_i = sigma th_i + (1 - sigma) th^_{i-1}``
+(sigma = 0.9) and the threshold is ``th = rho th^+ + (1 - rho) th^-`` (:func:`blend_threshold`).
+It is kept per gesture in the forest file (``meta["gesture_thresholds"]``).
+
+Design choices where the thesis is vague:
+
+- **The box** is a fixed region of the image, centred at ``box_u, box_v`` (fractions of the
+  width and height) with half side ``box_half_size_px`` (pixels at the reference focal
+  length); the variety between rounds (distance, place, background) comes from the user
+  moving, as the thesis asks, not from a moving box.
+- **Moving averages start** at the first value (``th^_0 = th_0``); the threshold is ``None``
+  until both averages have a value and is then the detector's threshold for that gesture.
+- **Several gestures in one forest**: teaching a gesture the forest does not know adds its
+  class (:func:`add_class`): every node and every candidate test of the open leaves gets a
+  zero count for it, so what the forest knows stays and the trees keep growing. Teaching a
+  gesture it knows (``extend=True``) continues it. A user must not do the forest's other
+  gestures while asked for negatives: they would be learnt as background (the instruction
+  says so).
+- **Cancel** puts back the forest as it was when the round began (a copy taken at each
+  round's start; for the first round, before the class was added) and the averages with it.
+- **Camera**: the forest learns in the pixels of the camera it sees (its tests are
+  pixel*metres at that focal length, ``meta["training"]["focal_px"]``); a forest grown at one
+  focal length is not taught with another camera.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from hmocap_ros.gestures.depth_features import depth_to_metres
+from hmocap_ros.gestures.detection import Detection, GestureDetector
+from hmocap_ros.gestures.forest_file import load_forest, save_forest
+from hmocap_ros.gestures.hard_negatives import frame_negatives
+from hmocap_ros.gestures.online_forest import OnlineForest
+from hmocap_ros.gestures.params import (
+    REFERENCE_FOCAL_PX,
+    DetectorParams,
+    FeatureParams,
+    OnlineParams,
+    OnlineTrainParams,
+    PatchParams,
+)
+from hmocap_ros.gestures.patches import collect_samples
+from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
+from hmocap_ros.params import group, param
+
+__all__ = ["LEARNING_STATES", "STATES", "Trainer", "TrainerParams", "TrainerStatus", "add_class",
+           "blend_threshold", "moving_average"]
+
+#: States of the trainer (sec. 3.4.1, fig. 3.10), in the order of a session.
+STATES = ("idle", "do_gesture", "update_positive", "release", "do_negatives", "testing", "done")
+#: States in which frames update the forest.
+LEARNING_STATES = ("update_positive", "do_negatives")
+_ROUND = ("do_gesture", "update_positive", "release", "do_negatives")
+
+INSTRUCTIONS = {
+    "idle": "Waiting for a gesture to teach.",
+    "do_gesture": "Do the gesture '{g}' with its centre in the box.",
+    "update_positive": "Keep '{g}' in the box and vary your pose a little.",
+    "release": "Release the gesture and wait.",
+    "do_negatives": "Move around and do other things (not '{g}', nor the room's other gestures).",
+    "testing": "Testing: do '{g}' anywhere and check that it is found.",
+    "done": "'{g}' is taught.",
+}
+
+
+@dataclass(frozen=True)
+class TrainerParams:
+    """The interactive trainer (thesis sec. 3.4.1). Pixel sizes are given for a camera of focal
+    length 525 px and scaled to the camera's."""
+
+    rounds: int = param(3, "Rounds of do_gesture, update_positive, release, do_negatives (>= 1).")
+    do_gesture_s: float = param(3.0, "Seconds (> 0) the user has to bring the gesture into the box.")
+    update_positive_s: float = param(6.0, "Seconds (> 0) of learning the gesture held in the box.")
+    release_s: float = param(2.0, "Seconds (> 0) to release the gesture.")
+    do_negatives_s: float = param(10.0, "Seconds (> 0) of learning negatives mined on the fly.")
+    testing_s: float = param(10.0, "Seconds (>= 0) of testing after the last round (detection only).")
+    box_u: float = param(0.5, "Box centre column as a fraction of the image width, in (0, 1).")
+    box_v: float = param(0.45, "Box centre row as a fraction of the image height, in (0, 1).")
+    box_half_size_px: float = param(
+        24.0, "Half side of the box in pixels at the reference focal length (> 0): the region where "
+              "the user is asked to hold the gesture and where th+ is read.")
+    sigma: float = param(0.9, "Weight sigma in (0, 1] of the newest value in the moving averages of th+ and th-.")
+    rho: float = param(
+        0.5, "Threshold th = rho th+ + (1 - rho) th-, rho in [0, 1]: higher = fewer false "
+             "positives (0.8 for a low false positive rate, sec. 3.4.1).")
+    features: FeatureParams = group(FeatureParams, "Tests of a new forest (eq. 3.6).")
+    patches: PatchParams = group(PatchParams, "Positive patches around the box centre (sec. 3.2.3).")
+    online: OnlineParams = group(OnlineParams, "Online forest of a new forest and its negatives (sec. 3.3).")
+    detector: DetectorParams = group(DetectorParams, "The on-the-fly detector (sec. 3.2.4).")
+
+    def __post_init__(self):
+        checks = [(self.rounds >= 1, "rounds must be >= 1"),
+                  (min(self.do_gesture_s, self.update_positive_s, self.release_s, self.do_negatives_s) > 0,
+                   "the round's durations must be > 0"),
+                  (self.testing_s >= 0, "testing_s must be >= 0"),
+                  (0 < self.box_u < 1 and 0 < self.box_v < 1, "box_u and box_v must be in (0, 1)"),
+                  (self.box_half_size_px > 0, "box_half_size_px must be > 0"),
+                  (0 < self.sigma <= 1, "sigma must be in (0, 1]"),
+                  (0 <= self.rho <= 1, "rho must be in [0, 1]")]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"TrainerParams: {message}")
+
+    def duration_s(self, state: str) -> float:
+        """Seconds ``state`` lasts (inf for idle and done)."""
+        return {"do_gesture": self.do_gesture_s, "update_positive": self.update_positive_s,
+                "release": self.release_s, "do_negatives": self.do_negatives_s,
+                "testing": self.testing_s}.get(state, float("inf"))
+
+
+@dataclass(frozen=True)
+class TrainerStatus:
+    """What the trainer shows after a frame (fig. 3.11): ``box`` = (u, v, half side) pixels;
+    ``detection`` the taught gesture's detection (or the best one) if any; ``samples`` how many
+    patches the frame taught."""
+
+    state: str
+    gesture: str
+    round: int
+    rounds: int
+    seconds_left: float
+    threshold: float | None
+    instruction: str
+    box: tuple
+    detection: Detection | None
+    detections: tuple
+    stamp_ns: int
+    known_gestures: tuple
+    samples: int = 0
+
+
+def moving_average(previous: float | None, value: float, sigma: float) -> float:
+    """``sigma value + (1 - sigma) previous`` (sec. 3.4.1); the first value starts it."""
+    return float(value) if previous is None else float(sigma) * float(value) + (1.0 - float(sigma)) * previous
+
+
+def blend_threshold(th_pos: float | None, th_neg: float | None, rho: float) -> float | None:
+    """``th = rho th+ + (1 - rho) th-`` (sec. 3.4.1); None until both are known."""
+    if th_pos is None or th_neg is None:
+        return None
+    return float(rho) * th_pos + (1.0 - float(rho)) * th_neg
+
+
+def add_class(forest: OnlineForest, name: str) -> OnlineForest:
+    """``forest`` with one more class ``name`` (last): every node's and open candidate test's
+    statistics get a zero count for it (nothing learnt is lost; module docstring)."""
+    f = forest.to_forest()
+    pad = lambda a: np.concatenate([a, np.zeros(a.shape[:-1] + (1,), a.dtype)], axis=-1)  # noqa: E731
+    trees = []
+    for t in f.trees:
+        tree = Tree(t.feature, t.threshold, t.left, t.right, pad(t.counts), t.depth)
+        p = t.pending
+        tree.pending = None if p is None else PendingTests(p.node, p.feature, p.threshold, pad(p.counts))
+        trees.append(tree)
+    meta = copy.deepcopy(f.meta)
+    meta["online"]["seen"] = list(meta["online"]["seen"]) + [0]
+    grown = Forest(trees, f.class_names + (str(name),), f.features, "online", meta)
+    return OnlineForest.from_forest(grown, forest.params)
+
+
+class Trainer:
+    """The interactive trainer (module docstring).
+
+    ``forest_or_path``: an :class:`OnlineForest`, an online :class:`Forest`, the path of a forest
+    file (kept growing where it stopped), or None / a path that does not exist (a new forest
+    from ``params.features`` and ``params.online`` at the first :meth:`start`). ``focal_px``: the
+    camera's focal length; None = the forest's training focal length (required for a new forest).
+    """
+
+    def __init__(self, forest_or_path, params: TrainerParams | None = None,
+                 rng: np.random.Generator | None = None, focal_px: float | None = None):
+        self.params = params if params is not None else TrainerParams()
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        forest = forest_or_path
+        if isinstance(forest, (str, Path)):
+            forest = load_forest(forest) if Path(forest).exists() else None
+        if isinstance(forest, Forest):
+            forest = OnlineForest.from_forest(forest)
+        if forest is not None and not isinstance(forest, OnlineForest):
+            raise TypeError("forest_or_path must be an OnlineForest, an online Forest, a path or None")
+        self.online: OnlineForest | None = forest
+        trained = None
+        if forest is not None:
+            trained = forest.meta.get("training", {}).get("focal_px")
+        if focal_px is None and not trained:
+            raise ValueError("the camera's focal length is needed (focal_px) for a forest without one")
+        if focal_px is not None and trained and abs(float(trained) - float(focal_px)) > 1e-6 * float(focal_px):
+            raise ValueError(f"the forest was grown at fx {trained:g} px, the camera has {focal_px:g} px")
+        self.focal_px = float(focal_px if focal_px is not None else trained)
+        scaled = OnlineTrainParams(features=self.params.features, patches=self.params.patches,
+                                   online=self.params.online).for_focal(self.focal_px)
+        self._new_params = scaled
+        self.patches = scaled.patches
+        self.state = "idle"
+        self.gesture = ""
+        self.round = 0
+        self._state_start: int | None = None
+        self._snapshot = None
+        self.th_pos: float | None = None
+        self.th_neg: float | None = None
+        self.detector: GestureDetector | None = None
+        if self.online is not None:
+            self._refresh_detector()
+
+    # ------------------------------------------------------------------ the forest
+
+    @property
+    def thresholds(self) -> dict:
+        """Detection threshold per gesture name (``meta["gesture_thresholds"]``)."""
+        return dict(self.online.meta.get("gesture_thresholds", {})) if self.online is not None else {}
+
+    @property
+    def threshold(self) -> float | None:
+        return blend_threshold(self.th_pos, self.th_neg, self.params.rho)
+
+    def _refresh_detector(self) -> None:
+        forest = self.online.to_forest()
+        if self.detector is None:
+            det = replace(self.params.detector, min_score=0.0)
+            self.detector = GestureDetector(forest, det, focal_px=self.focal_px)
+        else:
+            self.detector.set_forest(forest)
+
+    def forest(self) -> Forest:
+        """The forest as it stands (kind online), with the thresholds and the generator's state."""
+        f = self.online.to_forest()
+        f.meta["online"]["rng_state"] = self.rng.bit_generator.state
+        return f
+
+    def save(self, path) -> Path:
+        """Write the forest to ``path`` atomically (temporary file + ``os.replace``,
+        :func:`~hmocap_ros.gestures.forest_file.save_forest`)."""
+        if self.online is None:
+            raise ValueError("no forest yet: start teaching a gesture first")
+        return save_forest(self.forest(), path)
+
+    # ------------------------------------------------------------------ the session
+
+    def start(self, gesture_name: str, stamp_ns: int, extend: bool = False) -> None:
+        """Begin teaching ``gesture_name`` at ``stamp_ns`` (first round, ``do_gesture``). A gesture
+        the forest knows needs ``extend=True`` (keep teaching it); a new one adds its class."""
+        name = str(gesture_name).strip()
+        if not name or name == "background":
+            raise ValueError(f"not a gesture name: {gesture_name!r}")
+        if self.state not in ("idle", "done"):
+            raise ValueError(f"already teaching '{self.gesture}' (state {self.state}); cancel first")
+        known = self.online.class_names if self.online is not None else ()
+        if name in known and not extend:
+            raise ValueError(f"the forest already knows '{name}' (extend=True to keep teaching it)")
+        self._snapshot = (copy.deepcopy(self.online), self.th_pos, self.th_neg)
+        if self.online is None:
+            p = self._new_params
+            meta = {"training": {"method": "interactive", "focal_px": self.focal_px}}
+            self.online = OnlineForest(("background", name), p.features, p.online, self.rng, meta)
+        elif name not in known:
+            self.online = add_class(self.online, name)
+        self._refresh_detector()
+        self.gesture = name
+        self.th_pos = self.th_neg = None
+        self.round = 1
+        self._enter("do_gesture", int(stamp_ns))
+
+    def cancel(self) -> None:
+        """Stop the session; the forest is put back as it was when the current round began."""
+        if self.state in LEARNING_STATES + ("do_gesture", "release") and self._snapshot is not None:
+            forest, self.th_pos, self.th_neg = self._snapshot
+            self.online = forest
+            if self.online is not None:
+                self._refresh_detector()
+            else:
+                self.detector = None
+        self.state = "idle"
+        self.round = 0
+        self._state_start = None
+
+    def _enter(self, state: str, stamp_ns: int) -> None:
+        self.state = state
+        self._state_start = stamp_ns
+
+    def _advance(self, stamp_ns: int) -> None:
+        """Move through the states whose time is over at ``stamp_ns`` (module docstring)."""
+        while self.state not in ("idle", "done"):
+            end = self._state_start + int(round(self.params.duration_s(self.state) * 1e9))
+            if stamp_ns < end:
+                return
+            if self.state == "do_negatives" and self.round < self.params.rounds:
+                self.round += 1
+                self._snapshot = (copy.deepcopy(self.online), self.th_pos, self.th_neg)
+                nxt = "do_gesture"
+            elif self.state == "do_negatives":
+                nxt = "testing"
+            elif self.state == "testing":
+                nxt = "done"
+            else:
+                nxt = _ROUND[_ROUND.index(self.state) + 1]
+            if self.state == "do_negatives" and nxt == "testing":
+                self._finish_round()
+            self._enter(nxt, end)
+
+    def _finish_round(self) -> None:
+        th = self.threshold
+        if th is not None:
+            self.online.meta.setdefault("gesture_thresholds", {})[self.gesture] = th
+
+    def box(self, width: int, height: int) -> tuple:
+        """(u, v, half side) of the box in pixels for an image ``width`` x ``height``."""
+        half = self.params.box_half_size_px * self.focal_px / REFERENCE_FOCAL_PX
+        return (self.params.box_u * width, self.params.box_v * height, half)
+
+    def on_frame(self, depth_m: np.ndarray, stamp_ns: int) -> TrainerStatus:
+        """Process one depth frame (metres, or REP 118 raw units per ``params.detector``) taken at
+        ``stamp_ns``: advance the states, learn per the state, detect; returns the status."""
+        stamp_ns = int(stamp_ns)
+        depth = np.asarray(depth_m)
+        if depth.ndim != 2:
+            raise ValueError(f"depth must be a 2-D image, got shape {depth.shape}")
+        if self._state_start is not None and stamp_ns < self._state_start:
+            raise ValueError("frame stamps went back in time")
+        self._advance(stamp_ns)
+        h, w = depth.shape
+        box = self.box(w, h)
+        if self.online is None:
+            return self._status(stamp_ns, box, (), 0)
+        cls = self.online.class_names.index(self.gesture) if self.gesture in self.online.class_names else 0
+        detections = tuple(self.detector.update(depth, stamp_ns))
+        samples = 0
+        if self.state in LEARNING_STATES:
+            bg = np.float32(self.online.features.background_depth_m)
+            metres = depth_to_metres(depth, self.params.detector.depth_format, float(bg))
+            dens = self.detector.density[:, :, cls - 1] if self.detector.density is not None else None
+            if self.state == "update_positive":
+                if dens is not None and dens.size:
+                    self.th_pos = moving_average(self.th_pos, self._box_max(dens, box), self.params.sigma)
+                s = collect_samples(metres[None], [(cls, int(round(box[0])), int(round(box[1])))], self.patches,
+                                    self.online.features, self.rng, len(self.online.class_names))
+                xs, ys, labels = s.x, s.y, s.label
+            else:
+                if dens is not None and dens.size:
+                    self.th_neg = moving_average(self.th_neg, float(dens.max()), self.params.sigma)
+                xs, ys, _ = frame_negatives(self.online.flat(), metres, self.online.params, self.rng)
+                labels = np.zeros(xs.size, np.int32)
+            if labels.size:
+                self.online.update(metres[None], np.zeros(labels.size, np.int32), xs, ys, labels, self.rng)
+                self._refresh_detector()
+            samples = int(labels.size)
+        return self._status(stamp_ns, box, self._shown(detections, cls), samples)
+
+    def _box_max(self, dens: np.ndarray, box: tuple) -> float:
+        """Maximum of a density grid (gh, gw) over the grid cells inside the box."""
+        p = self.detector.active_params
+        off, s = self.detector.grid_offset, p.stride
+        u, v, half = box
+        gx0, gx1 = int(np.ceil((u - half - off) / s)), int(np.floor((u + half - off) / s)) + 1
+        gy0, gy1 = int(np.ceil((v - half - off) / s)), int(np.floor((v + half - off) / s)) + 1
+        win = dens[max(gy0, 0):max(gy1, 0), max(gx0, 0):max(gx1, 0)]
+        return float(win.max()) if win.size else 0.0
+
+    def _shown(self, detections: tuple, cls: int) -> tuple:
+        """The detections kept by each gesture's threshold (the learnt one, else the detector's
+        ``min_score``; the taught gesture's running threshold while it is taught)."""
+        ths = self.thresholds
+        if self.gesture and self.threshold is not None and self.state != "idle":
+            ths[self.gesture] = self.threshold
+        floor = self.params.detector.min_score
+        return tuple(d for d in detections if d.score >= ths.get(d.name, floor))
+
+    def _status(self, stamp_ns: int, box: tuple, detections: tuple, samples: int) -> TrainerStatus:
+        left = 0.0
+        if self._state_start is not None and self.state not in ("idle", "done"):
+            left = max(0.0, self.params.duration_s(self.state) - (stamp_ns - self._state_start) * 1e-9)
+        mine = [d for d in detections if d.name == self.gesture]
+        detection = mine[0] if mine else (detections[0] if detections else None)
+        known = tuple(self.online.class_names[1:]) if self.online is not None else ()
+        return TrainerStatus(self.state, self.gesture, self.round, self.params.rounds, left, self.threshold,
+                             INSTRUCTIONS[self.state].format(g=self.gesture), box, detection, detections,
+                             stamp_ns, known, samples)
+
+    def status(self, stamp_ns: int = 0, width: int = 640, height: int = 480) -> TrainerStatus:
+        """The status without a frame (e.g. before the first one)."""
+        return self._status(int(stamp_ns), self.box(width, height), (), 0)
