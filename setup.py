@@ -11,6 +11,7 @@ CONSOLE_SCRIPTS = [
     "camera_rig_publisher = hmocap_ros.nodes.camera_rig_publisher:main",
     "foreground_segmentation = hmocap_ros.nodes.foreground_segmentation:main",
     "gesture_detection = hmocap_ros.nodes.gesture_detection:main",
+    "extremity_detection = hmocap_ros.nodes.extremity_detection:main",
     "body_tracker = hmocap_ros.nodes.body_tracker:main",
 ]
 

@@ -108,6 +108,7 @@ COMMAND_GROUPS = {
         {
             "mocap": ("hmocap_ros.eval.mocap_eval", "3D joint error and speed of the body tracker on a multi-view bag"),
             "gestures": ("hmocap_ros.eval.gesture_eval", "precision-recall and AP per gesture on a depth bag"),
+            "extremities": ("hmocap_ros.eval.extremity_eval", "precision, recall and 3D error of the extremity detection on a multi-view bag"),
         },
     ),
     "train": (

@@ -1,16 +1,19 @@
 """``hmocap demo``: the shipped recordings through the real nodes over DDS, recorded and scored.
 
 1. Body: the shipped 4-camera bag (``data/demo/mocap_4cam.mcap``: empty room, then a person
-   waving) is replayed into ``foreground_segmentation`` -> ``body_tracker``; foregrounds,
-   skeletons, joint states, body shape and diagnostics are recorded to ``<out>/body.mcap``.
+   waving) is replayed into ``foreground_segmentation`` -> ``extremity_detection`` ->
+   ``body_tracker``; foregrounds, extremities, skeletons, the body's joint states
+   (``/humans/bodies/body_0/joint_states``), the body frames (``/tf``), body shape and
+   diagnostics are recorded to ``<out>/body.mcap``.
 2. Gestures: the shipped depth bag (``data/demo/gestures_depth.mcap``) is replayed into
    ``gesture_detection``; its gestures are recorded to ``<out>/gestures.mcap``.
 
 Every node is its own process over DDS on loopback. The demo then compares what came out
 with the bags' ground truth: foreground F1, 3D joint error (mm) and the tracker's time per
 frame; gestures found with the right class within 10 pixels (at 640x480, scaled).
-The body tracker queues every frame (``queue_depth``) and works through them at its full
-particle budget; the demo waits for a pose per frame with a person.
+The body tracker queues every frame (``queue_depth``) and works through them in stamp order
+(``latest_only:=false``) at its full particle budget; the demo waits for a pose per frame with
+a person.
 """
 
 from __future__ import annotations
@@ -35,9 +38,11 @@ DEMO_RIG = DATA_DIR / "mocap_4cam_rig.yaml"
 GESTURE_BAG = DATA_DIR / "gestures_depth.mcap"
 
 #: body_tracker settings of the demo: the shipped bag is 160x120, so compare at full scale;
-#: every frame is queued (a live room would rather drop frames than lag).
+#: every frame is queued and tracked (a live room, ``latest_only`` as the node's default,
+#: would rather skip frames than lag).
+#: extremity_detection runs its default detector.
 TRACKER_ARGS = ["-p", "weighting.working_scale:=1.0", "-p", "method:=dd-hpf", "-p",
-                "queue_depth:=100"]
+                "queue_depth:=100", "-p", "latest_only:=false"]
 
 
 def _cameras(bag: Path) -> list[str]:
@@ -65,15 +70,18 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
         n_person = reader.topics()[topics.GT_SKELETON].count
     out_bag = out / "body.mcap"
     fg_topics = [topics.camera_foreground(c) for c in cameras]
-    record = [*fg_topics, "/skeleton", "/skeleton_markers", "/joint_states", "/body_shape", "/diagnostics"]
-    print(f"body: {DEMO_BAG.name}, {len(cameras)} cameras -> foreground_segmentation -> body_tracker "
-          f"(replay at {rate:g}x real time)")
+    record = [*fg_topics, "/extremities", "/skeleton", "/skeleton_markers",
+              "/humans/bodies/body_0/joint_states", "/tf", "/body_shape", "/diagnostics"]
+    print(f"body: {DEMO_BAG.name}, {len(cameras)} cameras -> foreground_segmentation -> "
+          f"extremity_detection -> body_tracker (replay at {rate:g}x real time)")
     t0 = time.monotonic()
     replay_through_nodes(
         DEMO_BAG,
         [("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
           ["--ros-args", "-p", f"cameras:=[{','.join(cameras)}]", "-p", "learn_frames:=8",
            "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
+         ("extremity_detection", "hmocap_ros.nodes.extremity_detection",
+          ["--ros-args", "-p", "queue_depth:=100"], "waiting for the rig"),
          ("body_tracker", "hmocap_ros.nodes.body_tracker", ["--ros-args", *TRACKER_ARGS], "waiting for the rig")],
         record, out_bag, env, out / "logs",
         replay_topics=[topics.CAMERA_RIG, *(topics.camera_image(c) for c in cameras)],
@@ -81,7 +89,7 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
     elapsed = time.monotonic() - t0
 
     truth = _by_stamp(DEMO_BAG, [topics.GT_SKELETON, *(topics.gt_silhouette(c) for c in cameras)])
-    got = _by_stamp(out_bag, ["/skeleton", "/diagnostics", *fg_topics])
+    got = _by_stamp(out_bag, ["/skeleton", "/diagnostics", "/extremities", *fg_topics])
     f1 = []
     for cam, fg_topic in zip(cameras, fg_topics, strict=True):
         gt = truth[topics.gt_silhouette(cam)]
@@ -93,6 +101,11 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
     print(f"  foreground: {len(got[fg_topics[0]])}/{n_images} masks per camera, "
           f"F1 vs ground truth {np.mean(f1) if f1 else float('nan'):.2f} (frames with the person)")
 
+    extremities = got["/extremities"].values()
+    labelled = sum(len([lab for lab in m.labels if lab != "unknown"]) for m in extremities)
+    detector = next(iter(extremities)).detector if extremities else "none"
+    print(f"  extremity_detection ({detector}): {len(extremities)}/{n_images} frame sets, "
+          f"{labelled / max(len(extremities), 1):.1f} labelled detections per set")
     errors = []
     for stamp, msg in got["/skeleton"].items():
         if stamp in truth[topics.GT_SKELETON]:

@@ -1,16 +1,22 @@
-"""body_tracker over DDS: the shipped bag through foreground_segmentation -> body_tracker gives
-joint states with the input stamps and a bounded 3D error; bad input is logged and survived.
+"""body_tracker over DDS: the shipped bag through foreground_segmentation -> extremity_detection
+-> body_tracker gives extremities and joint states with the input stamps and a bounded 3D error;
+the REP-155 outputs (``humans/bodies/tracked``, the per-body topics, the body frames on
+``/tf``, per-joint confidences) of one body; a tracker slower than the cameras keeps its
+latency bounded by skipping frame sets, and answers every one with ``latest_only:=false``;
+bad input is logged and survived.
 
-The replay runs ``dd-hpf``, which is ``hpf-apo`` plus the skin maps the foreground node
-publishes beside the masks (both synchronised by stamp), so it covers both paths; and it runs
-with ``max_people:=2``, so the per-body topics are covered too (the bag has one person: the
-second slot keeps searching).
+The replay runs ``dd-hpf``, which is ``hpf-apo`` plus the detections of the extremity node
+(synchronised with the masks by stamp), so it covers both paths; and it runs with
+``max_people:=2``, so the per-body topics are covered for two slots too (the bag has one
+person: the second slot keeps searching). Replays that count on every frame being answered
+run the tracker with ``latest_only:=false``.
 
 Small particle budgets keep this fast on a 2-core machine; the figures of the README come
 from ``tools/mocap_table.py`` and ``hmocap eval mocap``, not from here.
 """
 from __future__ import annotations
 
+import json
 import sys
 
 import numpy as np
@@ -22,9 +28,14 @@ from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
+#: the extremity detector of the pipeline test (the shipped bag is 160x120)
+DETECTOR = "keypoints"
 FAST = ["-p", "filter.particles:=120", "-p", "filter.layers:=0", "-p", "startup.particles:=60",
         "-p", "startup.frames:=2", "-p", "weighting.working_scale:=1.0",
         "-p", "startup.working_scale:=1.0"]
+#: every frame set answered, in stamp order (a slow replay), with every mask kept
+EVERY_FRAME = ["-p", "latest_only:=false", "-p", "queue_depth:=100"]
+BODY_0 = "/humans/bodies/body_0"
 
 
 def _points(msg) -> np.ndarray:
@@ -61,29 +72,41 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path, model):
     nodes = [("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
               ["--ros-args", "-p", f"cameras:=[{','.join(CAMERAS)}]", "-p", "learn_frames:=8",
                "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
+             ("extremity_detection", "hmocap_ros.nodes.extremity_detection",
+              ["--ros-args", "-p", f"detector:={DETECTOR}", "-p", "queue_depth:=100"],
+              "waiting for the rig"),
              ("body_tracker", "hmocap_ros.nodes.body_tracker",
-              ["--ros-args", "-p", "method:=dd-hpf", "-p", "queue_depth:=100",
+              ["--ros-args", "-p", "method:=dd-hpf", *EVERY_FRAME,
                "-p", "max_people:=2", *FAST],
               "waiting for the rig")]
     procs = replay_through_nodes(
-        DEMO_BAG, nodes, ["/joint_states", "/skeleton", "/body_shape", "/diagnostics",
-                          "/humans/bodies/body_0/joint_states"], out,
+        DEMO_BAG, nodes, ["/skeleton", "/body_shape", "/diagnostics", f"{BODY_0}/joint_states",
+                          "/extremities", "/extremities/points"], out,
         loopback_dds_env(), tmp_path / "logs",
         replay_topics=["/camera_rig", *(f"/{c}/image_raw" for c in CAMERAS)], replay_rate=0.2,
-        expect={"/joint_states": 15}, settle=5.0)
-    log = procs["body_tracker"].output()
-    assert "Traceback" not in log, log
+        expect={f"{BODY_0}/joint_states": 15}, settle=5.0)
+    for name in ("body_tracker", "extremity_detection"):
+        log = procs[name].output()
+        assert "Traceback" not in log, log
     with BagReader(DEMO_BAG) as reader:
         image_stamps = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/cam_1/image_raw"])}
         truth = {stamp_to_ns(m.msg.header.stamp): m.msg
                  for m in reader.messages(["/ground_truth/skeleton"])}
     with BagReader(out) as reader:
-        joints = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/joint_states"])}
+        joints = {stamp_to_ns(m.msg.header.stamp): m.msg
+                  for m in reader.messages([f"{BODY_0}/joint_states"])}
         skeletons = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
         shapes = list(reader.messages(["/body_shape"]))
         diags = list(reader.messages(["/diagnostics"]))
-        body_0 = {stamp_to_ns(m.msg.header.stamp)
-                  for m in reader.messages(["/humans/bodies/body_0/joint_states"])}
+        extremities = {stamp_to_ns(m.msg.header.stamp): m.msg
+                       for m in reader.messages(["/extremities"])}
+        clouds = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/extremities/points"])}
+    # one set of detections per frame set with masks (after the 8 frames the foreground node
+    # learns from), with its stamp, and its point cloud
+    assert set(extremities) <= image_stamps and len(extremities) >= len(image_stamps) - 8 - 2
+    assert clouds == set(extremities)
+    assert all(m.detector == DETECTOR and m.header.frame_id == "room" for m in extremities.values())
+    assert any(len(m.labels) > 0 for m in extremities.values())
     assert set(joints) <= image_stamps and set(joints) == set(skeletons)
     assert len(joints) >= len(truth) - 2, (len(joints), len(truth))  # a pose for (nearly) every frame
     js = next(iter(joints.values()))
@@ -102,12 +125,11 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path, model):
                 if s.message == "tracking"]
     # dd-hpf runs the hpf-apo layers: two sweeps of the 7 blocks (filter.sweeps) + the final layer
     assert tracking and len(tracking[-1]["ms_per_layer"].split()) == 15
-    # the skin maps arrived with the masks: hands were searched for in 3D on tracked frames
+    # the detections arrived with the masks: hands were assigned on tracked frames
     assert any(float(t.get("time_detection", 0)) > 0 for t in tracking), tracking[-1]
     assert any("hand" in t.get("extremities", "") for t in tracking), tracking[-1]
     assert len(tracking[-1]["ess_per_layer"].split()) == 15 and float(tracking[-1]["seconds_per_frame"]) > 0
-    # two slots: the person is body_0 on both its topics; body_1 finds nobody else
-    assert body_0 == set(joints)
+    # two slots: the person is body_0 on its topics; body_1 finds nobody else
     assert {sk.body_id for sk in skeletons.values()} == {"body_0"}
     ours = [[s.name for s in d.msg.status] for d in diags
             if d.msg.status and d.msg.status[0].name.startswith("body_tracker")]
@@ -124,12 +146,13 @@ def test_every_frame_answered_with_a_camera_absent(tmp_path):
         frames = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/cam_1/image_raw"])}
         person = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/ground_truth/skeleton"])}
     node = ("body_tracker", "hmocap_ros.nodes.body_tracker",
-            ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "method:=hpf-apo", "-p", "queue_depth:=100",
+            ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "method:=hpf-apo", *EVERY_FRAME,
              "-p", "max_wait_ms:=150.0", *FAST, *remaps], "kernels ready")
     result = replay_through_nodes(
-        DEMO_BAG, [node], ["/joint_states", "/diagnostics"], tmp_path / "out.mcap", loopback_dds_env(),
-        tmp_path / "logs", replay_topics=[f"/ground_truth/{c}/silhouette" for c in present], replay_rate=0.5,
-        expect={"/diagnostics": len(frames), "/joint_states": len(person)}, settle=2.0)
+        DEMO_BAG, [node], [f"{BODY_0}/joint_states", "/diagnostics"], tmp_path / "out.mcap",
+        loopback_dds_env(), tmp_path / "logs",
+        replay_topics=[f"/ground_truth/{c}/silhouette" for c in present], replay_rate=0.5,
+        expect={"/diagnostics": len(frames), f"{BODY_0}/joint_states": len(person)}, settle=2.0)
     log = result["body_tracker"].output()
     assert "Traceback" not in log, log
     assert result.unanswered == {}, (result.recorded, log)
@@ -137,9 +160,185 @@ def test_every_frame_answered_with_a_camera_absent(tmp_path):
         answered = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/diagnostics"])}
         dropped = {kv.value for m in reader.messages(["/diagnostics"]) for st in m.msg.status
                    for kv in st.values if kv.key == "dropped"}
-        joints = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/joint_states"])}
+        joints = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages([f"{BODY_0}/joint_states"])}
     assert answered == frames and joints == person
     assert dropped == {"cam_4"}
+
+
+TRACKED_LISTENER = r"""
+import json, rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from hmocap_interfaces.msg import IdsList
+rclpy.init()
+node = rclpy.create_node("tracked_listener")
+def on_ids(msg):
+    stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+    print("TRACKED " + json.dumps([stamp, list(msg.ids), msg.header.frame_id]), flush=True)
+node.create_subscription(IdsList, "/humans/bodies/tracked", on_ids,
+                         QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+print("listening", flush=True)
+try:
+    rclpy.spin(node)
+except BaseException:
+    pass
+"""
+
+
+def _transform_matrix(t) -> np.ndarray:
+    from hmocap_ros.io.tf import from_transform_stamped
+
+    return from_transform_stamped(t).matrix
+
+
+def test_rep155_topics_body_frames_and_confidence_of_one_body(tmp_path):
+    # The ground-truth silhouettes straight into one tracker slot (max_people:=1): REP-155's
+    # list of tracked bodies for every frame set, the per-body topics, the body's frames on
+    # /tf placing every joint where the skeleton has it, and confidences in [0, 1].
+    remaps = [a for c in CAMERAS for a in ("-r", f"/{c}/foreground:=/ground_truth/{c}/silhouette")]
+    with BagReader(DEMO_BAG) as reader:
+        frames = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/cam_1/image_raw"])}
+        person = {stamp_to_ns(m.msg.header.stamp) for m in reader.messages(["/ground_truth/skeleton"])}
+    node = ("body_tracker", "hmocap_ros.nodes.body_tracker",
+            ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "method:=hpf-apo", "-p", "max_people:=1",
+             *EVERY_FRAME, *FAST, *remaps], "kernels ready")
+    env = loopback_dds_env()
+    out = tmp_path / "out.mcap"
+    topics = ["/skeleton", "/tf", f"{BODY_0}/joint_states", f"{BODY_0}/body_shape", "/body_shape",
+              "/diagnostics"]
+    with NodeProcess("listener", [sys.executable, "-c", TRACKED_LISTENER], env, tmp_path) as listener:
+        assert listener.wait_for_output("listening", 60), listener.output()
+        result = replay_through_nodes(
+            DEMO_BAG, [node], topics, out, env, tmp_path / "logs",
+            replay_topics=[f"/ground_truth/{c}/silhouette" for c in CAMERAS], replay_rate=0.5,
+            expect={"/diagnostics": len(frames), "/skeleton": len(person) - 1}, settle=2.0)
+        listener.stop()
+        heard = listener.output()
+    log = result["body_tracker"].output()
+    assert "Traceback" not in log, log
+    tracked = {}
+    for line in heard.splitlines():
+        if line.startswith("TRACKED "):
+            stamp, ids, frame_id = json.loads(line[len("TRACKED "):])
+            assert frame_id == "room"
+            tracked[stamp] = ids
+    with BagReader(out) as reader:
+        skeletons = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
+        joints = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages([f"{BODY_0}/joint_states"])}
+        tf_msgs = {stamp_to_ns(m.msg.transforms[0].header.stamp): m.msg for m in reader.messages(["/tf"])}
+        shapes = [m.msg for m in reader.messages([f"{BODY_0}/body_shape"])]
+        plain_shapes = [m.msg for m in reader.messages(["/body_shape"])]
+        latched = reader.topics()[f"{BODY_0}/body_shape"].latched
+        diags = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/diagnostics"])}
+    # humans/bodies/tracked: every frame set, the body while it has a pose, none otherwise
+    # (the listener may match the publisher a few frames late on a loaded machine: from the
+    # first stamp it heard on, it hears every frame set)
+    assert set(diags) == frames and tracked and set(tracked) == {s for s in frames if s >= min(tracked)}
+    assert {s for s, ids in tracked.items() if ids} == {s for s in skeletons if s >= min(tracked)}
+    assert all(ids in ([], ["body_0"]) for ids in tracked.values())
+    assert len(skeletons) >= len(person) - 1 and set(skeletons) <= person
+    # the per-body topics of the one slot
+    assert set(joints) == set(skeletons) and all(len(js.name) == 30 for js in joints.values())
+    assert latched and shapes and shapes[-1].body_id == "body_0" and 1.5 < shapes[-1].height < 2.1
+    assert plain_shapes and plain_shapes[-1].height == shapes[-1].height
+    # /tf: one message per pose, room -> body_body_0 -> ... -> every joint of the skeleton
+    assert set(tf_msgs) == set(skeletons)
+    for stamp, sk in skeletons.items():
+        transforms = tf_msgs[stamp].transforms
+        assert all(stamp_to_ns(t.header.stamp) == stamp for t in transforms)
+        names = ["body_body_0"] + [f"{n}_body_0" for n in sk.joint_names[1:]]
+        assert [t.child_frame_id for t in transforms] == names
+        assert transforms[0].header.frame_id == "room"
+        pose = {"room": np.eye(4)}
+        for t in transforms:
+            pose[t.child_frame_id] = pose[t.header.frame_id] @ _transform_matrix(t)
+        positions = np.array([pose[n][:3, 3] for n in names])
+        np.testing.assert_allclose(positions, _points(sk), atol=1e-6)
+        up = pose["body_body_0"][:3, 2]  # REP-155: z towards the head; the room is +Y up
+        assert up[1] > 0.7, up
+    # confidence: one per joint in [0, 1] once the filter tracks (empty on start-up frames),
+    # the pelvis surer than the wrists, which the particles place less alike
+    confident = [np.array(sk.confidence) for sk in skeletons.values() if len(sk.confidence)]
+    assert confident and all(len(c) == 19 for c in confident)
+    assert all(len(sk.confidence) in (0, 19) for sk in skeletons.values())
+    confidence = np.stack(confident)
+    assert np.all((confidence >= 0.0) & (confidence <= 1.0))
+    names = list(next(iter(skeletons.values())).joint_names)
+    wrists = confidence[:, [names.index("l_wrist"), names.index("r_wrist")]].mean()
+    assert confidence[:, names.index("pelvis")].mean() > wrists, confidence.mean(axis=0)
+    states = [s.message for d in diags.values() for s in d.status]
+    assert "tracking" in states
+
+
+def _latency_run(tmp_path, name: str, args: list, rate: float, expect: dict | None = None) -> dict:
+    """The ground-truth silhouettes at ``rate`` into a tracker; per processed frame set its
+    latency (s): when its diagnostics reached the recorder, less when the replay sent the set
+    (its stamp's offset in the bag over ``rate`` from the replay's start). The start is taken
+    from the set with the least delay, one of the empty-room sets at the start of the bag,
+    which the tracker answers in milliseconds. Also its seconds per frame and skipped counts."""
+    remaps = [a for c in CAMERAS for a in ("-r", f"/{c}/foreground:=/ground_truth/{c}/silhouette")]
+    node = ("body_tracker", "hmocap_ros.nodes.body_tracker",
+            ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "method:=hpf-apo", *FAST, *args, *remaps],
+            "kernels ready")
+    out = tmp_path / f"{name}.mcap"
+    inputs = [f"/ground_truth/{c}/silhouette" for c in CAMERAS]
+    with BagReader(DEMO_BAG) as reader:
+        frames = sorted(stamp_to_ns(m.msg.header.stamp) for m in reader.messages([inputs[0]]))
+    # drained once no diagnostics (one per set tracked) came for ``settle`` s
+    result = replay_through_nodes(DEMO_BAG, [node], ["/diagnostics", "/skeleton"], out,
+                                  loopback_dds_env(), tmp_path / f"logs_{name}", replay_topics=inputs,
+                                  replay_rate=rate, settle=8.0, drain_topics=["/diagnostics"],
+                                  expect=expect)
+    log = result["body_tracker"].output()
+    assert "Traceback" not in log, log
+    rows = []
+    with BagReader(out) as reader:
+        for m in reader.messages(["/diagnostics"]):
+            values = {kv.key: kv.value for kv in m.msg.status[0].values}
+            stamp = stamp_to_ns(m.msg.header.stamp)
+            rows.append((stamp, (m.log_time_ns - (stamp - frames[0]) / rate) / 1e9,
+                         float(values["seconds_per_frame"]), int(values["skipped_frame_sets"]),
+                         int(values["skipped_since_last"]), float(values["wait_ms"])))
+    stamps, delay, seconds, total, since, wait = (np.array(c) for c in zip(*rows))
+    assert np.all(np.diff(stamps) > 0)  # never out of order
+    return {"stamps": stamps, "latency": delay - delay.min(), "seconds": seconds, "skipped_total": total,
+            "skipped_since": since, "wait_ms": wait, "frames": frames}
+
+
+def test_a_tracker_slower_than_the_cameras_skips_sets_and_keeps_its_latency_bounded(tmp_path):
+    # The 4 cameras at their real 25 fps: the tracker needs far more than 40 ms per set. Live
+    # (latest_only, the default) it tracks the newest set after each one and counts the rest;
+    # the latency of every set it tracks stays within about two processing times (the set in
+    # progress when it came, then its own). latest_only:=false answers every set, and its
+    # latency grows with the queue.
+    with BagReader(DEMO_BAG) as reader:
+        n_frames = reader.topics()["/cam_1/image_raw"].count
+    live = _latency_run(tmp_path, "live", [], rate=1.0)
+    every = _latency_run(tmp_path, "every", EVERY_FRAME, rate=1.0, expect={"/diagnostics": n_frames})
+    frames = every["frames"]
+    assert list(every["stamps"]) == frames and every["skipped_total"][-1] == 0
+    assert live["skipped_total"][-1] > 0 and len(live["stamps"]) < len(frames)
+    # the cumulative count is the sum of the per-message counts, and with the sets tracked
+    # it accounts for every frame set up to the last one tracked
+    assert np.array_equal(np.cumsum(live["skipped_since"]), live["skipped_total"])
+    first = frames.index(int(live["stamps"][0]))
+    last = frames.index(int(live["stamps"][-1]))
+    assert live["skipped_total"][-1] == (last - first + 1) - len(live["stamps"])
+    # bounded: each set within the processing of the one before and its own (plus slack for
+    # a loaded machine); the last set tracked is one of the last frames
+    previous = np.concatenate([[0.0], live["seconds"][:-1]])
+    slack = 1.0
+    assert np.all(live["latency"] <= live["seconds"] + previous + slack), \
+        (live["latency"], live["seconds"])
+    assert live["stamps"][-1] >= frames[-3], (live["stamps"][-1] - frames[-1]) / 1e6
+    figures = {"live_latency_max_s": float(live["latency"].max()),
+               "live_last_latency_s": float(live["latency"][-1]),
+               "every_last_latency_s": float(every["latency"][-1]),
+               "seconds_per_frame_max": float(live["seconds"].max()),
+               "skipped": int(live["skipped_total"][-1]), "tracked": len(live["stamps"]),
+               "frames": len(frames)}
+    print(figures)
+    # queueing every set: the last one waits for the whole backlog
+    assert every["latency"][-1] > live["latency"][-1], figures
 
 
 def test_replay_result_counts_unanswered_frames(tmp_path):

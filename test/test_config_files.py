@@ -27,6 +27,8 @@ NODE_CONFIGS = {
     "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation", "ForegroundNodeConfig", "hmocap_ros.segmentation", "ForegroundParams"),
     "gesture_detection": ("hmocap_ros.nodes.gesture_detection", "GestureNodeConfig", "hmocap_ros.gestures", "DetectorParams"),
     "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.params", "TrackerParams"),
+    "extremity_detection": ("hmocap_ros.nodes.extremity_detection", "ExtremityNodeConfig",
+                            "hmocap_ros.detection.extremity_pipeline", "ExtremityDetectionParams"),
 }
 
 

@@ -1,4 +1,5 @@
-"""Detector-driven tracking (thesis sec. 2.5): skin maps, 3D extremities, IK particles, dd-hpf.
+"""Detector-driven tracking (thesis sec. 2.5): skin maps, 3D extremities, IK particles, dd-hpf
+with skin candidates and with labelled keypoint joints.
 
 Scenes with known ground truth: the tracking body in a chosen pose, exact silhouettes in the
 cameras of ``config/rig_example.yaml`` at 320x240, and a detector map that is 1 exactly where
@@ -16,9 +17,11 @@ from hmocap_ros.segmentation.skin import skin_probability
 from hmocap_ros.sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
-from hmocap_ros.tracking.extremity_detection import (ExtremityDetector, ExtremityParams, classify,
-                                                     detection_cost, geodesic_extrema,
-                                                     reacquire_hands, surface_points, visibility)
+from hmocap_ros.detection.detections import MODEL_JOINT, Detections
+from hmocap_ros.detection.skin_extremities import (SkinExtremityDetector, SkinExtremityParams,
+                                                   surface_points, visibility)
+from hmocap_ros.tracking.detection_assignment import (MAX_DISTANCE, classify, detection_cost,
+                                                      reacquire_hands)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 
 STAMP0 = 1_700_000_000_000_000_000
@@ -114,24 +117,6 @@ def test_visibility_sees_the_front_of_a_ball_only(rig):
     assert not visibility(pts, normals, list(rig), voxel, views=views)[1].any()
 
 
-def test_geodesic_extrema_are_the_ends_of_the_limbs():
-    # a star: a 5x5 core (the centre) with four bars, the one along +x bent back along +y
-    occ = np.zeros((40, 40, 5), bool)
-    occ[18:23, 2:38, :] = True        # bar along y through the core
-    occ[2:38, 18:23, :] = True        # bar along x
-    occ[34:38, 23:37, :] = True       # the +x bar bends towards +y: its tip is at (36, 36)
-    voxel = 0.01
-    tips = geodesic_extrema(occ, np.zeros(3), voxel, np.array([0.2, 0.2, 0.02]), 4, 0.02)
-    expected = voxel * np.array([[20, 2, 2], [20, 37, 2], [2, 20, 2], [36, 36, 2]])
-    assert tips.shape == (4, 3)
-    d = np.linalg.norm(tips[:, None] - expected[None], axis=2)
-    # each end found once, within a voxel or two (the tip mean lies inside the bar)
-    assert np.all(d.min(axis=0) < 0.025) and len(set(np.argmin(d, axis=1))) == 4, d.round(3)
-    # the farthest end along the body (the bent bar: about 30 voxels of path) comes first
-    assert np.argmin(d[0]) == 3
-    assert len(geodesic_extrema(np.zeros((3, 3, 3), bool), np.zeros(3), 0.01, np.zeros(3), 3, 0.02)) == 0
-
-
 def test_reacquisition_gives_a_lost_hand_a_candidate_within_reach():
     shoulders = np.array([[0.2, 1.4, 0.0], [-0.2, 1.4, 0.0]])
     reach = np.array([0.7, 0.7])
@@ -186,32 +171,35 @@ def test_classify_is_the_greedy_solution_of_eq_2_19():
     assert np.isnan(classify(np.zeros((0, 3)), targets, (0.35, 0.35, 0.25))).all()
 
 
-def test_extremity_detector_finds_the_hands_in_3d(model, rig, rest):
+def skin_detections(rig, masks, maps, joints=None) -> Detections:
+    cand = SkinExtremityDetector(list(rig), SkinExtremityParams(mask_scale=1.0, voxel=0.025)
+                                 ).detect(list(masks), list(maps), joints)
+    return Detections("skin", ("unknown",) * len(cand.positions), cand.positions, cand.scores,
+                      cand.normals, cand.surface, cand.probability)
+
+
+def test_skin_detector_finds_the_hands_in_3d(model, rig, rest):
     params = arms_out(model)
     masks, maps = scene(model, rig, params)
     ik = IKProposer(model)
     truth = ik.end_effectors(params[None], rest)[0]  # l_hand, r_hand, head, l_foot, r_foot
     _, joints = model.pose(params[None])
-    detector = ExtremityDetector(list(rig), ExtremityParams(mask_scale=1.0, voxel=0.025))
     # the previous pose: hands 15-20 cm away from where they are now
-    targets = truth + np.array([[0.1, -0.1, 0.08], [-0.12, 0.1, 0.0], [0.0, 0.0, 0.0],
-                                [0.1, 0.05, 0.1], [-0.1, 0.05, -0.1]])
-    found = detector.detect(list(masks), list(maps), joints[0], targets)
-    assert found.found[[0, 1, 3, 4]].all()
-    err = np.linalg.norm(found.assigned[[0, 1]] - truth[[0, 1]], axis=1)
-    assert err.max() < 0.05, err
-    # the feet are the hull's geodesic extremes (mean of the hull within 8 cm of the tip)
-    err = np.linalg.norm(found.assigned[[3, 4]] - truth[[3, 4]], axis=1)
-    assert err.max() < 0.08, err
-    assert len(found.detections) == 4  # hands and feet: the set C_t of eq. 2.20
-    assert len(found.surface) == len(found.probability) > 500
+    targets = truth[:3] + np.array([[0.1, -0.1, 0.08], [-0.12, 0.1, 0.0], [0.0, 0.0, 0.0]])
+    for box_joints in (joints[0], None):  # around the last skeleton, or the room's hull
+        found = skin_detections(rig, masks, maps, box_joints)
+        assigned = classify(found.positions, targets, MAX_DISTANCE[:3])
+        err = np.linalg.norm(assigned[:2] - truth[:2], axis=1)
+        assert err.max() < 0.05, err
+        assert len(found.points) == len(found.probability) > 500
+        assert np.all(found.scores > 0) and np.allclose(np.linalg.norm(found.normals, axis=1), 1)
     # a view without its map or its mask is left out, not an error
-    maps_missing = [None, maps[1], maps[2], None]
-    masks_missing = [masks[0], masks[1], masks[2], None]
-    again = detector.detect(masks_missing, maps_missing, joints[0], targets)
-    assert again.assigned.shape == (5, 3)
-    none = detector.detect(list(masks), [None] * 4, joints[0], targets)
-    assert not none.found[:3].any() and len(none.candidates) == 0 and none.found[3:].all()
+    detector = SkinExtremityDetector(list(rig), SkinExtremityParams(mask_scale=1.0, voxel=0.025))
+    again = detector.detect([masks[0], masks[1], masks[2], None], [None, maps[1], maps[2], None],
+                            joints[0])
+    assert again.positions.shape[1] == 3
+    assert len(detector.detect(list(masks), [None] * 4, joints[0]).positions) == 0
+    assert len(detector.detect([np.zeros_like(m) for m in masks], list(maps)).positions) == 0
 
 
 # ----------------------------------------------------------------------------- IK particles
@@ -256,35 +244,77 @@ def test_ik_solutions_put_the_hand_on_the_detection(model, rig, rest):
     assert ik.fraction["l_arm"] == pytest.approx(0.25) and ik.fraction["r_arm"] == 0.5
 
 
-def test_dd_hpf_tracks_with_detector_maps_and_runs_without(model, rig, rest):
-    params = arms_out(model)
-    masks, maps = scene(model, rig, params)
-    tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "dd-hpf", "filter.particles": 100, "weighting.working_scale": 0.5,
-        "startup.min_foreground": 30, "startup.estimate_shape": False}),
-        np.random.default_rng(0))
-    truth = model.pose(params[None])[1][0]
-    errors = []
-    for f in range(3):
-        res = tracker.update(list(masks), STAMP0 + f, list(maps))
-        errors.append(np.linalg.norm(res.joints - truth, axis=1))
-    assert res.state == "tracking" and res.extremities is not None
-    assert res.extremities.found[[0, 1]].all() and res.timings["detection"] > 0
-    assert not res.extremities.found[3:].any()  # the tracker's detector leaves the feet out
-    # against the A-pose at the true root and heading: the raised arms are what it misses
+def _a_pose_baseline(model, params, truth):
+    """Joint errors of the A-pose at the true root and heading: what missing arms cost."""
     a_pose = rest_pose(model.skeleton).copy()
     for dof in ("root_tx", "root_ty", "root_tz", "root_yaw"):
         a_pose[model.skeleton.dof_index(dof)] = params[model.skeleton.dof_index(dof)]
-    base = np.linalg.norm(model.pose(a_pose[None])[1][0] - truth, axis=1)
+    return np.linalg.norm(model.pose(a_pose[None])[1][0] - truth, axis=1)
+
+
+def _dd_tracker(model, rig):
+    return BodyTracker(model, rig, from_flat(TrackerParams, {
+        "method": "dd-hpf", "filter.particles": 100, "weighting.working_scale": 0.5,
+        "startup.min_foreground": 30, "startup.estimate_shape": False}),
+        np.random.default_rng(0))
+
+
+def test_dd_hpf_tracks_with_skin_detections_and_runs_without(model, rig, rest):
+    params = arms_out(model)
+    masks, maps = scene(model, rig, params)
+    tracker = _dd_tracker(model, rig)
+    truth = model.pose(params[None])[1][0]
+    detections = skin_detections(rig, masks, maps)
+    errors = []
+    for f in range(3):
+        res = tracker.update(list(masks), STAMP0 + f, detections)
+        errors.append(np.linalg.norm(res.joints - truth, axis=1))
+    assert res.state == "tracking" and res.extremities is not None
+    assert res.extremities.found[[0, 1]].all() and res.timings["detection"] > 0
+    assert not res.extremities.found[3:].any()  # skin sees no feet
+    base = _a_pose_baseline(model, params, truth)
     wrists = [model.joint_index("l_wrist"), model.joint_index("r_wrist")]
     figures = {"mean": errors[-1].mean(), "wrist": errors[-1][wrists].mean(),
                "a_pose_mean": base.mean(), "a_pose_wrist": base[wrists].mean()}
-    # today 19 mm mean and 34 mm wrists; the A-pose 79 mm and 485 mm
     assert figures["mean"] < 0.04 and figures["mean"] < 0.5 * figures["a_pose_mean"], figures
     assert figures["wrist"] < 0.08 and figures["wrist"] < 0.3 * figures["a_pose_wrist"], figures
-    # without maps (a foreground node that does not publish them) it runs as hpf-apo
+    # without detections (no extremity_detection node) it runs as hpf-apo
     res = tracker.update(list(masks), STAMP0 + 10)
     assert res.state == "tracking" and res.extremities is None
-    # the wrong number of maps is logged and ignored
-    res = tracker.update(list(masks), STAMP0 + 11, [maps[0]])
+    # an empty detection set: nothing found, nothing breaks
+    res = tracker.update(list(masks), STAMP0 + 11, Detections.empty("skin"))
     assert res.state == "tracking" and not res.extremities.found[:3].any()
+
+
+def test_dd_hpf_follows_labelled_keypoint_joints(model, rig, rest):
+    """Labelled joints drive every layer: with the silhouettes of one pose and the keypoints
+    of a pose whose arms differ, the arms follow the keypoints; wrong keypoints far off cost
+    a bounded amount and the silhouettes win."""
+    params = arms_out(model)
+    masks, _ = scene(model, rig, params)
+    truth = model.pose(params[None])[1][0]
+    ik = IKProposer(model)
+    hands = ik.end_effectors(params[None], rest)[0]
+    names = list(model.joint_names)
+    labels = list(MODEL_JOINT) + ["left_hand", "right_hand", "head"]
+    pos = [truth[names.index(MODEL_JOINT[k])] for k in MODEL_JOINT] + list(hands[:3])
+    good = Detections("keypoints", tuple(labels), np.array(pos), np.full(len(pos), 0.9))
+    tracker = _dd_tracker(model, rig)
+    for f in range(3):
+        res = tracker.update(list(masks), STAMP0 + f, good)
+    err = np.linalg.norm(res.joints - truth, axis=1)
+    wrists = [names.index("l_wrist"), names.index("r_wrist")]
+    assert res.extremities.joints is not None and res.extremities.found[[0, 1, 2]].all()
+    base = _a_pose_baseline(model, params, truth)
+    assert err.mean() < 0.035 and err[wrists].mean() < 0.05, (err.mean(), err[wrists])
+    assert err[wrists].mean() < 0.15 * base[wrists].mean()
+    # the same filter without the joint term (kappa 0) does worse on the wrists
+    plain = BodyTracker(model, rig, from_flat(TrackerParams, {
+        "method": "dd-hpf", "filter.particles": 100, "weighting.working_scale": 0.5,
+        "startup.min_foreground": 30, "startup.estimate_shape": False,
+        "detector.joint_kappa": 0.0, "detector.refine_kappa": 0.0}), np.random.default_rng(0))
+    empty = Detections.empty("keypoints")
+    for f in range(3):
+        res0 = plain.update(list(masks), STAMP0 + f, empty)
+    err0 = np.linalg.norm(res0.joints - truth, axis=1)
+    assert err[wrists].mean() < err0[wrists].mean(), (err[wrists], err0[wrists])

@@ -57,11 +57,11 @@ def test_masks_for_every_frame_with_input_stamps(tmp_path):
     out = tmp_path / "fg.mcap"
     with BagReader(DEMO_BAG) as reader:
         per_camera = {c: reader.topics()[f"/{c}/image_raw"].count for c in CAMERAS}
-    procs = replay_through_nodes(DEMO_BAG, [NODE], [f"/{c}/{k}" for c in CAMERAS for k in ("foreground", "skin")], out,
+    procs = replay_through_nodes(DEMO_BAG, [NODE], [f"/{c}/{k}" for c in CAMERAS for k in ("foreground",)], out,
                                  loopback_dds_env(), tmp_path / "logs",
                                  replay_topics=[f"/{c}/image_raw" for c in CAMERAS],
                                  replay_rate=0.5,  # 50 frames/s in all: a loaded 2-core machine keeps up
-                                 expect={f"/{c}/{k}": n for c, n in per_camera.items() for k in ("foreground", "skin")})
+                                 expect={f"/{c}/{k}": n for c, n in per_camera.items() for k in ("foreground",)})
     log = procs["foreground_segmentation"].output()
     assert "Traceback" not in log, log
     with BagReader(DEMO_BAG) as reader:
@@ -72,13 +72,7 @@ def test_masks_for_every_frame_with_input_stamps(tmp_path):
     with BagReader(out) as reader:
         masks = {(m.topic.split("/")[1], stamp_to_ns(m.msg.header.stamp)): image_to_numpy(m.msg) > 0
                  for m in reader.messages([f"/{c}/foreground" for c in CAMERAS])}
-        skins = {(m.topic.split("/")[1], stamp_to_ns(m.msg.header.stamp)): image_to_numpy(m.msg)
-                 for m in reader.messages([f"/{c}/skin" for c in CAMERAS])}
     assert set(masks) == stamps                       # one mask per image, with the image's stamp
-    assert set(skins) == stamps                       # and one skin map, at half resolution
-    key = next(iter(skins))
-    assert skins[key].shape == (masks[key].shape[0] // 2, masks[key].shape[1] // 2)
-    assert max(int(v.max()) for v in skins.values()) > 200  # the person's hands and face
     judged = [k for k in masks if truth[k].sum() > 30]  # frames with the person in view (after learning)
     assert len(judged) >= 60
     scores = mask_scores(np.stack([masks[k] for k in judged]), np.stack([truth[k] for k in judged]))

@@ -85,10 +85,10 @@ def test_cancel_mid_round_restores_the_forest():
     before = None
     for k in range(0, 80):
         s = tr.on_frame(_frame(rng), t0 + k * NS // 10)
-        if s.round == 2 and before is None:  # first frame of round 2 (do_gesture: no learning)
+        if s.round == 2 and before is None:  # first frame of the second round (do_gesture: no learning)
             before = _arrays(tr)
     assert tr.state == "update_positive" and tr.round == 2
-    assert not _same(before, _arrays(tr))  # round 2 learnt something
+    assert not _same(before, _arrays(tr))  # the second round learnt something
     tr.cancel()
     assert tr.state == "idle" and _same(before, _arrays(tr))
     # cancel in the first round of a new gesture: its class goes away again

@@ -79,7 +79,7 @@ def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path):
     assert report["frames_with_truth"] == 3 and report["cameras"] == ["cam_1", "cam_2", "cam_3",
                                                                      "cam_4"]
     assert set(report["methods"]) == {"dd-hpf", "hpf"}
-    assert report["skin_detection_seconds_per_frame"] > 0  # dd-hpf's maps from the images
+    assert report["detection_seconds_per_frame"] > 0 and report["detector"] == "keypoints"
     res = report["methods"]["dd-hpf"]
     for key in ("mean_mm", "std_mm", "per_joint", "per_frame_mm", "frames_with_pose", "fps",
                 "seconds_per_frame", "fps_with_segmentation", "evaluations_per_frame",
@@ -213,13 +213,14 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     table = load_tool("mocap_table")
     default = TrackerParams().filter.velocity_gain
     key = "filter.velocity_gain"
-    ns = argparse.Namespace(seed=0, max_people=2, methods=["hpf"])
+    ns = argparse.Namespace(seed=0, max_people=2, methods=["hpf"], detector="keypoints")
 
     def report(gain, overrides):
         path = tmp_path / f"r_{gain}.json"
         params = stored_params("hpf", {key: gain})
         assert params[key] == gain and params["method"] == "hpf"
         path.write_text(json.dumps({"seed": 0, "max_people": 2, "silhouettes": "fg",
+                                    "detector": "keypoints",
                                     "methods": {"hpf": {"params": params}},
                                     "overrides": overrides}))
         return path
@@ -229,9 +230,11 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     assert table._reusable(made_with_param, ns, {key: default}) is not None
     assert table._reusable(made_with_param, ns, {key: default / 2}) is None
     assert table._reusable(made_with_param, argparse.Namespace(
-        seed=1, max_people=2, methods=["hpf"]), {}) is None
+        seed=1, max_people=2, methods=["hpf"], detector="keypoints"), {}) is None
     assert table._reusable(made_with_param, argparse.Namespace(
-        seed=0, max_people=2, methods=["hpf", "apf"]), {}) is None
+        seed=0, max_people=2, methods=["hpf", "apf"], detector="keypoints"), {}) is None
+    assert table._reusable(made_with_param, argparse.Namespace(
+        seed=0, max_people=2, methods=["hpf"], detector="skin"), {}) is None
     made_at_another_value = report(default / 2, {})
     assert table._reusable(made_at_another_value, ns, {}) is None
     assert table._reusable(made_at_another_value, ns, {key: default / 2}) is not None

@@ -121,7 +121,7 @@ MUTANTS = {
         TRACKING + "test_tracker_follows_a_short_sequence[tracking]",
         TRACKING + "test_tracker_follows_a_short_sequence[tracking_coarse]",
         TRACKING + "test_tracker_survives_dropped_cameras_empty_frames_and_no_person",
-        "test_detector_driven.py::test_dd_hpf_tracks_with_detector_maps_and_runs_without")),
+        "test_detector_driven.py::test_dd_hpf_tracks_with_skin_detections_and_runs_without")),
     "foreground_ignores_images": Mutant(foreground_ignores_images, (
         "test_segmentation.py::test_moving_blob_f1_after_learning",
         "test_segmentation.py::test_foreground_beats_naive_differencing_with_shadows_and_light_changes")),

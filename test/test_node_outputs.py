@@ -28,7 +28,8 @@ def test_body_tracker_markers_and_per_body_shape(tmp_path):
     remaps = [a for c in CAMERAS for a in ("-r", f"/{c}/foreground:=/ground_truth/{c}/silhouette")]
     node = ("body_tracker", "hmocap_ros.nodes.body_tracker",
             ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "method:=hpf-apo", "-p", "queue_depth:=100",
-             "-p", "max_people:=2", *SMALL_TRACKER, *remaps], "kernels ready")
+             "-p", "latest_only:=false", "-p", "max_people:=2", *SMALL_TRACKER, *remaps],
+            "kernels ready")
     with BagReader(DEMO_BAG) as reader:
         person = set(_stamps(reader, "/ground_truth/skeleton"))
     out = tmp_path / "out.mcap"
@@ -95,7 +96,7 @@ def test_gesture_probability_image_per_frame(tmp_path):
 
 def test_foreground_diagnostics_count_frames_per_camera(tmp_path):
     node = ("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
-            ["--ros-args", "-p", "cameras:=[cam_1,cam_2]", "-p", "learn_frames:=8", "-p", "publish_skin:=false",
+            ["--ros-args", "-p", "cameras:=[cam_1,cam_2]", "-p", "learn_frames:=8",
              "-p", "diagnostics_period:=0.2"], "segmenting")
     cameras = ["cam_1", "cam_2"]
     with BagReader(DEMO_BAG) as reader:

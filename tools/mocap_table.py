@@ -5,7 +5,8 @@ One command renders an evaluation bag per shipped CMU clip (``hmocap sim mocap``
 640x480, 25 fps, one second of empty room first so the background model can learn), once
 without and once with distractors (a door that opens, a rolling ball, a second person), then
 replays each through the same code as ``hmocap eval mocap`` (foreground segmentation, then the
-tracker with its estimated anthropometry; DD-HPF+ also gets the skin detector's maps) for the
+tracker with its estimated anthropometry; DD-HPF+ also gets the detections of the extremity
+detector, ``--detector keypoints`` or ``skin``) for the
 methods of :data:`hmocap_ros.tracking.methods.METHODS` at about 3,500 weight evaluations per
 frame, and writes a Markdown table of mean (std) 3D joint errors in mm, the per-frame error
 plots and the JSON reports::
@@ -90,7 +91,8 @@ def _reusable(path: Path, ns, overrides: dict) -> dict | None:
     except (OSError, ValueError):
         return None
     if report.get("seed") != ns.seed or report.get("max_people") != ns.max_people \
-            or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]):
+            or report.get("silhouettes") != "fg" or not set(ns.methods) <= set(report["methods"]) \
+            or report.get("detector", "skin") != ns.detector:
         return None
     if any(report["methods"][m].get("params") is None
            or settings_diff(report["methods"][m]["params"], stored_params(m, overrides))
@@ -129,6 +131,8 @@ def main(argv=None) -> int:
                    help="reuse a bag's JSON report from an earlier (interrupted) run when it has "
                         "the same seed, max-people, methods and tracker settings (the current "
                         "defaults with --param), instead of tracking it again")
+    p.add_argument("--detector", choices=("keypoints", "skin"), default="keypoints",
+                   help="extremity detector of DD-HPF+ (default keypoints)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", default=[],
                    help="override a tracker setting by its dotted name for every method, e.g. "
                         "filter.sweeps=1 (repeatable), as in hmocap eval mocap")
@@ -154,15 +158,17 @@ def main(argv=None) -> int:
             seed = bag_seed(i, distractors)
             bag = _bag(work, clip, start, seconds, seed, distractors)
             stem = bag.stem
-            report = _reusable(work / f"{stem}.json", ns, overrides) if ns.reuse else None
+            name = f"{stem}_{ns.detector}.json"
+            report = _reusable(work / name, ns, overrides) if ns.reuse else None
             if report is None:
                 report = evaluate(bag, ns.methods, silhouettes="fg", seed=ns.seed,
-                                  max_people=ns.max_people, overrides=overrides)
+                                  max_people=ns.max_people, overrides=overrides,
+                                  detector=ns.detector)
                 report["overrides"] = overrides
-                (work / f"{stem}.json").write_text(
+                (work / name).write_text(
                     json.dumps(report, indent=1, default=_json_default))
             else:
-                print(f"reused {stem}.json", flush=True)
+                print(f"reused {name}", flush=True)
             plot_errors(report, figures / f"tracking_{stem}.png",
                         title=f"{label}{' with distractors' if distractors else ''}")
             rows.append((label, seconds, distractors, report))

@@ -33,9 +33,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from mocap_table import LABELS, SEQUENCES, bag_seed, bag_stem  # noqa: E402
+from mocap_table import SEQUENCES, bag_seed, bag_stem  # noqa: E402
 
 from hmocap_ros.camera_model import triangulate, triangulate_robust  # noqa: E402
+from hmocap_ros.tracking.methods import METHODS  # noqa: E402
 
 #: our joint -> MediaPipe Pose landmark index
 LANDMARKS = {"l_shoulder": 11, "r_shoulder": 12, "l_elbow": 13, "r_elbow": 14,
@@ -84,6 +85,12 @@ def read_bag(bag: Path, stack_path: Path):
     return rig, np.stack([truth[s] for s in stamps]), names
 
 
+def _label(method: str, detector: str) -> str:
+    """The table label of a method; DD-HPF+ names its detector."""
+    label = METHODS[method].label
+    return f"{label} ({detector})" if METHODS[method].uses_detector else label
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -93,6 +100,8 @@ def main(argv=None) -> int:
     p.add_argument("--max-reprojection-px", type=float, default=20.0,
                    help="leave out a view that reprojects further than this (0: plain DLT)")
     p.add_argument("--out", default=str(ROOT / "docs" / "peer_mediapipe.md"))
+    p.add_argument("--detector", choices=("keypoints", "skin"), default="keypoints",
+                   help="the table's reports made with this extremity detector")
     p.add_argument("--methods", nargs="*", default=["hpf-apo", "dd-hpf"],
                    help="tracker methods of the table's reports to compare (those present)")
     ns = p.parse_args(argv)
@@ -103,7 +112,7 @@ def main(argv=None) -> int:
     for i, (label, clip, start, seconds) in enumerate(SEQUENCES):
         for distractors in (False, True):
             stem = bag_stem(clip, seconds, bag_seed(i, distractors), distractors)
-            bag, report = work / f"{stem}.mcap", work / f"{stem}.json"
+            bag, report = work / f"{stem}.mcap", work / f"{stem}_{ns.detector}.json"
             if not (bag.exists() and report.exists()):
                 print(f"skip {stem}: run tools/mocap_table.py first", flush=True)
                 continue
@@ -150,8 +159,8 @@ def main(argv=None) -> int:
              "Error: mean (std) over frames of the mean 3D error of the 12 joints both "
              "skeletons define (shoulders, elbows, wrists, hips, knees, ankles), mm.", "",
              "| sequence | scene | peer: MediaPipe + DLT | joints triangulated | " + " | ".join(
-                 f"{LABELS.get(m, m)}, same 12 joints" for m in methods) + " | " + " | ".join(
-                 f"{LABELS.get(m, m)}, 19 joints" for m in methods) + " |",
+                 f"{_label(m, ns.detector)}, same 12 joints" for m in methods) + " | " + " | ".join(
+                 f"{_label(m, ns.detector)}, 19 joints" for m in methods) + " |",
              "|---|---|---|---|" + "---|" * (2 * len(methods))]
     for label, seconds, distractors, mean, std, cover, ms, ours12, ours19 in rows:
         lines.append(f"| {label} ({seconds:g} s) | {'distractors' if distractors else 'clean'} | "

@@ -168,8 +168,8 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     states, costs, tracks = [], [], []
     times, stage, evals = [], {}, []
     for k, stamp in enumerate(frames.stamps):
-        maps = frames.maps[k] if (frames.maps is not None and uses_detector) else None
-        results = people.update(frames.mask_list(k), int(stamp), maps)
+        dets = frames.detections[k] if (frames.detections is not None and uses_detector) else None
+        results = people.update(frames.mask_list(k), int(stamp), dets)
         slot = _subject_track(results, frames.truth[k], root, true_root)
         result = results[slot]
         if has_truth[k]:
@@ -208,13 +208,18 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
 def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
              max_frames: int | None = None, seed: int = 0, particles: int = 0, layers: int = 0,
              overrides: dict | None = None, given_shape: bool = False,
-             fg_params: dict | None = None, max_people: int = 1, out=None) -> dict:
+             fg_params: dict | None = None, max_people: int = 1, detector: str = "keypoints",
+             out=None) -> dict:
     """Evaluate ``methods`` on one bag; returns the JSON-ready report (``max_people``: see
-    :func:`run_method`)."""
+    :func:`run_method`; ``detector``: the extremity detector of the methods that use one)."""
+    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
+
     out = sys.stderr if out is None else out
     t0 = time.perf_counter()
     frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,
-                         detector_maps=any(get_method(m).uses_detector for m in methods))
+                         detector=(ExtremityDetectionParams(detector=detector)
+                                   if any(get_method(m).uses_detector for m in methods)
+                                   else None))
     report = {
         "bag": str(bag),
         "silhouettes": frames.silhouettes,
@@ -224,7 +229,8 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
         "cameras": list(frames.rig.names),
         "image_size": list(frames.shape_hw[::-1]),
         "segmentation_seconds_per_frame": frames.segmentation_s,
-        "skin_detection_seconds_per_frame": frames.detector_s,
+        "detector": detector,
+        "detection_seconds_per_frame": frames.detector_s,
         "seed": seed,
         "given_shape": bool(given_shape),
         "max_people": int(max_people),
@@ -312,6 +318,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-people", type=int, default=1,
                         help="people followed at once (one tracker each); the subject is scored "
                              "on the track nearest it (default 1)")
+    parser.add_argument("--detector", choices=("keypoints", "skin"), default=None,
+                        help="extremity detector of dd-hpf (default: extremity_detection's)")
     parser.add_argument("--threads", type=int, default=None, help="numba threads")
     parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
@@ -326,12 +334,15 @@ def main_from_args(ns: argparse.Namespace) -> int:
 
     methods = list(method_names()) if ns.compare else (ns.method or [TrackerParams().method])
     methods = list(dict.fromkeys(methods))
+    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
+
     try:
         overrides = tracker_overrides(ns.param)
         report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
                           seed=ns.seed, particles=ns.particles, layers=ns.layers,
                           overrides=overrides, given_shape=ns.given_shape,
-                          max_people=ns.max_people)
+                          max_people=ns.max_people,
+                          detector=ns.detector or ExtremityDetectionParams().detector)
     except (ValueError, OSError, RuntimeError) as err:
         print(f"hmocap eval mocap: {err}", file=sys.stderr)
         return 2

@@ -1,9 +1,10 @@
-"""Reading a multi-view bag for the tracker's evaluation: masks, detector maps and truth.
+"""Reading a multi-view bag for the tracker's evaluation: masks, detections and truth.
 
 :func:`load_frames` reads any bag in the documented layout (:mod:`hmocap_ros.io.topics`),
 segments each frame set's images with the same foreground model as the live node (or reads
-the bag's exact silhouettes), optionally computes the skin maps of detector-driven tracking,
-and collects the ground truth. Masks are stored bit-packed, computed once for all methods.
+the bag's exact silhouettes), optionally runs the extremity detection of detector-driven
+tracking on each frame set (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`,
+the node's code, without the last skeleton), and collects the ground truth. Masks are stored bit-packed, computed once for all methods.
 """
 from __future__ import annotations
 
@@ -29,8 +30,8 @@ class BagFrames:
     (NaN where the frame has no skeleton); joint_names: names of ``truth``'s joints;
     body_shape: the subject's BodyShape or None; silhouettes / fallback: what was used and why.
     segmentation_s: seconds of foreground segmentation per frame set.
-    maps: per frame a list of one skin probability map per camera (uint8) or None, when
-    loaded for ``dd-hpf``; detector_s: seconds of skin detection per frame set.
+    detections: per frame the extremity detection's Detections, when loaded for ``dd-hpf``,
+    else None; detector_s: seconds of extremity detection per frame set.
     """
 
     rig: object
@@ -43,7 +44,7 @@ class BagFrames:
     fallback: str = ""
     segmentation_s: float = 0.0
     shape_hw: tuple = ()
-    maps: list | None = None
+    detections: list | None = None
     detector_s: float = 0.0
 
     def mask_list(self, k: int) -> list:
@@ -119,38 +120,24 @@ def _mask_row(use, msgs, stamp, bg, rgb_of) -> list:
     return row
 
 
-def _map_row(image_topics, msgs, stamp, rgb_of) -> list:
-    """One skin probability map per camera of a frame set (``segmentation.skin``), or None."""
-    from hmocap_ros.segmentation.skin import skin_probability
-
-    row = []
-    for topic in image_topics:
-        try:
-            row.append(skin_probability(rgb_of(topic)) if topic in msgs else None)
-        except ValueError as err:
-            log.warning("frame %d, %s: %s (no detector map)", stamp, topic, err)
-            row.append(None)
-    return row
-
-
-def _frame_sets(reader, use, use_present, map_images, image_topics, slop_ns: int, bg,
+def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, bg,
                 truth_by_stamp, n_joints: int, max_frames: int | None):
     """Every frame set's packed masks of the ``use`` topics (those in the bag:
-    ``use_present``), its skin maps when ``map_images`` (the image topics in the bag) is
-    given, its truth and the timing: ``(stamps, masks, truth, maps, shape_hw, segmentation s,
+    ``use_present``), its detections when ``pipeline`` (an ExtremityPipeline) is given, its
+    truth and the timing: ``(stamps, masks, truth, detections, shape_hw, segmentation s,
     detection s)``."""
     from hmocap_ros.io.conversions import image_to_rgb
 
     stamps, masks, truth = [], [], []
-    maps = [] if map_images is not None else None
+    detections = [] if pipeline is not None else None
     shape_hw: tuple = ()
     seg_time = det_time = 0.0
     n_truth = 0
     read = list(use_present)
-    if map_images is not None:
-        read += [t for t in map_images if t not in read]
+    if pipeline is not None:
+        read += [t for t in image_topics if t not in read and t in reader.topics()]
     for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True, min_topics=1):
-        decoded: dict = {}  # each image decoded once, for its mask and its skin map
+        decoded: dict = {}  # each image decoded once, for its mask and its detections
 
         def rgb_of(topic: str) -> np.ndarray:
             if topic not in decoded:
@@ -159,15 +146,16 @@ def _frame_sets(reader, use, use_present, map_images, image_topics, slop_ns: int
 
         t0 = time.perf_counter()
         row = []
-        for mask in _mask_row(use, msgs, stamp, bg, rgb_of):
+        full = _mask_row(use, msgs, stamp, bg, rgb_of)
+        for mask in full:
             if mask is not None:
                 shape_hw = shape_hw or mask.shape[:2]
             row.append(np.packbits(mask != 0) if mask is not None
                        and mask.shape[:2] == shape_hw else None)
         seg_time += time.perf_counter() - t0
-        if maps is not None:
+        if detections is not None:
             t0 = time.perf_counter()
-            maps.append(_map_row(image_topics, msgs, stamp, rgb_of))
+            detections.append(_detect(pipeline, image_topics, msgs, stamp, rgb_of, full))
             det_time += time.perf_counter() - t0
         stamps.append(stamp)
         masks.append(row)
@@ -177,18 +165,34 @@ def _frame_sets(reader, use, use_present, map_images, image_topics, slop_ns: int
             n_truth += 1
             if max_frames is not None and n_truth >= max_frames:
                 break
-    return stamps, masks, truth, maps, shape_hw, seg_time, det_time
+    return stamps, masks, truth, detections, shape_hw, seg_time, det_time
+
+
+def _detect(pipeline, image_topics, msgs, stamp, rgb_of, masks):
+    """The frame set's detections (the node's code), or None when it cannot run."""
+    images = []
+    for topic in image_topics:
+        try:
+            images.append(rgb_of(topic) if topic in msgs else None)
+        except ValueError as err:
+            log.warning("frame %d, %s: %s (no detections from this view)", stamp, topic, err)
+            images.append(None)
+    try:
+        return pipeline.detect(images, list(masks))
+    except ValueError as err:
+        log.warning("frame %d: extremity detection failed: %s", stamp, err)
+        return None
 
 
 def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None = None,
                 slop_ns: int = 0, fg_params: dict | None = None, out=None,
-                detector_maps: bool = False) -> BagFrames:
+                detector=None) -> BagFrames:
     """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
 
     max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
     ForegroundParams fields to override (``learn_frames`` is set from the bag).
-    detector_maps: also compute each image's skin probability map (``segmentation.skin``,
-    the extremity detector of detector-driven tracking).
+    detector: ExtremityDetectionParams: also run the extremity detection on every frame set
+    (the detections of detector-driven tracking), or None.
     """
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
@@ -230,13 +234,17 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
             params = ForegroundParams(**{**(fg_params or {}),
                                          "learn_frames": int(np.clip(n_empty, 1, 100))})
             bg = [BackgroundModel(params) for _ in names]
-        frames = _frame_sets(reader, use, use_present,
-                             present_images if detector_maps else None, image_topics, slop_ns,
+        pipeline = None
+        if detector is not None:
+            from hmocap_ros.detection.extremity_pipeline import ExtremityPipeline
+
+            pipeline = ExtremityPipeline(rig.cameras, detector)
+        frames = _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns,
                              bg, truth_by_stamp, len(joint_names), max_frames)
-    stamps, masks, truth, maps, shape_hw, seg_time, det_time = frames
+    stamps, masks, truth, detections, shape_hw, seg_time, det_time = frames
     return BagFrames(rig=rig, stamps=np.asarray(stamps, dtype=np.int64), masks=masks,
                      truth=np.stack(truth) if truth else np.zeros((0, len(joint_names), 3)),
                      joint_names=joint_names, body_shape=body_shape, silhouettes=silhouettes,
                      fallback=fallback, segmentation_s=seg_time / max(len(stamps), 1),
-                     shape_hw=tuple(shape_hw), maps=maps,
+                     shape_hw=tuple(shape_hw), detections=detections,
                      detector_s=det_time / max(len(stamps), 1))

@@ -1,13 +1,14 @@
 """One body's recorded motion read from a bag into arrays: the input of every exporter.
 
 A bag holds the motion in two kinds (:data:`MOTION_SOURCES`): what ``body_tracker`` publishes
-(``skeleton``, ``joint_states``, latched ``body_shape``, and per body
+(``skeleton``, latched ``body_shape`` of the first body, and per body (REP-155)
 ``humans/bodies/<id>/joint_states`` / ``body_shape``; under the namespace the recording was
 made in, e.g. ``/room/skeleton``) and the simulator's ground truth (``/ground_truth/skeleton``,
 ``/ground_truth/joint_states``, ``/ground_truth/body_shape``; docs/simulator.md). Skeleton
-messages carry a ``body_id``; joint states do not: the plain ``joint_states`` topic carries the
-first body (the one on the plain ``body_shape`` topic, or the first on the skeleton topic),
-the per-body topics the others.
+messages carry a ``body_id``; joint states do not, so a body's joint states are read from its
+per-body topic, and for the first body (the one on the plain ``body_shape`` topic, or the
+first on the skeleton topic) without one, from a plain ``joint_states`` topic beside the
+skeleton (a recording of another publisher of one body).
 """
 
 from __future__ import annotations

@@ -2,7 +2,9 @@
 
 No rclpy here: :class:`FrameTransform` is a parent -> child transform in plain numbers, built
 from a rig camera (:func:`camera_transform`, :func:`rig_transforms`) or from a rotation matrix
-and a translation (:func:`frame_transform`); :func:`to_transform_stamped` and
+and a translation (:func:`frame_transform`); :func:`rotations_to_quaternions` converts a batch
+of rotations at once (a tracked body's joint frames, :mod:`hmocap_ros.tracking.body_frames`);
+:func:`to_transform_stamped` and
 :func:`tf_message` build the messages through a message factory
 (``hmocap_ros.io.msg_factory``: ``RclpyFactory`` in a node, ``RosbagsFactory`` for bags).
 
@@ -43,6 +45,7 @@ __all__ = [
     "quaternion_to_rotation",
     "rig_transforms",
     "rotation_to_quaternion",
+    "rotations_to_quaternions",
     "tf_message",
     "to_transform_stamped",
 ]
@@ -94,6 +97,44 @@ def rotation_to_quaternion(rotation) -> tuple[float, float, float, float]:
     if q[3] < 0:
         q = -q
     return tuple(float(v) for v in q)
+
+
+def rotations_to_quaternions(rotations) -> np.ndarray:
+    """Unit quaternions ``(N, 4)`` as ``(x, y, z, w)``, ``w >= 0``, of rotation matrices
+    ``(N, 3, 3)``: :func:`rotation_to_quaternion` vectorised (the same branch choice per matrix,
+    so the two agree to rounding). ``ValueError`` when any matrix is not a finite proper
+    rotation within :data:`ROTATION_TOLERANCE`."""
+    R = np.asarray(rotations, dtype=np.float64)
+    if R.ndim != 3 or R.shape[1:] != (3, 3) or not np.all(np.isfinite(R)):
+        raise ValueError(f"rotations must be finite (N, 3, 3) matrices, got shape {R.shape}")
+    error = np.abs(np.einsum("nki,nkj->nij", R, R) - np.eye(3)).max(axis=(1, 2), initial=0.0)
+    bad = (error > ROTATION_TOLERANCE) | (np.abs(np.linalg.det(R) - 1.0) > ROTATION_TOLERANCE)
+    if np.any(bad):
+        raise ValueError(f"not rotation matrices (orthonormal, det +1) at rows {np.flatnonzero(bad).tolist()}")
+    diagonal = np.einsum("nii->ni", R)
+    trace = diagonal.sum(axis=1)
+    # Shepperd's method per matrix: 4 * (w^2, x^2, y^2, z^2) up to a common offset; the largest
+    # is the component whose square root is stable.
+    k = np.argmax(np.column_stack([trace, diagonal]), axis=1)
+    q = np.empty((len(R), 4))
+    w_rows = k == 0
+    s = 2.0 * np.sqrt(1.0 + trace[w_rows])
+    Rw = R[w_rows]
+    q[w_rows] = np.column_stack([Rw[:, 2, 1] - Rw[:, 1, 2], Rw[:, 0, 2] - Rw[:, 2, 0],
+                                 Rw[:, 1, 0] - Rw[:, 0, 1], 0.25 * s * s]) / s[:, None]
+    for i in range(3):
+        rows = k == i + 1
+        if not np.any(rows):
+            continue
+        j, m = (i + 1) % 3, (i + 2) % 3
+        Ri = R[rows]
+        s = 2.0 * np.sqrt(1.0 + Ri[:, i, i] - Ri[:, j, j] - Ri[:, m, m])
+        q[rows, i] = 0.25 * s
+        q[rows, j] = (Ri[:, j, i] + Ri[:, i, j]) / s
+        q[rows, m] = (Ri[:, m, i] + Ri[:, i, m]) / s
+        q[rows, 3] = (Ri[:, m, j] - Ri[:, j, m]) / s
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return np.where(q[:, 3:] < 0, -q, q)
 
 
 def quaternion_to_rotation(quaternion_xyzw) -> np.ndarray:

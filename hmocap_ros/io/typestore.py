@@ -19,7 +19,8 @@ from rosbags.typesys.store import Typestore
 
 INTERFACE_PACKAGE = "hmocap_interfaces"
 #: The custom message names, in dependency order (GestureArray needs Gesture).
-INTERFACE_MESSAGES = ("Skeleton", "Extremities", "Gesture", "GestureArray", "BodyShape", "CameraRig")
+INTERFACE_MESSAGES = ("Skeleton", "Extremities", "Gesture", "GestureArray", "BodyShape", "CameraRig",
+                      "IdsList")
 
 
 class InterfaceDefinitionsNotFound(RuntimeError):

@@ -1,4 +1,4 @@
-"""body_tracker: the 3D body pose of the person in the room from N foreground masks (thesis ch. 2).
+"""body_tracker: the 3D body pose of the people in the room from N foreground masks (thesis ch. 2).
 
 Synchronises the foreground masks of the rig cameras by stamp and runs
 :class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on each set: layered particle filtering
@@ -10,26 +10,49 @@ Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
   is set; the masks are expected at the rig's resolution.
   ``<camera>/foreground`` (sensor_msgs/Image mono8, sensor-data QoS), per rig camera.
-  ``<camera>/skin`` (sensor_msgs/Image mono8, any resolution), per rig camera, with a
-  method that uses a detector (``dd-hpf``) only: the extremity detector's maps
-  (foreground_segmentation publishes them, each just before its mask). They are not waited for: a frame set is processed when its masks are
-  complete, with the maps of its stamp that have arrived (a view without one is not searched
-  for hands), so a foreground node that publishes none costs no latency.
-Publications (all with the stamp of the frame set):
-  ``joint_states`` (sensor_msgs/JointState): the pose parameters (root translation in metres,
-  angles in radians) by DoF name, of the first body (``body_id``).
+  ``extremities`` (hmocap_interfaces/Extremities, reliable, a queue of ``queue_depth`` but at
+  least 10), with a method that uses a detector (``dd-hpf``) only: the 3D detections of the
+  extremity_detection node, matched by stamp with the masks. While that topic has a publisher, a frame set waits for its detections like for
+  a camera (``max_wait_ms``); with none, frame sets go out on their masks alone and the
+  method runs as its boxed schedule.
+Publications (all with the stamp of the frame set), following REP-155 (Human-Robot
+Interaction: ``humans/bodies/...`` topics and body frames):
+  ``humans/bodies/tracked`` (hmocap_interfaces/IdsList, REP-155's hri_msgs/IdsList): the ids
+  of the bodies with a pose in this frame set, for every frame set processed (empty: nobody).
+  ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState), per body with a pose: the
+  pose parameters (root translation in metres, angles in radians) by DoF name.
+  ``humans/bodies/<id>/body_shape`` (hmocap_interfaces/BodyShape, latched), per body: its
+  anthropometry, when estimated; the first body's also on ``body_shape``.
   ``skeleton`` (hmocap_interfaces/Skeleton): 3D joints in the room frame, one message per
-  tracked body (``body_id`` says whose).
+  tracked body (``body_id`` says whose), with a ``confidence`` per joint (below).
   ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove,
   one namespace per body.
-  ``body_shape`` (hmocap_interfaces/BodyShape, latched): the first body's anthropometry.
-  ``humans/bodies/<id>/joint_states`` and ``humans/bodies/<id>/body_shape`` (REP-155 style),
-  per body, when ``max_people`` > 1.
+  ``/tf`` (tf2_msgs/TFMessage, with ``publish_tf``): per tracked body, room frame ->
+  ``body_<id>`` (the pelvis) and a frame per joint, ``<joint>_<id>`` (``l_wrist_body_0``...),
+  along the kinematic tree, oriented as REP-155 asks (x forward, y left, z up at rest); the
+  names and conventions are those of :mod:`hmocap_ros.tracking.body_frames`. One message per
+  frame set with every tracked body's frames.
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray): per body state, seconds per frame, ESS
-  and milliseconds per layer, time per stage, views used and dropped, and with ``dd-hpf`` the
-  extremities detected.
-Synchronisation (:class:`~hmocap_ros.stamp_sync.StampSynchronizer`): a frame set goes to the
-tracker when every camera's mask of its stamp (within ``slop_ms``) is there, or, with a camera
+  and milliseconds per layer, time per stage, views used and dropped, frame sets skipped
+  (``skipped_frame_sets``: since the node started, ``skipped_since_last``: since the last
+  diagnostics message), ``wait_ms`` (how long the set waited for the tracker), and with
+  ``dd-hpf`` the detections assigned (``extremities``: which end-effectors,
+  ``joint_detections``: how many labelled joints).
+
+No plain ``joint_states`` topic: a robot's ``/joint_states`` (robot_state_publisher) lives
+under that name in the same graph, so a body tracker publishing there corrupts the robot's
+TF tree, and a renamed plain topic (``body/joint_states``) would only repeat the first body's
+``humans/bodies/<body_id>/joint_states`` under a name no REP-155 tool looks for. The first
+body's id is the ``body_id`` parameter, so its per-body topic is as stable a name as any.
+
+Per-joint confidence (``Skeleton.confidence``, in [0, 1]): from the spread of the joint's
+position over the particles of the filter's final layer, ``exp(-spread / 5 cm)``, raised
+where a labelled joint detection (``dd-hpf`` with the keypoint detector) agrees with the
+estimate (:mod:`hmocap_ros.tracking.body_frames`). Empty on start-up frames, which run no
+particle filter over the whole pose.
+
+Synchronisation (:class:`~hmocap_ros.stamp_sync.StampSynchronizer`): a frame set is complete
+when every camera's mask of its stamp (within ``slop_ms``) is there, or, with a camera
 missing, ``max_wait_ms`` after its newest mask arrived (a steady-clock timer polls every
 ``max_wait_ms / 4``) or once a mask ``max_wait_ms`` newer has come, with at least
 ``min_views_to_sync`` views; a mask that arrives after its set went out is dropped. The wait
@@ -37,9 +60,23 @@ counts only time the node is idle: masks queued while the tracker works on a fra
 up on. So the last frames of a stream and a live stream with a dead camera are tracked with at
 most ``max_wait_ms`` (plus a timer period) of added delay.
 
+Keeping up (:class:`~hmocap_ros.tracking.body_tracker.FrameSetQueue`): the subscriptions only
+feed the synchroniser, whose complete sets wait in a queue; a steady-clock timer every
+``4 ms`` tracks one set once no input has arrived for ``5 ms`` and ``5 ms`` have passed since
+the last set was done (rclpy's executor serves a due timer before the subscriptions, so this
+lets the masks that queued up while the tracker worked come in first), or once the oldest set
+has waited ``50 ms`` whatever the input does. With ``latest_only`` (live) the tracker takes
+the newest set and skips the older ones, so its latency stays about one processing time
+instead of growing while it cannot keep up; the frames skipped, and those that never came
+complete (dropped from a subscription's bounded queue, ``queue_depth``), are counted in the
+diagnostics, and the tracker's motion model accounts for the time between the sets it
+tracks (:mod:`hmocap_ros.tracking.body_tracker`). With ``latest_only:=false`` every set is
+tracked, in stamp order: for bag replays that must answer every frame (also raise
+``queue_depth`` so the subscriptions keep every mask).
+
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``,
-``queue_depth``, ``seed``, ``body_id``, ``max_people`` and every setting of
-:class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
+``queue_depth``, ``latest_only``, ``publish_tf``, ``seed``, ``body_id``, ``max_people`` and
+every setting of :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
 (``startup.height_margin``; listed below; the YAML nests them in groups).
 
 Several people (``max_people``): one tracker per person
@@ -49,7 +86,8 @@ others are ``body_id`` numbered on (``body_0``, ``body_1``, ...). Each followed 
 a filter run per frame.
 
 A dropped camera is tracked on the remaining views; a frame without a person publishes
-nothing but diagnostics; a fit that collapses re-initialises from the visual hull.
+nothing but diagnostics and an empty ``humans/bodies/tracked``; a fit that collapses
+re-initialises from the visual hull.
 """
 
 from __future__ import annotations
@@ -61,24 +99,47 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
-from hmocap_interfaces.msg import CameraRig, Skeleton
+from hmocap_interfaces.msg import CameraRig, Extremities, IdsList, Skeleton
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, JointState
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from hmocap_ros.body.model import load_body_model
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy
-from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
+from hmocap_ros.io.tf import TF_TOPIC, tf_message
 from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, param, run_node,
                                      sensor_qos)
 from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
 from hmocap_ros.stamp_sync import StampSynchronizer
+from hmocap_ros.tracking.body_frames import body_transforms
+from hmocap_ros.tracking.body_tracker import FrameSetQueue, PickedSet
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
-from hmocap_ros.tracking.extremity_detection import END_EFFECTORS
+from hmocap_ros.detection.detections import detections_from_msg
+from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 
 NODE_NAME = "body_tracker"
+#: the synchroniser's key (and topic) of the extremity detections
+DETECTIONS = "extremities"
+#: REP-155's list of the bodies tracked now
+TRACKED_TOPIC = "humans/bodies/tracked"
+#: Keeping up (module docstring): the timer that tracks a waiting frame set, the quiet time of
+#: the input and the pause after a set before the next, and the longest a set waits for quiet.
+TICK_S = 0.004
+QUIET_NS = 5_000_000
+DRAIN_NS = 5_000_000
+MAX_HOLD_NS = 50_000_000
+#: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, keep last 100)
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def per_body_topic(body_id: str, name: str) -> str:
+    """REP-155's topic ``name`` of body ``body_id``: ``humans/bodies/<id>/<name>``."""
+    return f"humans/bodies/{body_id}/{name}"
 
 
 @dataclass(frozen=True)
@@ -93,6 +154,12 @@ class BodyTrackerNodeConfig:
     queue_depth: int = param(5, "Masks queued per camera while the tracker is busy (best effort: older "
                                 "ones are dropped, so a live tracker works on recent frames; raise it "
                                 "when replaying a bag slowly and every frame must be tracked).")
+    latest_only: bool = param(True, "Live: when frame sets come faster than the tracker processes them, "
+                                    "track the newest and skip (and count) the others, so the latency "
+                                    "stays bounded. false: track every set in stamp order (slow bag "
+                                    "replays that must answer every frame; raise queue_depth too).")
+    publish_tf: bool = param(True, "Publish each tracked body's frames on /tf: room -> body_<id> (the "
+                                   "pelvis) and <joint>_<id> along the skeleton (REP-155 names).")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
     body_id: str = param("body_0", "Body id of the first tracked body in the published messages "
                                    "(REP-155 style); further bodies are numbered on (body_1, ...).")
@@ -120,26 +187,33 @@ class BodyTrackerNode(Node):
         self.last_state = ["searching"] * len(self.ids)
         self.frames = 0
         self.busy_ns = 0  # time spent in _process: not waiting time for the synchroniser
+        self.queue = FrameSetQueue(self.config.latest_only)
+        self.last_input_ns = 0   # steady time of the last mask or detections received
+        self.idle_since_ns = 0   # steady time the last frame set was done
+        self.skipped_total = 0
+        self.skipped_unreported = 0  # skipped since the last diagnostics message
+        self.factory = RclpyFactory()
         self.pub_skeleton = self.create_publisher(Skeleton, "skeleton", RESULT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "skeleton_markers", RESULT_QOS)
-        # per body: (joint_states, body_shape); the first body's on the plain topics too
-        self.pub_body = [[(self.create_publisher(JointState, "joint_states", RESULT_QOS),
-                           self.create_publisher(BodyShapeMsg, "body_shape", LATCHED_QOS))]]
-        self.pub_body += [[] for _ in self.ids[1:]]
-        if len(self.ids) > 1:
-            for k, body in enumerate(self.ids):
-                self.pub_body[k].append((
-                    self.create_publisher(JointState, f"humans/bodies/{body}/joint_states",
-                                          RESULT_QOS),
-                    self.create_publisher(BodyShapeMsg, f"humans/bodies/{body}/body_shape",
-                                          LATCHED_QOS)))
+        self.pub_tracked = self.create_publisher(IdsList, TRACKED_TOPIC, RESULT_QOS)
+        # per body: its joint_states and body_shape publishers; the first body's shape also on
+        # the plain body_shape topic
+        self.pub_joints = [self.create_publisher(JointState, per_body_topic(body, "joint_states"),
+                                                 RESULT_QOS) for body in self.ids]
+        self.pub_shapes = [[self.create_publisher(BodyShapeMsg, per_body_topic(body, "body_shape"),
+                                                  LATCHED_QOS)] for body in self.ids]
+        self.pub_shapes[0].append(self.create_publisher(BodyShapeMsg, "body_shape", LATCHED_QOS))
+        self.pub_tf = (self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+                       if self.config.publish_tf else None)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
         if self.config.max_wait_ms <= 0:
             self.get_logger().fatal(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
             raise SystemExit(2)
-        # A steady clock: sets with a missing view go out on time whatever /clock does.
-        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # A steady clock: sets with a missing view go out on time whatever /clock does, and the
+        # tracker takes the waiting sets on its own pace.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync, clock=steady)
+        self.create_timer(TICK_S, self._tick, clock=steady)
         if self.config.rig_file:
             try:
                 self._set_rig(load_rig(self.config.rig_file))
@@ -166,22 +240,25 @@ class BodyTrackerNode(Node):
         self.frame_id = rig.frame_id
         self.tracker = PeopleTracker(self.model, rig, self.params, self.rng,
                                      max_people=len(self.ids), ids=self.ids)
-        self.use_maps = self.params.tracking_method.uses_detector
-        self.maps = {name: {} for name in rig.names}  # camera -> stamp -> skin map (recent)
+        self.use_detections = self.params.tracking_method.uses_detector
         self.sync = StampSynchronizer(
-            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
+            list(rig.names) + ([DETECTIONS] if self.use_detections else []), slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
             min_keys=min(self.config.min_views_to_sync, len(rig)),
             max_delay_ns=int(self.config.max_wait_ms * 1e6), max_wait_ns=int(self.config.max_wait_ms * 1e6))
+        self.queue = FrameSetQueue(self.config.latest_only)
         if first:
             # Subscribe before compiling: masks that arrive during the (cold-cache) warm-up
             # wait in the subscriptions' queues instead of being published to nobody.
             for name in rig.names:
                 self.create_subscription(Image, f"{name}/foreground", self._on_mask(name),
                                          sensor_qos(max(1, self.config.queue_depth)))
-                if self.use_maps:
-                    self.create_subscription(Image, f"{name}/skin", self._on_skin(name),
-                                             sensor_qos(max(1, self.config.queue_depth)))
+            if self.use_detections:
+                # as deep as the masks' queues: detections dropped while the tracker works
+                # would leave their frame sets incomplete
+                self.create_subscription(Extremities, DETECTIONS, self._on_extremities, QoSProfile(
+                    depth=max(RESULT_QOS.depth, self.config.queue_depth),
+                    reliability=ReliabilityPolicy.RELIABLE))
             seconds = self.tracker.warm_up()
             self.get_logger().info(f"kernels ready ({seconds:.1f} s)")
         self.get_logger().info(f"tracking with {len(rig)} cameras ({', '.join(rig.names)}), method "
@@ -199,41 +276,40 @@ class BodyTrackerNode(Node):
             return None
         return image
 
-    def _on_skin(self, name: str):
-        def on_skin(msg: Image) -> None:
-            if self.rig is None or name not in self.maps:
-                return
-            image = self._mono8(msg, f"{name}/skin")
-            if image is None:
-                return
-            recent = self.maps[name]
-            recent[stamp_to_ns(msg.header.stamp)] = image
-            while len(recent) > max(10, self.config.queue_depth):  # masks that never came
-                recent.pop(next(iter(recent)))
-
-        return on_skin
-
-    def _map_for(self, name: str, stamp_ns: int) -> np.ndarray | None:
-        """The skin map of ``name`` within the slop of ``stamp_ns`` (taken out), or None."""
-        recent = self.maps.get(name, {})
-        slop = int(self.config.slop_ms * 1e6)
-        for stamp in list(recent):
-            if abs(stamp - stamp_ns) <= slop:
-                return recent.pop(stamp)
-        return None
+    def _on_extremities(self, msg: Extremities) -> None:
+        if self.sync is None:
+            return
+        try:
+            detections = detections_from_msg(msg)
+        except ValueError as err:
+            self.get_logger().error(f"extremities: {err}", throttle_duration_sec=5.0)
+            return
+        self.last_input_ns = time.monotonic_ns()
+        self._enqueue(self.sync.add(DETECTIONS, stamp_to_ns(msg.header.stamp), detections,
+                                    now_ns=self._idle_clock_ns()))
 
     def _on_mask(self, name: str):
         def on_mask(msg: Image) -> None:
             if self.sync is None or name not in self.rig:
                 return
+            self.last_input_ns = time.monotonic_ns()
             mask = self._mono8(msg, f"{name}/foreground")
             if mask is None:
                 return
-            for synced in self.sync.add(name, stamp_to_ns(msg.header.stamp), mask,
-                                        now_ns=self._idle_clock_ns()):
-                self._process(synced.stamp_ns, synced.items)
+            stamp = stamp_to_ns(msg.header.stamp)
+            synced_sets = self.sync.add(name, stamp, mask, now_ns=self._idle_clock_ns())
+            if self.use_detections and self.count_publishers(DETECTIONS) == 0:
+                # nobody detects: the set must not wait for detections (None: none this frame)
+                synced_sets += self.sync.add(DETECTIONS, stamp, None,
+                                             now_ns=self._idle_clock_ns())
+            self._enqueue(synced_sets)
 
         return on_mask
+
+    def _enqueue(self, synced_sets) -> None:
+        now = time.monotonic_ns()
+        for synced in synced_sets:
+            self.queue.put(synced.stamp_ns, synced.items, now)
 
     def _idle_clock_ns(self) -> int:
         """Steady time the node has not spent processing (the synchroniser's arrival clock)."""
@@ -242,17 +318,34 @@ class BodyTrackerNode(Node):
     def _poll_sync(self) -> None:
         if self.sync is None:
             return
-        for synced in self.sync.poll(self._idle_clock_ns()):
-            self._process(synced.stamp_ns, synced.items)
+        self._enqueue(self.sync.poll(self._idle_clock_ns()))
 
-    def _process(self, stamp_ns: int, items: dict) -> None:
+    def _tick(self) -> None:
+        """Track a waiting frame set once the queued input has come in (module docstring)."""
+        if self.sync is None or not len(self.queue):
+            return
+        now = time.monotonic_ns()
+        if now - self.idle_since_ns < DRAIN_NS:
+            return
+        if now - self.last_input_ns < QUIET_NS and now - self.queue.oldest_arrival_ns() < MAX_HOLD_NS:
+            return
+        picked = self.queue.take(self.idle_since_ns, now)
+        if picked is not None:
+            self._process(picked)
+
+    def _process(self, picked: PickedSet) -> None:
         start = time.monotonic_ns()
         try:
-            self._track(stamp_ns, items)
+            self.skipped_total += picked.skipped
+            self.skipped_unreported += picked.skipped
+            self.tracker.saw(picked.passed_over)  # their stamps still measure the frame period
+            self._track(picked)
         finally:
-            self.busy_ns += time.monotonic_ns() - start
+            self.idle_since_ns = time.monotonic_ns()
+            self.busy_ns += self.idle_since_ns - start
 
-    def _track(self, stamp_ns: int, items: dict) -> None:
+    def _track(self, picked: PickedSet) -> None:
+        stamp_ns, items = picked.stamp_ns, picked.items
         log = self.get_logger()
         masks = []
         for cam in self.rig.cameras:
@@ -262,10 +355,10 @@ class BodyTrackerNode(Node):
                           f"{cam.width}x{cam.height}: view dropped", throttle_duration_sec=5.0)
                 mask = None
             masks.append(mask)
-        maps = [self._map_for(n, stamp_ns) for n in self.rig.names] if self.use_maps else None
+        detections = items.get(DETECTIONS)
         t0 = time.perf_counter()
         try:
-            results = self.tracker.update(masks, stamp_ns, maps)
+            results = self.tracker.update(masks, stamp_ns, detections)
         except Exception as err:  # a tracker bug must not take the room's node down
             log.error(f"tracking failed on frame {stamp_ns}: {err!r}; restarting the track")
             self.tracker.reset(forget_shape=False)
@@ -278,7 +371,11 @@ class BodyTrackerNode(Node):
                 self.last_state[k] = result.state
             if result.has_pose:
                 self._publish_pose(k, stamp_ns, result)
-        self._publish_diagnostics(stamp_ns, results, seconds)
+        tracked = self._header(IdsList(), stamp_ns)
+        tracked.ids = [body for body, result in zip(self.ids, results) if result.has_pose]
+        self.pub_tracked.publish(tracked)
+        self._publish_tf(stamp_ns, results)
+        self._publish_diagnostics(stamp_ns, results, seconds, picked)
 
     def _log_transition(self, k: int, result, seconds: float) -> None:
         log = self.get_logger()
@@ -309,14 +406,15 @@ class BodyTrackerNode(Node):
         js = self._header(JointState(), stamp_ns)
         js.name = list(skel.dof_names)
         js.position = [float(x) for x in result.params]
-        for pub_joints, _ in self.pub_body[k]:
-            pub_joints.publish(js)
+        self.pub_joints[k].publish(js)
 
         sk = self._header(Skeleton(), stamp_ns)
         sk.body_id = body
         sk.joint_names = list(result.joint_names)
         sk.positions = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in result.joints]
         sk.parents = [int(i) for i in self.model.parents]
+        confidence = result.confidence
+        sk.confidence = [] if confidence is None else [float(c) for c in confidence]
         sk.fit_error = float(result.fit_cost)
         self.pub_skeleton.publish(sk)
         self.pub_markers.publish(self._markers(k, stamp_ns, result.joints))
@@ -331,8 +429,25 @@ class BodyTrackerNode(Node):
             msg.radial_scale = [float(x) for x in np.ravel(shape.radial_scale)]
             msg.global_scale = float(shape.global_scale)
             msg.height = float(shape.height(self.tracker.trackers[k].model))
-            for _, pub_shape in self.pub_body[k]:
+            for pub_shape in self.pub_shapes[k]:
                 pub_shape.publish(msg)
+
+    def _publish_tf(self, stamp_ns: int, results) -> None:
+        """Every tracked body's frames in one TFMessage (:mod:`.body_frames`)."""
+        if self.pub_tf is None:
+            return
+        transforms = []
+        for body, result in zip(self.ids, results):
+            if result.transforms is None:
+                continue
+            try:
+                transforms += body_transforms(result.joint_names, self.model.parents,
+                                              result.transforms, body, self.frame_id)
+            except ValueError as err:  # a degenerate pose must not stop the node
+                self.get_logger().error(f"{body}: no frames on {TF_TOPIC}: {err}",
+                                        throttle_duration_sec=5.0)
+        if transforms:
+            self.pub_tf.publish(tf_message(transforms, stamp_ns, self.factory))
 
     def _markers(self, k: int, stamp_ns: int, joints: np.ndarray) -> MarkerArray:
         body = self.ids[k]
@@ -355,15 +470,21 @@ class BodyTrackerNode(Node):
             m.lifetime.nanosec = 500_000_000  # disappear when tracking stops
         return MarkerArray(markers=[spheres, bones])
 
-    def _publish_diagnostics(self, stamp_ns: int, results, seconds: float) -> None:
+    def _publish_diagnostics(self, stamp_ns: int, results, seconds: float,
+                             picked: PickedSet) -> None:
         diag = self._header(DiagnosticArray(), stamp_ns)
-        diag.status = [self._status(body, result, seconds)
+        timing = [KeyValue(key="skipped_frame_sets", value=str(self.skipped_total)),
+                  KeyValue(key="skipped_since_last", value=str(self.skipped_unreported)),
+                  KeyValue(key="wait_ms", value=f"{picked.waited_ns / 1e6:.1f}")]
+        diag.status = [self._status(body, result, seconds, timing)
                        for body, result in zip(self.ids, results)]
         self.pub_diag.publish(diag)
+        self.skipped_unreported = 0
 
-    def _status(self, body: str, result, seconds: float) -> DiagnosticStatus:
+    def _status(self, body: str, result, seconds: float, timing: list) -> DiagnosticStatus:
         values = [KeyValue(key="state", value=result.state),
                   KeyValue(key="seconds_per_frame", value=f"{seconds:.3f}"),
+                  *timing,
                   KeyValue(key="fit_cost", value=f"{result.fit_cost:.4f}"),
                   KeyValue(key="views", value=" ".join(self.rig.names[i] for i in result.views)),
                   KeyValue(key="dropped", value=" ".join(self.rig.names[i] for i in result.dropped)),
@@ -374,6 +495,9 @@ class BodyTrackerNode(Node):
         if result.extremities is not None:  # dd-hpf: which hands/feet/head were detected
             values.append(KeyValue(key="extremities", value=" ".join(
                 n for n, ok in zip(END_EFFECTORS, result.extremities.found) if ok)))
+            joints = result.extremities.joint_scores
+            values.append(KeyValue(key="joint_detections", value=str(
+                0 if joints is None else int((joints > 0).sum()))))
         level = DiagnosticStatus.OK if result.state in ("tracking", "initialising", "searching") else \
             DiagnosticStatus.WARN
         return DiagnosticStatus(level=level, name=f"{NODE_NAME}: {body}", message=result.state,

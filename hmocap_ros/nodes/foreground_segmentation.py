@@ -11,16 +11,12 @@ Subscriptions:
   catching up) loses no frame as long as the node keeps up on average.
 Publications:
   ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id).
-  ``<camera>/skin`` (sensor_msgs/Image mono8, half resolution, 255 = probability 1), when
-  ``publish_skin``: the per-pixel skin probability inside the foreground
-  (:mod:`hmocap_ros.segmentation.skin`), the extremity detector that body_tracker's ``dd-hpf``
-  method fuses over the views (thesis sec. 2.5.1).
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames,
   milliseconds per frame and state (learning or segmenting) per camera.
 Services:
   ``~/relearn`` (std_srvs/Trigger): forget the background of every camera and learn it again.
-Parameters: ``cameras``, ``queue_depth``, ``diagnostics_period``, ``relearn_after_size_errors``,
-``publish_skin`` and every field of
+Parameters: ``cameras``, ``queue_depth``, ``diagnostics_period``, ``relearn_after_size_errors``
+and every field of
 :class:`~hmocap_ros.segmentation.ForegroundParams` (``foreground_segmentation --help``).
 
 Frames of the wrong encoding or of a size other than the one learnt are refused with a
@@ -47,7 +43,6 @@ from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.nodes.common import RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node, sensor_qos
 from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
-from hmocap_ros.segmentation.skin import skin_probability
 
 NODE_NAME = "foreground_segmentation"
 
@@ -61,8 +56,6 @@ class ForegroundNodeConfig:
     diagnostics_period: float = param(1.0, "Seconds between diagnostics messages (0 = none).")
     relearn_after_size_errors: int = param(25, "Relearn a camera's background after this many consecutive "
                                                "frames of a size other than the learnt one (0 = never).")
-    publish_skin: bool = param(True, "Also publish <camera>/skin, the skin probability inside the foreground "
-                                     "(mono8, half resolution), for body_tracker's dd-hpf method.")
 
 
 def is_colour(encoding: str) -> bool:
@@ -95,12 +88,9 @@ class ForegroundSegmentation(Node):
         compile_kernels(self.params)
         self.cameras = {name: _CameraState(self.params) for name in self.config.cameras}
         self.mask_pubs = {}
-        self.skin_pubs = {}
         image_qos = sensor_qos(max(1, self.config.queue_depth))
         for name in self.cameras:
             self.mask_pubs[name] = self.create_publisher(Image, f"{name}/foreground", SENSOR_QOS)
-            if self.config.publish_skin:
-                self.skin_pubs[name] = self.create_publisher(Image, f"{name}/skin", SENSOR_QOS)
             self.create_subscription(Image, f"{name}/image_raw", self._callback(name), image_qos)
         self.create_service(Trigger, "~/relearn", self._relearn)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
@@ -146,12 +136,8 @@ class ForegroundSegmentation(Node):
                 return
             if state.encoding is None:
                 state.encoding = msg.encoding
-            skin = skin_probability(rgb, mask=mask) if name in self.skin_pubs else None
             state.seconds += time.perf_counter() - t0
             state.frames += 1
-            if skin is not None:  # before the mask: body_tracker takes the maps that are there
-                self.skin_pubs[name].publish(numpy_to_image(skin, "mono8", stamp, msg.header.frame_id,
-                                                            self.factory))
             self.mask_pubs[name].publish(numpy_to_image(mask, "mono8", stamp, msg.header.frame_id, self.factory))
 
         return on_image

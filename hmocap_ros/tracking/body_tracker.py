@@ -13,9 +13,10 @@ the same method. The tracker is a state machine (:class:`~.result.TrackerState`)
 ``tracking``
     layered particle filtering per frame with the method's schedule (:mod:`.methods`,
     :mod:`.body_layers`) and the silhouette XOR weighting (:mod:`.body_fitness`, eq. 2.8 /
-    2.15). ``dd-hpf`` (sec. 2.5) also takes per-view detector maps: hands and head are
-    located in 3D (:mod:`.extremity_detection`), IK particles put the arms where the hands
-    are (:mod:`.ik_proposals`) and the final layer adds the detection cost of eq. 2.20-2.21.
+    2.15). ``dd-hpf`` (sec. 2.5) also takes the frame set's 3D detections
+    (:mod:`hmocap_ros.detection`): they are assigned to the body (:mod:`.detector_driven`),
+    IK particles put the arms where the hands are (:mod:`.ik_proposals`), each layer weighs
+    its joints' labelled detections and the final layer adds eq. 2.20-2.21.
     Fresh searches (:mod:`.research`) re-seed the filter when they find a better pose.
 ``lost``
     the fit cost of the estimate stayed above ``lost.cost`` for ``lost.frames`` frames; the
@@ -31,9 +32,33 @@ Before the filter runs, the particles' pelvis position is shifted by ``filter.ve
 times the estimate's last frame-to-frame displacement: a constant-velocity prior. A walking
 or running person moves 5-12 cm per frame, several times the Gaussian's std; limbs reverse
 too quickly for such a prior to help them.
+
+Time between frame sets: a live node that cannot keep up tracks the newest frame set and
+skips the others, so the frame sets a tracker processes may lie several camera frames
+apart. The frame period comes from the stamps (:class:`FramePeriod`: the median difference
+of consecutive stamps, those of frame sets seen but skipped included, see :meth:`saw`); the
+time between two processed frame sets counts in whole periods ``k`` (at least 1), and:
+
+- the velocity step is scaled by ``k_now / k_before``, the periods since the last processed
+  frame set over the periods between the two before it (the displacement of the last
+  estimate spans ``k_before`` periods);
+- the inter-frame diffusion, whose stds (``sigma0``, :mod:`.body_layers`) are the motion of
+  one 25 fps frame, grows with ``k_now``: every layer's kernel std is scaled by ``k_now``,
+  and the blocks that the last frame's inter-frame kernel already diffused (the torso for
+  the hierarchical schedules, every DoF for the APF) get the rest of their ``k_now *
+  sigma0`` before the filter runs. Over a few frames a body's motion is smooth (a limb keeps
+  its velocity), so its change grows with the time itself, not with its square root.
+
+Both use ``min(k_now, MAX_ELAPSED_PERIODS)`` (4 periods, 160 ms at 25 fps): beyond that a
+velocity extrapolation and a wider search place more particles where the body is not than
+they recover; a track lost over a long gap starts again from the visual hull. With a frame
+set every period (``k = 1``) both are exactly the thesis' model: the same numbers and the
+same random draws.
 """
 from __future__ import annotations
 
+import bisect
+import dataclasses
 import logging
 import time
 from typing import Sequence
@@ -41,11 +66,13 @@ from typing import Sequence
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
-from hmocap_ros.lpf.layered_filter import lpf_run
+from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
+from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import BodySchedule, schedule_for
 from hmocap_ros.tracking.detector_driven import DetectorDriven
-from hmocap_ros.tracking.extremity_detection import Extremities
+from hmocap_ros.detection.detections import Detections
+from hmocap_ros.tracking.detection_assignment import Assigned
 from hmocap_ros.tracking.layer_weighting import fit_cost, layer_vertices, layer_weight_fn, warm_up
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
@@ -54,13 +81,146 @@ from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult, stage_
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
 from hmocap_ros.tracking.visual_hull import room_bounds
 
-__all__ = ["SAME_PERSON_RADIUS", "STATES", "BodyTracker", "TrackResult", "TrackerParams",
-           "TrackerState"]
+__all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "BodyTracker", "FramePeriod",
+           "FrameSetQueue", "PickedSet", "TrackResult", "TrackerParams", "TrackerState"]
 
 log = logging.getLogger(__name__)
 
 #: Stages timed per frame (``TrackResult.timings``), besides the weighting's own.
 STAGES = ("observe", "hull", "init", "filter", "proposals", "detection")
+#: Most frame periods between two processed frame sets that the motion model accounts for
+#: (velocity extrapolation and diffusion; module docstring).
+MAX_ELAPSED_PERIODS = 4
+
+
+class FramePeriod:
+    """A stream's frame period from its stamps: the median difference of consecutive distinct
+    stamps among the :attr:`WINDOW` newest seen (a few frames dropped here and there do not
+    move a median). A stamp older than every one kept (a stream that started again) starts
+    the window anew. A median under :attr:`MIN_PERIOD_NS` is no camera's frame period
+    (stamps that count frames rather than time, as synthetic sequences number them): the
+    period is then unknown, and every time counts as one period."""
+
+    #: stamps kept
+    WINDOW = 64
+    #: shortest frame period taken for one (1 ms: 1,000 frames per second)
+    MIN_PERIOD_NS = 1_000_000
+
+    def __init__(self):
+        self._stamps: list[int] = []  # sorted, distinct
+
+    def add(self, stamp_ns: int) -> None:
+        stamp_ns = int(stamp_ns)
+        stamps = self._stamps
+        if stamps and stamp_ns < stamps[0]:
+            stamps.clear()
+        i = bisect.bisect_left(stamps, stamp_ns)
+        if i < len(stamps) and stamps[i] == stamp_ns:
+            return
+        stamps.insert(i, stamp_ns)
+        if len(stamps) > self.WINDOW:
+            del stamps[0]
+
+    @property
+    def period_ns(self) -> float | None:
+        """The median stamp difference (ns), or None before two distinct stamps or when it
+        is under :attr:`MIN_PERIOD_NS`."""
+        if len(self._stamps) < 2:
+            return None
+        period = float(np.median(np.diff(self._stamps)))
+        return period if period >= self.MIN_PERIOD_NS else None
+
+    def periods(self, dt_ns: int) -> int:
+        """Whole frame periods in ``dt_ns`` (rounded, at least 1; 1 while the period is
+        unknown or for a time that does not go forward)."""
+        period = self.period_ns
+        if period is None or period <= 0 or dt_ns <= 0:
+            return 1
+        return max(1, int(round(dt_ns / period)))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PickedSet:
+    """A frame set taken from a :class:`FrameSetQueue`.
+
+    stamp_ns, items: the set (the synchroniser's); waited_ns: from its completion to its
+    take; passed_over: stamps of the complete sets skipped for it (newest-only); missing:
+    frame sets that never came complete between the set taken before and this one (stamp
+    gaps counted in frame periods).
+    """
+
+    stamp_ns: int
+    items: dict
+    waited_ns: int
+    passed_over: tuple = ()
+    missing: int = 0
+
+    @property
+    def skipped(self) -> int:
+        """Frame sets not tracked between the set taken before and this one."""
+        return len(self.passed_over) + self.missing
+
+
+class FrameSetQueue:
+    """Complete frame sets waiting for a tracker that may be slower than the cameras.
+
+    ``latest_only``: :meth:`take` gives the newest set and passes over the older ones (a live
+    tracker stays at the present, at the cost of the frames in between); otherwise every set,
+    oldest first (a bag replayed slowly, where every frame must be tracked).
+
+    Frame sets that never came complete are counted too (``PickedSet.missing``): frames a
+    DDS queue of bounded depth dropped while the tracker worked, sets the synchroniser gave
+    up on. They show as gaps in the stamps, counted in frame periods (:class:`FramePeriod`,
+    fed with every stamp put). A gap before a set that arrived more than two frame periods
+    (at least :attr:`IDLE_GAP_NS`) after the tracker last became idle is a pause of the
+    stream, not frames lost while it worked, and is not counted.
+    """
+
+    #: Shortest time after the tracker became idle from which a set's arrival means the
+    #: stream paused (when the frame period is unknown or shorter than half of it).
+    IDLE_GAP_NS = 100_000_000
+
+    def __init__(self, latest_only: bool = True):
+        self.latest_only = bool(latest_only)
+        self.period = FramePeriod()
+        self._pending: dict[int, tuple[dict, int]] = {}  # stamp -> (items, arrival)
+        self._last: int | None = None                     # stamp of the last set taken
+
+    def __len__(self) -> int:
+        return len(self._pending)
+
+    def put(self, stamp_ns: int, items: dict, arrival_ns: int) -> None:
+        """A complete (or given up on) frame set, arrived at ``arrival_ns`` (monotonic)."""
+        self._pending[int(stamp_ns)] = (items, int(arrival_ns))
+        self.period.add(stamp_ns)
+
+    def oldest_arrival_ns(self) -> int | None:
+        return min((a for _, a in self._pending.values()), default=None)
+
+    def take(self, idle_since_ns: int, now_ns: int) -> PickedSet | None:
+        """The next set to track (None when none waits). ``idle_since_ns``: when the tracker
+        last finished a set (monotonic, as the arrival times); ``now_ns``: the time now."""
+        if not self._pending:
+            return None
+        stamps = sorted(self._pending)
+        if self._last is not None and stamps[-1] <= self._last:  # the stream started again
+            self._last = None
+        chosen = stamps[-1] if self.latest_only else stamps[0]
+        passed = tuple(t for t in stamps if t < chosen)
+        first_arrival = self._pending[stamps[0]][1]
+        items, arrival = self._pending.pop(chosen)
+        for t in passed:
+            del self._pending[t]
+        missing = 0
+        sequence = list(passed) + [chosen]
+        if self._last is not None:
+            period = self.period.period_ns or 0.0
+            if first_arrival - idle_since_ns <= max(2.0 * period, self.IDLE_GAP_NS):
+                sequence.insert(0, self._last)  # else the stream paused while the tracker idled
+        for a, b in zip(sequence, sequence[1:]):
+            missing += self.period.periods(b - a) - 1
+        self._last = chosen
+        return PickedSet(chosen, items, max(0, now_ns - arrival), passed, missing)
 
 
 class BodyTracker:
@@ -99,7 +259,12 @@ class BodyTracker:
         self.proposer = LimbProposer(model, ("l_arm", "r_arm"))
         self.start_proposer = LimbProposer(model, ("l_arm", "r_arm", "l_leg", "r_leg"))
         self.research = ResearchPolicy(p.research)
-        self.driven = DetectorDriven(model, self.cameras) if self.method.uses_detector else None
+        self.driven = (DetectorDriven(model, self.schedule.layer_blocks, p.detector)
+                       if self.method.uses_detector else None)
+        self.frame_period = FramePeriod()
+        self._stamps: tuple = ()  # stamps of the last two frame sets processed
+        self._elapsed = (1, 1)    # periods between those two, and from the last to this one
+        self._scaled_filters: dict[int, LayeredFilter] = {}
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -138,6 +303,11 @@ class BodyTracker:
             return self._startup.estimator.shape()
         return None
 
+    def saw(self, stamp_ns: int) -> None:
+        """A frame set of ``stamp_ns`` came but is not processed (a node that keeps up by
+        skipping sets): its stamp still measures the frame period."""
+        self.frame_period.add(stamp_ns)
+
     def warm_up(self) -> float:
         """Compile the weighting's numba kernels (:func:`~.layer_weighting.warm_up`);
         returns the seconds it took."""
@@ -146,31 +316,31 @@ class BodyTracker:
     # ------------------------------------------------------------------ weighting
 
     def weight_fn(self, obs: Observation, shape: BodyShape,
-                  extremities: Extremities | None = None):
+                  assigned: Assigned | None = None):
         """The schedule's weighting (:func:`~.layer_weighting.layer_weight_fn`): eq. 2.8, or
-        eq. 2.15 in the layer's observation boxes; with hands detected, the final layer is
-        the refinement layer of eq. 2.21."""
+        eq. 2.15 in the layer's observation boxes; with detections, each layer adds its
+        joints' detection term and the final layer is the refinement layer of eq. 2.21."""
         rest = self.fitness.rest(shape)
-        refine = (self.driven.refinement(extremities, self.params.detector.refine_kappa, rest)
-                  if self.driven is not None else None)
+        terms = self.driven.layer_terms(assigned, rest) if self.driven is not None else None
         return layer_weight_fn(self.fitness, self.model, self.schedule, self._layer_vertices,
-                               self.params.weighting, obs, rest, refine)
+                               self.params.weighting, obs, rest, terms)
 
     # ------------------------------------------------------------------ update
 
     def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int,
-               detector_maps: Sequence[np.ndarray | None] | None = None,
+               detections: Detections | None = None,
                exclude: np.ndarray | None = None) -> TrackResult:
         """Process one frame set: one foreground mask per rig camera (None where missing).
 
-        detector_maps: per camera the extremity detector's probability map (uint8, 255 = 1,
-        any resolution; ``segmentation.skin``) or None; used by methods that use a detector
-        (``dd-hpf``), which without them run as their boxed schedule. exclude: (K, 3) room
+        detections: the extremity detector's 3D detections of this frame set
+        (:class:`~hmocap_ros.detection.detections.Detections`) or None; used by methods that
+        use a detector (``dd-hpf``), which without them run as their boxed schedule. exclude: (K, 3) room
         points where people followed by other trackers stand
         (:class:`~.people_tracker.PeopleTracker`): a start never takes a person within
         :data:`SAME_PERSON_RADIUS` of one of them.
         """
         t_start = time.perf_counter()
+        self._note_stamp(int(stamp_ns))
         self.fitness.times.reset()
         if self.shape_fitness is not self.fitness:
             self.shape_fitness.times.reset()
@@ -198,7 +368,7 @@ class BodyTracker:
                 return self._result(stamp_ns, obs, t_start, timings)
         if self.state == TrackerState.INITIALISING:
             return self._initialise(masks, obs, stamp_ns, t_start, timings)
-        return self._track(masks, detector_maps, obs, stamp_ns, t_start, timings)
+        return self._track(detections, obs, stamp_ns, t_start, timings)
 
     def _initialise(self, masks, obs: Observation, stamp_ns: int, t_start: float,
                     timings: dict) -> TrackResult:
@@ -216,7 +386,7 @@ class BodyTracker:
         timings["init"] = time.perf_counter() - t0
         return self._result(stamp_ns, obs, t_start, timings, self._fit_cost(obs), layers)
 
-    def _track(self, masks, detector_maps, obs: Observation, stamp_ns: int, t_start: float,
+    def _track(self, detections: Detections | None, obs: Observation, stamp_ns: int, t_start: float,
                timings: dict) -> TrackResult:
         """One tracked frame: prediction, proposals, detections, the layered filter, the
         fresh-search policy and the loss check."""
@@ -224,15 +394,17 @@ class BodyTracker:
         extremities = None
         try:
             reference = self._predict()
+            periods = min(self._elapsed[1], MAX_ELAPSED_PERIODS)
+            self._diffuse_elapsed(periods)
             if self.params.filter.proposal_fraction > 0.0 and self.estimate is not None:
                 timings["proposals"] = self._propose(obs, reference)
-            if self.driven is not None and detector_maps is not None and reference is not None:
+            if self.driven is not None and detections is not None and reference is not None:
                 t1 = time.perf_counter()
                 extremities = self.driven.detect(self.fitness, self.fitness.rest(self.shape),
-                                                 masks, detector_maps, reference,
-                                                 self.particles, self.rng)
+                                                 detections, reference, self.particles,
+                                                 self.rng)
                 timings["detection"] = time.perf_counter() - t1
-            res = lpf_run(self.particles, self.schedule.filter,
+            res = lpf_run(self.particles, self._filter_for(periods),
                           self.weight_fn(obs, self.shape, extremities), self.rng)
             if self.driven is not None:
                 self.driven.learn(res, extremities, self.fitness.rest(self.shape))
@@ -242,6 +414,8 @@ class BodyTracker:
             self.state = TrackerState.LOST
             self.particles = None
             return self._result(stamp_ns, obs, t_start, timings)
+        spread = joint_spread(self.model, res.weighted_particles, res.weights,
+                              self.fitness.rest(self.shape).joints)
         timings["filter"] = time.perf_counter() - t0
         self.particles = res.particles
         self._previous_estimate = self.estimate
@@ -258,7 +432,44 @@ class BodyTracker:
                      fit_cost, lost.cost, self._bad_frames)
             self.state = TrackerState.LOST
             self._bad_frames = 0
-        return self._result(stamp_ns, obs, t_start, timings, fit_cost, res.layers, extremities)
+        return self._result(stamp_ns, obs, t_start, timings, fit_cost, res.layers, extremities,
+                            spread)
+
+    # ------------------------------------------------------------------ time
+
+    def _note_stamp(self, stamp_ns: int) -> None:
+        """Count the frame periods since the last processed frame set (module docstring)."""
+        self.frame_period.add(stamp_ns)
+        before = now = 1
+        if self._stamps:
+            now = self.frame_period.periods(stamp_ns - self._stamps[-1])
+        if len(self._stamps) == 2:
+            before = self.frame_period.periods(self._stamps[1] - self._stamps[0])
+        self._elapsed = (before, now)
+        self._stamps = (self._stamps + (stamp_ns,))[-2:]
+
+    def _filter_for(self, periods: int) -> LayeredFilter:
+        """The schedule's filter with every layer's kernel std times ``periods`` (the final
+        layer's inter-frame kernel, which diffuses for the next frame set, unchanged)."""
+        lpf = self.schedule.filter
+        if periods <= 1:
+            return lpf
+        scaled = self._scaled_filters.get(periods)
+        if scaled is None:
+            layers = tuple(dataclasses.replace(layer, std=periods * lpf.stds[k])
+                           for k, layer in enumerate(lpf.layers))
+            scaled = self._scaled_filters[periods] = dataclasses.replace(lpf, layers=layers)
+        return scaled
+
+    def _diffuse_elapsed(self, periods: int) -> None:
+        """After ``periods`` > 1 frame periods, the rest of the inter-frame diffusion of the
+        blocks the last frame's inter-frame kernel diffused: std ``sigma * sqrt(periods^2 -
+        1)`` on top of its ``sigma``, so that their std is ``periods * sigma``."""
+        if periods <= 1 or self.particles is None:
+            return
+        lpf = self.schedule.filter
+        std = lpf.stds[-1] * np.sqrt(periods * periods - 1.0)
+        self.particles = lpf.final.kernel(self.particles, std, self.rng)
 
     # ------------------------------------------------------------------ steps
 
@@ -337,8 +548,8 @@ class BodyTracker:
         self.state = TrackerState.TRACKING
 
     def _predict(self) -> np.ndarray | None:
-        """Apply the velocity prediction to the particles' pelvis; returns the predicted
-        pose."""
+        """Apply the velocity prediction to the particles' pelvis, scaled to the time since
+        the last processed frame set; returns the predicted pose."""
         if self.estimate is None:
             return None
         predicted = self.estimate.copy()
@@ -347,6 +558,10 @@ class BodyTracker:
             return predicted
         dofs = self.skel.translation_dofs
         step = self.estimate - self._previous_estimate
+        before, now = self._elapsed
+        now = min(now, MAX_ELAPSED_PERIODS)
+        if now != before:  # the last step spans ``before`` periods, this one ``now``
+            step = step * (now / before)
         self.particles[:, dofs] += gain * step[dofs]
         predicted[dofs] += gain * step[dofs]
         return predicted
@@ -356,17 +571,20 @@ class BodyTracker:
 
     def _result(self, stamp_ns: int, obs: Observation, t_start: float, timings: dict,
                 fit_cost: float = float("nan"), layers: tuple = (),
-                extremities: Extremities | None = None) -> TrackResult:
+                extremities: Assigned | None = None,
+                spread: np.ndarray | None = None) -> TrackResult:
         extra = self.shape_fitness.times if self.shape_fitness is not self.fitness else None
         timings = stage_timings(timings, t_start, self.fitness.times, extra)
-        params = joints = None
+        params = joints = transforms = None
         shape = self._current_shape()
         if self.state.follows_person and self.estimate is not None:
             params = self.estimate.copy()
-            _, j = self.fitness.pose(params[None], shape)
-            joints = np.asarray(j[0], dtype=np.float64)
+            transforms = joint_transforms(self.model, params, self.fitness.rest(shape).joints)
+            joints = transforms[:, :3, 3].copy()
+        else:
+            spread = None
         return TrackResult(stamp_ns=int(stamp_ns), state=self.state, params=params,
                            joints=joints, joint_names=tuple(self.model.joint_names), shape=shape,
                            fit_cost=fit_cost, views=tuple(int(v) for v in obs.views),
                            dropped=tuple(obs.dropped), layers=tuple(layers), timings=timings,
-                           extremities=extremities)
+                           extremities=extremities, transforms=transforms, joint_spread=spread)

@@ -6,7 +6,8 @@ observation into the ``weight_fn(particles, layer)`` of the layered filter
 (:class:`~.body_fitness.SilhouetteFitness`) and counts the silhouette XOR over the whole
 images (eq. 2.8) or inside the observation boxes of the layer's body parts (eq. 2.15,
 :mod:`.observation_boxes`); with detections, the final layer adds the detection cost of
-eq. 2.20 (the refinement layer, eq. 2.21). :func:`fit_cost` is the cost the tracker judges a
+eq. 2.20 (the refinement layer, eq. 2.21) and each layer the distance of its joints to
+their labelled detections (:mod:`.detector_driven`). :func:`fit_cost` is the cost the tracker judges a
 frame's fit by.
 """
 from __future__ import annotations
@@ -31,16 +32,15 @@ def layer_vertices(model, schedule) -> list:
 
 
 def layer_weight_fn(fitness, model, schedule, vertices: list, weighting, obs: Observation,
-                    rest, refine=None):
+                    rest, terms=None):
     """``weight_fn(particles, layer) -> costs`` of ``schedule`` on ``obs``.
 
     fitness: the :class:`~.body_fitness.SilhouetteFitness`; vertices: :func:`layer_vertices`;
     weighting: the tracker's ``weighting`` settings (box reach, spread, margin); rest: the
-    shaped rest body. refine: ``(kappa, cost_fn)`` adding ``kappa * cost_fn(particles)`` to
-    the final layer's cost (eq. 2.21), or None.
+    shaped rest body. terms: per weighting a ``cost_fn(particles, joints)`` added to its
+    silhouette cost (detections, eq. 2.21) or None; or None.
     """
     lengths = chain_lengths(model, rest)
-    last = schedule.n_weightings - 1
 
     def weight(particles: np.ndarray, layer: int) -> np.ndarray:
         verts, joints = fitness.pose(particles, rest)
@@ -56,9 +56,8 @@ def layer_weight_fn(fitness, model, schedule, vertices: list, weighting, obs: Ob
                                        weighting.box_margin)
             boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
         cost = fitness.costs_from_verts(verts, obs, boxes)
-        if refine is not None and layer == last:
-            kappa, cost_fn = refine
-            cost = cost + kappa * cost_fn(particles)
+        if terms is not None and terms[layer] is not None:
+            cost = cost + terms[layer](particles, joints)
         return cost
 
     return weight

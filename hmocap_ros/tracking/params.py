@@ -117,9 +117,16 @@ class DetectorParams:
 
     refine_kappa: float = param(2.0, "Weight kappa (per metre, >= 0) of the detection cost of "
                                      "eq. 2.20 in the refinement layer (eq. 2.21).")
+    joint_kappa: float = param(2.0, "Weight (per metre, >= 0) of the distance of the joints a "
+                                    "layer moves to their labelled detections (keypoints), "
+                                    "added to the layer's silhouette cost.")
+    joint_cap: float = param(0.25, "Largest distance (m, > 0) one joint detection adds to a "
+                                   "layer's cost: a wrong detection costs a bounded amount.")
 
     def __post_init__(self):
-        _check([(self.refine_kappa >= 0.0, "detector.refine_kappa must be >= 0")])
+        _check([(self.refine_kappa >= 0.0, "detector.refine_kappa must be >= 0"),
+                (self.joint_kappa >= 0.0, "detector.joint_kappa must be >= 0"),
+                (self.joint_cap > 0.0, "detector.joint_cap must be > 0")])
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ from typing import Sequence
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.detection.detections import Detections
 from hmocap_ros.tracking.body_tracker import BodyTracker
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.result import TrackResult
@@ -73,14 +74,27 @@ class PeopleTracker:
         for tracker in self.trackers:
             tracker.reset(forget_shape)
 
+    def saw(self, stamps_ns: Sequence[int]) -> None:
+        """Frame sets that came but are not processed (skipped to keep up): their stamps
+        still measure the frame period of every slot (:meth:`BodyTracker.saw`)."""
+        for stamp in stamps_ns:
+            for tracker in self.trackers:
+                tracker.saw(stamp)
+
     def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int,
-               detector_maps: Sequence[np.ndarray | None] | None = None) -> list[TrackResult]:
-        """One frame set through every slot, in slot order; one result per slot."""
+               detections: Detections | None = None) -> list[TrackResult]:
+        """One frame set through every slot, in slot order; one result per slot.
+
+        detections: the frame set's 3D detections. Unlabelled skin candidates go to every
+        slot (each assigns them to its own body, eq. 2.19); a keypoint detector's labelled
+        joints are one person's, the first slot's."""
         results = []
         for k, tracker in enumerate(self.trackers):
             others = [t.position for j, t in enumerate(self.trackers) if j != k]
             others = np.array([p for p in others if p is not None]).reshape(-1, 3)
-            results.append(tracker.update(masks, stamp_ns, detector_maps,
+            mine = detections if (k == 0 or detections is None
+                                  or detections.detector == "skin") else None
+            results.append(tracker.update(masks, stamp_ns, mine,
                                           exclude=others if len(others) else None))
         self._drop_duplicates(results)
         return results

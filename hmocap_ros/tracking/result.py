@@ -8,7 +8,8 @@ from enum import StrEnum
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
-from hmocap_ros.tracking.extremity_detection import Extremities
+from hmocap_ros.tracking.body_frames import joint_confidence
+from hmocap_ros.tracking.detection_assignment import Assigned
 
 __all__ = ["STATES", "TrackResult", "TrackerState", "stage_timings"]
 
@@ -45,6 +46,12 @@ class TrackResult:
     state: the :class:`TrackerState` after this frame.
     params: (D,) pose parameters (tracking DoF set) or None; joints: (J, 3) joint positions in
     metres in the room frame or None; joint_names: their names; shape: the body shape used.
+    transforms: (J, 4, 4) the joints' global transforms (rotation: joint frame in the body
+    model's axes -> room; translation: ``joints``), or None without pose; the tf2 frames of
+    :mod:`.body_frames` are made from them.
+    joint_spread: (J,) metres, per joint the weighted RMS distance of its position over the
+    final layer's particles (:func:`.body_frames.joint_spread`); None where no filter ran
+    (start-up frames, no pose).
     fit_cost: eq. 2.8 cost of the estimate divided by the number of views (NaN without pose).
     views: rig indices used; dropped: rig indices whose mask was missing or invalid.
     layers: per-layer diagnostics (ESS, beta, times) of the filter run, if one ran.
@@ -64,11 +71,24 @@ class TrackResult:
     dropped: tuple = ()
     layers: tuple = ()
     timings: dict = field(default_factory=dict)
-    extremities: Extremities | None = None
+    extremities: Assigned | None = None
+    transforms: np.ndarray | None = None
+    joint_spread: np.ndarray | None = None
 
     @property
     def has_pose(self) -> bool:
         return self.joints is not None
+
+    @property
+    def confidence(self) -> np.ndarray | None:
+        """(J,) per-joint confidence in [0, 1] (:func:`.body_frames.joint_confidence`: the
+        spread, raised where a labelled detection agrees), or None when the spread is unknown."""
+        if self.joint_spread is None or self.joints is None:
+            return None
+        ext = self.extremities
+        detected = ext.joints if ext is not None else None
+        scores = ext.joint_scores if ext is not None else None
+        return joint_confidence(self.joint_spread, self.joints, detected, scores)
 
     @property
     def ess(self) -> tuple:

@@ -1,0 +1,291 @@
+"""extremity_detection: head, hands, feet and limb joints in 3D from the rig's images and foregrounds (thesis sec. 2.5.1).
+
+Pairs each camera's image with its foreground mask by stamp, synchronises the cameras into frame
+sets and runs :class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline` on each:
+``detector`` ``keypoints`` (a 2D landmark network per view on the view's foreground region,
+triangulated robustly over the views) or ``skin`` (the thesis' skin-colour detector on the
+oriented surface of the carved hull, eq. 2.16-2.18). body_tracker's ``dd-hpf`` consumes the
+detections.
+
+Subscriptions:
+  ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``.
+  ``<camera>/image_raw`` (sensor_msgs/Image, rgb8/bgr8/..., sensor-data QoS) and
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, the foreground_segmentation node's), per
+  rig camera, at the rig's resolution.
+  ``skeleton`` (hmocap_interfaces/Skeleton), when ``use_skeleton``: the last tracked skeleton,
+  which places the keypoint crops and the skin carving box and labels the skin candidates.
+Publications (with the stamp of the frame set):
+  ``extremities`` (hmocap_interfaces/Extremities): labelled 3D detections with scores.
+  ``extremities/points`` (sensor_msgs/PointCloud2, fields x, y, z, probability): skin, the
+  oriented surface points with their extremity probability (eq. 2.16-2.18); keypoints, the
+  detections with their scores. For RViz/Foxglove.
+  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): frame sets, detections, views, ms per set.
+Synchronisation: a frame set goes out when every camera's (image, foreground) pair of its
+stamp (within ``slop_ms``) is there, or ``max_wait_ms`` after its newest pair with at least
+``min_views_to_sync`` views (the others are detected without them).
+
+Bad input (a wrong encoding or size, a view missing, no rig yet) is logged and the frame or view
+left out; a keypoint model file that is missing or corrupt is logged with its path and how to
+get it, and the node detects with ``skin`` instead.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, Vector3
+from hmocap_interfaces.msg import CameraRig, Extremities, Skeleton
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+
+from hmocap_ros.detection.detections import fill_msg
+from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
+                                                     skeleton_labels)
+from hmocap_ros.detection.keypoint_network import ModelFileError
+from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
+from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
+from hmocap_ros.io.point_clouds import array_to_pointcloud2
+from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, param, run_node,
+                                     sensor_qos)
+from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
+from hmocap_ros.stamp_sync import StampSynchronizer
+
+NODE_NAME = "extremity_detection"
+POINT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("probability", "<f4")])
+
+
+@dataclass(frozen=True)
+class ExtremityNodeConfig:
+    rig_file: str = param("", "Rig calibration YAML; empty = take the rig from the latched camera_rig topic.")
+    model_file: str = param("", "Keypoint network file (TFLite); empty = the model shipped with the package.")
+    use_skeleton: bool = param(True, "Use the last tracked skeleton (topic skeleton) to place the keypoint "
+                                     "crops and the skin carving box and to label skin candidates.")
+    slop_ms: float = param(5.0, "Largest stamp difference (ms) between the frames of one frame set.")
+    min_views_to_sync: int = param(2, "Frame sets with at least this many cameras are processed when a "
+                                      "camera drops out (after max_wait_ms).")
+    max_wait_ms: float = param(200.0, "How long (ms, > 0) a frame set waits for a missing camera.")
+    queue_depth: int = param(5, "Frames queued per camera and topic while the node is busy.")
+    skeleton_max_age_ms: float = param(500.0, "A skeleton older than this (ms) before the frame set is "
+                                              "not used.")
+
+
+class ExtremityDetectionNode(Node):
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        self.config = declare_parameters(self, ExtremityNodeConfig)
+        self.params = declare_parameters(self, ExtremityDetectionParams)
+        if self.config.max_wait_ms <= 0:
+            raise ValueError(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
+        self.factory = RclpyFactory()
+        self.rig: Rig | None = None
+        self.pipeline: ExtremityPipeline | None = None
+        self.sync: StampSynchronizer | None = None
+        self.images: dict = {}   # camera -> stamp -> rgb image waiting for its mask
+        self.skeleton: tuple[int, dict] | None = None
+        self.frame_id = "room"
+        self.frames = 0
+        self.seconds = 0.0
+        self.busy_ns = 0
+        self.last_counts = (0, 0)
+        self.pub = self.create_publisher(Extremities, "extremities", RESULT_QOS)
+        from sensor_msgs.msg import PointCloud2
+
+        self.pub_points = self.create_publisher(PointCloud2, "extremities/points", RESULT_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_timer(1.0, self._publish_diagnostics)
+        if self.config.use_skeleton:
+            self.create_subscription(Skeleton, "skeleton", self._on_skeleton, RESULT_QOS)
+        if self.config.rig_file:
+            try:
+                self._set_rig(load_rig(self.config.rig_file))
+            except (RigError, OSError) as err:
+                raise ValueError(f"cannot load the rig: {err}") from err
+        else:
+            self.create_subscription(CameraRig, "camera_rig", self._on_rig, LATCHED_QOS)
+            self.get_logger().info("waiting for the rig on camera_rig")
+
+    # ------------------------------------------------------------------ set-up
+
+    def _on_rig(self, msg: CameraRig) -> None:
+        try:
+            rig = rig_from_msg(msg)
+        except (RigError, ValueError) as err:
+            self.get_logger().error(f"camera_rig: {err}")
+            return
+        if self.rig is not None and rig.isclose(self.rig):
+            return
+        self._set_rig(rig)
+
+    def _make_pipeline(self, rig: Rig) -> ExtremityPipeline:
+        model = self.config.model_file or None
+        try:
+            return ExtremityPipeline(rig.cameras, self.params, model)
+        except ModelFileError as err:
+            self.get_logger().error(f"{err}; detecting with the skin detector instead")
+            self.params = replace(self.params, detector="skin")
+            return ExtremityPipeline(rig.cameras, self.params)
+
+    def _set_rig(self, rig: Rig) -> None:
+        first = self.rig is None
+        self.rig = rig
+        self.frame_id = rig.frame_id
+        self.pipeline = self._make_pipeline(rig)
+        self.images = {name: {} for name in rig.names}
+        wait = int(self.config.max_wait_ms * 1e6)
+        self.sync = StampSynchronizer(
+            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
+            queue_size=max(10, self.config.queue_depth), allow_partial=True,
+            min_keys=min(self.config.min_views_to_sync, len(rig)),
+            max_delay_ns=wait, max_wait_ns=wait)
+        if first:
+            qos = sensor_qos(max(1, self.config.queue_depth))
+            for name in rig.names:
+                self.create_subscription(Image, f"{name}/image_raw", self._on_image(name), qos)
+                self.create_subscription(Image, f"{name}/foreground", self._on_mask(name), qos)
+        self.get_logger().info(f"detecting with {self.params.detector} on {len(rig)} cameras "
+                               f"({', '.join(rig.names)})")
+
+    # ------------------------------------------------------------------ inputs
+
+    def _on_skeleton(self, msg: Skeleton) -> None:
+        joints = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
+        if len(joints) != len(msg.joint_names):
+            self.get_logger().error("skeleton: joint names and positions differ in length",
+                                    throttle_duration_sec=5.0)
+            return
+        self.skeleton = (stamp_to_ns(msg.header.stamp),
+                         skeleton_labels([str(n) for n in msg.joint_names], joints))
+
+    def _on_image(self, name: str):
+        def on_image(msg: Image) -> None:
+            if self.rig is None or name not in self.images:
+                return
+            try:
+                rgb = image_to_rgb(msg)
+            except ConversionError as err:
+                self.get_logger().error(f"{name}/image_raw: {err}", throttle_duration_sec=5.0)
+                return
+            recent = self.images[name]
+            recent[stamp_to_ns(msg.header.stamp)] = rgb
+            while len(recent) > max(10, 2 * self.config.queue_depth):
+                recent.pop(next(iter(recent)))
+
+        return on_image
+
+    def _on_mask(self, name: str):
+        def on_mask(msg: Image) -> None:
+            if self.sync is None or name not in self.images:
+                return
+            try:
+                mask = image_to_numpy(msg)
+            except ConversionError as err:
+                self.get_logger().error(f"{name}/foreground: {err}", throttle_duration_sec=5.0)
+                return
+            if mask.ndim != 2:
+                self.get_logger().error(f"{name}/foreground must be mono8, got {msg.encoding}",
+                                        throttle_duration_sec=5.0)
+                return
+            stamp = stamp_to_ns(msg.header.stamp)
+            image = self._image_for(name, stamp)
+            if image is None:
+                self.get_logger().debug(f"{name}: no image of stamp {stamp} for its mask")
+                return
+            for synced in self.sync.add(name, stamp, (image, mask), now_ns=self._idle_ns()):
+                self._process(synced.stamp_ns, synced.items)
+
+        return on_mask
+
+    def _image_for(self, name: str, stamp_ns: int) -> np.ndarray | None:
+        recent = self.images[name]
+        slop = int(self.config.slop_ms * 1e6)
+        for stamp in list(recent):
+            if abs(stamp - stamp_ns) <= slop:
+                return recent.pop(stamp)
+        return None
+
+    def _idle_ns(self) -> int:
+        return time.monotonic_ns() - self.busy_ns
+
+    def _poll_sync(self) -> None:
+        if self.sync is None:
+            return
+        for synced in self.sync.poll(self._idle_ns()):
+            self._process(synced.stamp_ns, synced.items)
+
+    # ------------------------------------------------------------------ detection
+
+    def _previous(self, stamp_ns: int) -> dict | None:
+        if self.skeleton is None:
+            return None
+        stamp, joints = self.skeleton
+        if abs(stamp_ns - stamp) > self.config.skeleton_max_age_ms * 1e6:
+            return None
+        return joints
+
+    def _process(self, stamp_ns: int, items: dict) -> None:
+        start = time.monotonic_ns()
+        try:
+            self._detect(stamp_ns, items)
+        finally:
+            self.busy_ns += time.monotonic_ns() - start
+
+    def _detect(self, stamp_ns: int, items: dict) -> None:
+        images, masks = [], []
+        for name in self.rig.names:
+            image, mask = items.get(name, (None, None))
+            images.append(image)
+            masks.append(mask)
+        t0 = time.perf_counter()
+        try:
+            det = self.pipeline.detect(images, masks, self._previous(stamp_ns))
+        except Exception as err:  # a detector bug must not take the room's node down
+            self.get_logger().error(f"extremity detection failed on frame {stamp_ns}: {err!r}")
+            return
+        self.seconds += time.perf_counter() - t0
+        self.frames += 1
+        self.last_counts = (len(det), sum(m is not None for m in masks))
+        msg = Extremities()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        msg.header.frame_id = self.frame_id
+        self.pub.publish(fill_msg(msg, det, Point, Vector3))
+        points = det.points if len(det.points) else det.positions
+        values = det.probability if len(det.points) else det.scores
+        cloud = np.zeros(len(points), POINT_DTYPE)
+        for k, axis in enumerate("xyz"):
+            cloud[axis] = points[:, k]
+        cloud["probability"] = values
+        self.pub_points.publish(array_to_pointcloud2(cloud, stamp_ns, self.frame_id,
+                                                     self.factory))
+
+    def _publish_diagnostics(self) -> None:
+        out = DiagnosticArray()
+        out.header.stamp = self.get_clock().now().to_msg()
+        ms = 1e3 * self.seconds / self.frames if self.frames else 0.0
+        level = DiagnosticStatus.OK if self.rig is not None else DiagnosticStatus.WARN
+        out.status.append(DiagnosticStatus(
+            level=level, name=f"{NODE_NAME}", hardware_id="rig",
+            message=(f"detecting ({self.params.detector})" if self.rig is not None
+                     else "waiting for the rig"),
+            values=[KeyValue(key="frame_sets", value=str(self.frames)),
+                    KeyValue(key="ms_per_frame_set", value=f"{ms:.1f}"),
+                    KeyValue(key="detections", value=str(self.last_counts[0])),
+                    KeyValue(key="views", value=str(self.last_counts[1]))]))
+        self.pub_diag.publish(out)
+
+    def log_totals(self) -> None:
+        self.get_logger().info(f"frame sets detected: {self.frames}")
+
+
+def main(args=None) -> int:
+    return run_node(ExtremityDetectionNode, NODE_NAME, __doc__,
+                    (ExtremityNodeConfig, ExtremityDetectionParams), args,
+                    on_shutdown=lambda node: node.log_totals())
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
