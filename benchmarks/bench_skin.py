@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Skin probability map speed (the extremity detector of thesis sec. 2.5.1, ``<camera>/skin``).
+"""Skin probability map speed (the skin extremity detector of thesis sec. 2.5.1).
 
-``foreground_segmentation`` computes it per image after the mask when ``publish_skin`` is on;
-this measures that extra cost at 640x480 (CPU time of the thread, median over 200 images of
+``extremity_detection`` with ``detector:=skin`` computes it per image inside the foreground;
+this measures that cost at 640x480 (CPU time of the thread, median over 200 images of
 sensor-like noise: the cost does not depend on the content).
 
     .venv/bin/python benchmarks/bench_skin.py

@@ -8,8 +8,8 @@ then every method of :data:`hmocap_ros.tracking.methods.METHODS` runs ``--frames
 tracking at its default budget of about 3,500 weight evaluations per frame (APF 14 layers x
 250 particles; in the default two sweeps over the kinematic tree, ``filter.sweeps``, HPF
 14 x 250 and HPF+APO and DD-HPF+ 15 x 234), with 1 and 2 numba threads. DD-HPF+ gets ideal
-hand-detector maps (1 where the hands are seen; the skin detector's own cost, 0.6 ms per
-640x480 image by ``bench_skin.py``, is the foreground node's).
+keypoint detections (the true limb joints and hands, labelled, score 1; the keypoint
+detector's own cost is the extremity node's, ``bench_keypoints.py``).
 
 Printed per method: seconds per frame (median), evaluations per second, and where the time
 goes (skinning = eq. 2.11/2.12, projection (fused into the XOR pass by default), XOR = eq.
@@ -38,6 +38,7 @@ import numpy as np
 
 from hmocap_ros.body import load_body_model, local_rotations_to_pose
 from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.eval.mocap_eval import tracker_overrides
 from hmocap_ros.params import from_flat
 from hmocap_ros.render import project_batch, render_silhouettes
@@ -64,10 +65,12 @@ def scene(model, rig, n_frames: int, start: int = 250):
     K, R, t, D = rig.arrays()
     uv, _ = project_batch(verts, K, R, t, D)
     masks = render_silhouettes(uv, model.faces, rig[0].height, rig[0].width) * np.uint8(255)
-    hands = np.isin(model.vertex_part, [model.joint_index("l_wrist"), model.joint_index("r_wrist")])
-    hand_faces = model.faces[hands[model.faces].all(axis=1)]
-    maps = render_silhouettes(uv, hand_faces, rig[0].height, rig[0].width) * np.uint8(255)
-    return shape, masks, maps
+    joints = np.asarray(model.pose(params, shape)[1])
+    names = list(model.joint_names)
+    labels = tuple(MODEL_JOINT)
+    index = [names.index(MODEL_JOINT[label]) for label in labels]
+    detections = [Detections("keypoints", labels, j[index], np.ones(len(labels))) for j in joints]
+    return shape, masks, detections
 
 
 def main() -> None:
@@ -113,11 +116,11 @@ def main() -> None:
                                                "research.every": args.frames + 2})
             tracker = BodyTracker(model, rig, params, np.random.default_rng(0), shape=shape)
             tracker.update(list(masks[0]), 0)  # start-up (hull, Powell): not timed
-            tracker.update(list(masks[1 % len(masks)]), 1, list(maps[1 % len(masks)]))  # warm-up
+            tracker.update(list(masks[1 % len(masks)]), 1, maps[1 % len(masks)])  # warm-up
             totals, stages = [], {}
             for f in range(1, args.frames + 1):
                 t0 = time.perf_counter()
-                res = tracker.update(list(masks[f]), f, list(maps[f]))
+                res = tracker.update(list(masks[f]), f, maps[f])
                 totals.append(time.perf_counter() - t0)
                 for k, v in res.timings.items():
                     stages[k] = stages.get(k, 0.0) + v
@@ -131,7 +134,7 @@ def main() -> None:
                   f"{evals / spf:8.0f} evaluations/s  | " + "  ".join(
                       f"{k} {stages.get(k, 0.0) / n:.3f}" for k in known) + f"  other {rest:.3f}",
                   flush=True)
-            res = tracker.update(list(masks[n]), n + 1, list(maps[n]))
+            res = tracker.update(list(masks[n]), n + 1, maps[n])
             search = res.timings.get("research", float("nan"))
             print(f"{'':18s}fresh search (research.every): {search:.2f} s on its frame, "
                   f"{search / every:.3f} s/frame at the default of one every {every} frames",

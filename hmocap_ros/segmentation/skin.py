@@ -14,7 +14,7 @@ Choices (the thesis names the detector, not its settings): mean and spread put t
 the Chai-Ngan box at d = 0 and its edges at about 2 standard deviations; pixels darker than
 ``min_luma`` get probability 0 (their chrominance is noise); the map is computed at
 ``scale`` of the image (area averaging first: hands are a few pixels wide at 0.5 of 640x480)
-and returned as uint8 (255 = 1.0), the encoding of the ``<camera>/skin`` topic.
+and returned as uint8 (255 = 1.0).
 """
 from __future__ import annotations
 

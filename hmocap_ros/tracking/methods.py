@@ -10,8 +10,9 @@ apf         APF        14 annealing layers over all DoFs (alg. 2)      silhouett
 hpf         HPF        7 layers along the kinematic tree (sec. 2.4.1)  silhouettes
 hpf-apo     HPF+APO    the 7 layers weighed in their parts' boxes      silhouettes
                        (eq. 2.15) plus a whole-body final layer
-dd-hpf      DD-HPF+    hpf-apo with IK particles from detected hands   silhouettes and
-                       and the refinement layer (eq. 2.20-2.21)        detector maps
+dd-hpf      DD-HPF+    hpf-apo with IK particles from detected hands,  silhouettes and
+                       joint terms and the refinement layer            3D detections
+                       (eq. 2.20-2.21)
 ==========  =========  ==============================================  =======================
 
 All four run at about 3,500 weight evaluations per frame by default, the budget of the
@@ -33,9 +34,10 @@ class TrackingMethod:
         layers over all DoFs (alg. 2).
     boxed: each hierarchical layer weighs inside the observation boxes of its body parts
         (approximate partitioning of observations, eq. 2.15).
-    uses_detector: the tracker locates hands in 3D from per-view detector maps, draws IK
-        particles for the arms and makes the final layer the refinement layer (sec. 2.5);
-        without maps it runs as its boxed schedule.
+    uses_detector: the tracker takes the extremity detector's 3D detections, draws IK
+        particles for the arms, weighs labelled joints in every layer and makes the final
+        layer the refinement layer (sec. 2.5); without detections it runs as its boxed
+        schedule.
     layers, particles: the default budget of one sweep (layers x particles weight
         evaluations per frame).
     """

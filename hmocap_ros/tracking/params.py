@@ -266,7 +266,7 @@ class TrackerParams:
                                   "'hpf-apo' (hierarchical with approximate partitioning of "
                                   "observations, 15 x 234 in two sweeps) or 'dd-hpf' (hpf-apo "
                                   "driven by hand detections: IK particles and the refinement "
-                                  "layer, sec. 2.5; needs detector maps).")
+                                  "layer, sec. 2.5; takes the extremity detections).")
     filter: FilterParams = group(FilterParams, "layered particle filter and kernels")
     weighting: WeightingParams = group(WeightingParams, "silhouette weighting and boxes")
     detector: DetectorParams = group(DetectorParams, "detector-driven tracking")
