@@ -5,13 +5,13 @@ gestures --online`` / ``--resume`` on a tiny simulated bag."""
 
 from __future__ import annotations
 
-import argparse
 import json
 
 import numpy as np
 import pytest
 
 from fixtures.toy_depth import TOY_CLASSES, toy_detector_params, toy_frame, toy_sequence
+from fixtures.gesture_cli import command_args, tiny_gesture_bag
 from hmocap_ros.commands import train_gestures
 from hmocap_ros.eval import gesture_eval as ge
 from hmocap_ros.gestures.detection import GestureDetector
@@ -23,7 +23,6 @@ from hmocap_ros.gestures.online_statistics import split_decision
 from hmocap_ros.gestures.params import FeatureParams, OnlineParams, OnlineTrainParams
 from hmocap_ros.gestures.trees import Forest, Tree
 from hmocap_ros.gestures.patches import collect_samples
-from hmocap_ros.sim import gesture_dataset as gd
 
 SHAPE = (240, 320)
 TOY = OnlineTrainParams(online=OnlineParams(n_trees=5, max_depth=12, alpha=60)).for_focal(525.0 * SHAPE[1] / 640)
@@ -199,37 +198,28 @@ def test_frame_negatives_hard_and_random_take_the_same_count(toy_data):
     assert spread(*hard[:2]) < 0.5 * spread(*random[:2])
 
 
-def _args(module, argv):
-    parser = argparse.ArgumentParser()
-    module.add_arguments(parser)
-    return parser.parse_args([str(a) for a in argv])
-
-
 @pytest.fixture(scope="module")
 def tiny_bag(tmp_path_factory):
-    out = tmp_path_factory.mktemp("online") / "tiny.mcap"
-    gd.generate(out, seed=7, subjects=1, frames=30, width=160, height=120, subject_offset=500,
-                contact=False, progress=False)
-    return out
+    return tiny_gesture_bag(tmp_path_factory.mktemp("online"))
 
 
 def test_cli_online_train_resume_and_eval(tmp_path, tiny_bag, capsys):
     base = [tiny_bag, "--online", "--trees", 3, "--depth", 8, "--alpha", 50, "--tests", 8]
     one, two, whole = tmp_path / "one.npz", tmp_path / "two.npz", tmp_path / "whole.npz"
-    assert train_gestures.main_from_args(_args(train_gestures, base + ["--passes", 1, "--out", one])) == 0
+    assert train_gestures.main_from_args(command_args(train_gestures, base + ["--passes", 1, "--out", one])) == 0
     assert "pass 1/1" in capsys.readouterr().out
     forest = load_forest(one)
     assert forest.kind == "online" and len(forest.trees) == 3 and forest.meta["online"]["params"]["alpha"] == 50
     assert all(t.pending is not None and t.pending.n_tests == 32 for t in forest.trees)
     resume = [tiny_bag, "--resume", one, "--passes", 1, "--out", two, "--quiet"]
-    assert train_gestures.main_from_args(_args(train_gestures, resume)) == 0
-    assert train_gestures.main_from_args(_args(train_gestures, base + ["--passes", 2, "--out", whole,
+    assert train_gestures.main_from_args(command_args(train_gestures, resume)) == 0
+    assert train_gestures.main_from_args(command_args(train_gestures, base + ["--passes", 2, "--out", whole,
                                                                        "--quiet"])) == 0
     _assert_same_forest(load_forest(two), load_forest(whole))  # two sessions = one session
     assert load_forest(two).n_nodes > forest.n_nodes
 
     out_json = tmp_path / "eval.json"
-    assert ge.main_from_args(_args(ge, [tiny_bag, "--model", two, "--json", out_json])) == 0
+    assert ge.main_from_args(command_args(ge, [tiny_bag, "--model", two, "--json", out_json])) == 0
     result = json.loads(out_json.read_text())
     assert 0.0 <= result["mean_ap"] <= 1.0 and set(result["per_class"]) == set(forest.class_names[1:])
 
@@ -246,6 +236,6 @@ def test_cli_online_bad_options_give_one_line_errors(tmp_path, tiny_bag, capsys,
     offline = save_forest(Forest([Tree.single_leaf([1, 1])], ("background", "g")), tmp_path / "offline.npz")
     argv = [a.replace("OFFLINE", str(offline)).replace("MISSING", str(tmp_path / "none.npz")) if isinstance(a, str)
             else a for a in argv]
-    assert train_gestures.main_from_args(_args(train_gestures, [tiny_bag, "--out", tmp_path / "f.npz", *argv])) == 2
+    assert train_gestures.main_from_args(command_args(train_gestures, [tiny_bag, "--out", tmp_path / "f.npz", *argv])) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -31,6 +31,8 @@ from hmocap_ros.detection.detections import MODEL_JOINT, UNKNOWN, Detections
 from hmocap_ros.detection.keypoint_detector import KeypointDetector, KeypointParams
 from hmocap_ros.detection.skin_extremities import SkinExtremityDetector, SkinExtremityParams
 from hmocap_ros.params import group, param
+from hmocap_ros.segmentation.skin import skin_probability
+from hmocap_ros.tracking.detection_assignment import classify
 
 __all__ = ["DETECTORS", "ExtremityDetectionParams", "ExtremityPipeline", "skeleton_labels"]
 
@@ -120,8 +122,6 @@ class ExtremityPipeline:
         return Detections("keypoints", tuple(kp.labels), kp.positions, kp.scores)
 
     def _skin(self, images, masks, previous) -> Detections:
-        from hmocap_ros.segmentation.skin import skin_probability
-
         maps = [skin_probability(img, mask=m) if img is not None and m is not None else None
                 for img, m in zip(images, masks)]
         joints = (np.array(list(previous.values())) if previous else None)
@@ -129,8 +129,6 @@ class ExtremityPipeline:
         labels = [UNKNOWN] * len(cand.positions)
         targets = _skin_targets(previous) if previous else None
         if targets is not None and len(cand.positions):
-            from hmocap_ros.tracking.detection_assignment import classify
-
             upsilon = [u for _, u in _SKIN_TARGETS]
             assigned = classify(cand.positions, targets, upsilon)
             for (label, _), pos in zip(_SKIN_TARGETS, assigned):

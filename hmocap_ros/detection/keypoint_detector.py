@@ -121,7 +121,7 @@ class KeypointParams:
         }
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
-            raise ValueError(f"KeypointParams: out of range: "
+            raise ValueError("KeypointParams: out of range: "
                              + ", ".join(f"{n}={getattr(self, n)!r}" for n in bad))
 
 

@@ -111,9 +111,9 @@ from hmocap_ros.body.model import load_body_model
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.tf import TF_TOPIC, tf_message
-from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, param, run_node,
-                                     sensor_qos)
-from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
+from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters,
+                                     param, run_node, sensor_qos)
+from hmocap_ros.rig import Rig, RigError, load_rig
 from hmocap_ros.stamp_sync import StampSynchronizer
 from hmocap_ros.tracking.body_frames import body_transforms
 from hmocap_ros.tracking.body_tracker import FrameSetQueue, PickedSet
@@ -225,14 +225,9 @@ class BodyTrackerNode(Node):
             self.get_logger().info("waiting for the rig on camera_rig")
 
     def _on_rig(self, msg: CameraRig) -> None:
-        try:
-            rig = rig_from_msg(msg)
-        except (RigError, ValueError) as err:
-            self.get_logger().error(f"camera_rig: {err}")
-            return
-        if self.rig is not None and rig.isclose(self.rig):
-            return
-        self._set_rig(rig)
+        rig = changed_rig(msg, self.rig, self.get_logger())
+        if rig is not None:
+            self._set_rig(rig)
 
     def _set_rig(self, rig: Rig) -> None:
         first = self.rig is None

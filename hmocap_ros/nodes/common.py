@@ -186,6 +186,21 @@ def run_node(
     return 0
 
 
+def changed_rig(msg, current, logger):
+    """The rig of a ``camera_rig`` message when it differs from ``current`` (a node's rig or
+    None); None when it is the same rig or invalid (logged)."""
+    from hmocap_ros.rig import RigError, rig_from_msg
+
+    try:
+        rig = rig_from_msg(msg)
+    except (RigError, ValueError) as err:
+        logger.error(f"camera_rig: {err}")
+        return None
+    if current is not None and rig.isclose(current):
+        return None
+    return rig
+
+
 def message_class(typename: str):
     """The rclpy message class for 'pkg/msg/Name' (ImportError with a clear text if unknown)."""
     import importlib

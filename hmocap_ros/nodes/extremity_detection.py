@@ -39,7 +39,7 @@ from geometry_msgs.msg import Point, Vector3
 from hmocap_interfaces.msg import CameraRig, Extremities, Skeleton
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import Image, PointCloud2
 
 from hmocap_ros.detection.detections import fill_msg
 from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
@@ -48,9 +48,9 @@ from hmocap_ros.detection.keypoint_network import ModelFileError
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.point_clouds import array_to_pointcloud2
-from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, param, run_node,
-                                     sensor_qos)
-from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_msg
+from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters,
+                                     param, run_node, sensor_qos)
+from hmocap_ros.rig import Rig, RigError, load_rig
 from hmocap_ros.stamp_sync import StampSynchronizer
 
 NODE_NAME = "extremity_detection"
@@ -91,8 +91,6 @@ class ExtremityDetectionNode(Node):
         self.busy_ns = 0
         self.last_counts = (0, 0)
         self.pub = self.create_publisher(Extremities, "extremities", RESULT_QOS)
-        from sensor_msgs.msg import PointCloud2
-
         self.pub_points = self.create_publisher(PointCloud2, "extremities/points", RESULT_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
         self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync,
@@ -112,14 +110,9 @@ class ExtremityDetectionNode(Node):
     # ------------------------------------------------------------------ set-up
 
     def _on_rig(self, msg: CameraRig) -> None:
-        try:
-            rig = rig_from_msg(msg)
-        except (RigError, ValueError) as err:
-            self.get_logger().error(f"camera_rig: {err}")
-            return
-        if self.rig is not None and rig.isclose(self.rig):
-            return
-        self._set_rig(rig)
+        rig = changed_rig(msg, self.rig, self.get_logger())
+        if rig is not None:
+            self._set_rig(rig)
 
     def _make_pipeline(self, rig: Rig) -> ExtremityPipeline:
         model = self.config.model_file or None
