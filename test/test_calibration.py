@@ -160,3 +160,19 @@ def test_camera_never_seeing_the_board(session, tmp_path, capsys):
         p.unlink()
     err = _fails([str(blind2), *BOARD], capsys, tmp_path)
     assert "a rig needs 2" in err
+
+
+def test_session_rendered_in_the_cameras_of_a_given_rig(tmp_path):
+    from hmocap_ros.rig import save_rig
+
+    given = make_rig(2, 160, 120)
+    save_rig(given, tmp_path / "given.yaml")
+    bag = tmp_path / "s.mcap"
+    assert hmocap(["sim", "calibration", "--rig", str(tmp_path / "given.yaml"), "--cameras", "5",
+                   "--seconds", "1", "--fps", "1", "--out", str(bag), "--quiet", *BOARD]) == 0
+    truth = load_rig(tmp_path / "s_rig.yaml")
+    assert truth.names == given.names and truth[0].width == 160
+    for a, b in zip(truth, given):
+        assert np.abs(a.position - b.position).max() < 1e-9 and np.abs(a.R - b.R).max() < 1e-12
+    assert hmocap(["sim", "calibration", "--rig", str(tmp_path / "none.yaml"), "--seconds", "1",
+                   "--out", str(tmp_path / "t.mcap"), "--quiet"]) == 2

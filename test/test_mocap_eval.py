@@ -245,3 +245,31 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     del data["methods"]["hpf"]["params"]["startup.height_margin"]
     lacking.write_text(json.dumps(data))
     assert table._reusable(lacking, ns, {}) is None
+
+
+def test_eval_tracks_with_a_given_rig(tmp_path, capsys):
+    from dataclasses import replace
+
+    from hmocap_ros.eval.mocap_frames import load_frames
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.rig import rig_from_msg, save_rig
+
+    with BagReader(DEMO_BAG) as reader:
+        rig = rig_from_msg(reader.first(topics.CAMERA_RIG))
+    # cam_1 moved 10 cm, the cameras listed in another order: taken in the bag's order
+    moved = Rig(rig.frame_id, tuple(replace(c, t=c.t + np.array([0.0, 0.0, 0.1])) if c.name == "cam_1"
+                                    else c for c in reversed(rig.cameras)))
+    frames = load_frames(DEMO_BAG, "gt", max_frames=1, rig=moved)
+    assert frames.rig.names == rig.names
+    assert np.allclose(frames.rig["cam_1"].t, rig["cam_1"].t + [0.0, 0.0, 0.1])
+    assert np.allclose(frames.rig["cam_2"].t, rig["cam_2"].t)
+    save_rig(moved, tmp_path / "moved.yaml")
+    assert run_eval([str(DEMO_BAG), "--method", "hpf", "--silhouettes", "gt", "--frames", "1",
+                     "--rig", str(tmp_path / "moved.yaml"), "--json", str(tmp_path / "r.json"),
+                     *SMALL_BUDGET]) == 0
+    assert json.loads((tmp_path / "r.json").read_text())["rig"] == str(tmp_path / "moved.yaml")
+    other = Rig(rig.frame_id, tuple(replace(c, name=f"x{c.name}") for c in rig))
+    save_rig(other, tmp_path / "other.yaml")
+    capsys.readouterr()
+    assert run_eval([str(DEMO_BAG), "--method", "hpf", "--rig", str(tmp_path / "other.yaml")]) == 2
+    assert "are not the bag's" in capsys.readouterr().err

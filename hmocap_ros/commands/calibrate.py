@@ -1,4 +1,6 @@
-"""``hmocap calibrate BAG --out rig.yaml``: the camera rig from a bag of a ChArUco board.
+"""``hmocap calibrate BAG --out rig.yaml``: the camera rig from a bag of a ChArUco board
+(``hmocap calibrate --live --out rig.yaml``: from the cameras' topics,
+:mod:`~hmocap_ros.commands.calibrate_live`).
 
 Reads every ``/<cam>/image_raw`` of the bag, detects the board's corners
 (:mod:`hmocap_ros.calibration.detection`), takes each camera's intrinsics from the bag
@@ -24,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_arguments", "main_from_args", "run_calibration"]
+__all__ = ["add_arguments", "main_from_args", "run_calibration", "run_live_calibration",
+           "calibrate_session"]
 
 _IMAGE_TOPIC = re.compile(r"^/(.+)/image_raw$")
 _SLOP_NS = 10_000_000  # images of one frame set: stamps within 10 ms
@@ -34,7 +37,7 @@ _MAX_FIT_PX = 3.0  # homography residual of a view of the configured board
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from hmocap_ros.sim.calibration_session import add_board_arguments
 
-    parser.add_argument("bag", help=".mcap file or rosbag2 directory")
+    parser.add_argument("bag", nargs="?", help=".mcap file or rosbag2 directory (or --live)")
     parser.add_argument("--out", type=Path, required=True,
                         help="rig YAML to write; <stem>.report.txt and <stem>.png go beside it")
     add_board_arguments(parser)
@@ -49,37 +52,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="floor (default): from the board on the floor; or a camera name: its "
                              "centre is the origin, its image up is +Y")
     parser.add_argument("--every", type=int, default=1,
-                        help="use every Nth image of each camera (default 1: all)")
+                        help="use every Nth image of each camera of the bag (default 1: all)")
+    live = parser.add_argument_group("live topics (instead of a bag)")
+    live.add_argument("--live", action="store_true",
+                      help="collect the session from the cameras' /<cam>/image_raw topics")
+    live.add_argument("--cameras", default=None,
+                      help="cameras, comma-separated (cam_1,cam_2,...); default: every "
+                           "/<cam>/image_raw topic found")
+    live.add_argument("--seconds", type=float, default=60.0,
+                      help="collect for this many seconds from the first frame set (default 60)")
+    live.add_argument("--fps", type=float, default=3.0,
+                      help="frame sets searched for the board per second, at most (default 3)")
+    live.add_argument("--min-views", type=int, default=0,
+                      help="stop early once every camera has seen the board this many times "
+                           "(default 0: run for --seconds)")
 
 
-class _Session:
-    """What the bag holds: camera names, image sizes, intrinsics, detections per image."""
-
-    def __init__(self):
-        self.names: list = []
-        self.sizes: dict = {}
-        self.intrinsics: dict = {}
-        self.detections: list = []  # (camera, stamp_ns, CornerDetection)
-        self.n_images: dict = {}
-
-
-def _read(bag: Path, spec, every: int, log) -> _Session:
-    from hmocap_ros.calibration.detection import CornerDetector
+def _read(bag: Path, spec, every: int, log):
+    """The session of a bag: its cameras, given intrinsics and the board in its images."""
+    from hmocap_ros.calibration.session import CalibrationSession
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.camera_info import camera_info_to_dict
     from hmocap_ros.io.images import image_to_rgb
     from hmocap_ros.io.msg_factory import stamp_to_ns
     from hmocap_ros.rig import rig_from_msg
 
-    session = _Session()
-    detector = CornerDetector(spec)
     with BagReader(bag) as reader:
         topics = reader.topics()
         image_topics = sorted(t for t, info in topics.items()
                               if _IMAGE_TOPIC.match(t) and info.msgtype == "sensor_msgs/msg/Image")
         if not image_topics:
             raise ValueError(f"{bag}: no /<camera>/image_raw topics of sensor_msgs/Image")
-        session.names = [_IMAGE_TOPIC.match(t).group(1) for t in image_topics]
+        session = CalibrationSession([_IMAGE_TOPIC.match(t).group(1) for t in image_topics], spec)
         if "/camera_rig" in topics:
             for cam in rig_from_msg(reader.first("/camera_rig")):
                 session.intrinsics[cam.name] = (cam.K, cam.D, cam.width, cam.height, "/camera_rig")
@@ -100,17 +104,14 @@ def _read(bag: Path, spec, every: int, log) -> _Session:
             counts[k] += 1
             if (counts[k] - 1) % every:
                 continue
-            image = image_to_rgb(item.msg)
-            session.sizes[k] = (image.shape[1], image.shape[0])
-            session.n_images[k] = session.n_images.get(k, 0) + 1
-            session.detections.append((k, stamp_to_ns(item.msg.header.stamp), detector.detect(image)))
+            session.add_image(k, stamp_to_ns(item.msg.header.stamp), image_to_rgb(item.msg))
             done += 1
             if done % 200 == 0:
                 log(f"  {done} images searched for the board")
     return session
 
 
-def _check_board(session: _Session, spec, bag: Path) -> list:
+def _check_board(session, spec, bag) -> list:
     """Views that fit the board; raises ValueError for no board or a board of other dimensions."""
     from hmocap_ros.calibration.detection import MIN_CORNERS, corner_fit_error
 
@@ -176,21 +177,22 @@ def _intrinsics(ns, session, names, seen, grouped, corner_points, log):
     return K, D, estimated
 
 
-def _write_outputs(out: Path, rig, text: str, solution, bag: Path, room: str,
+def _write_outputs(out: Path, rig, text: str, solution, source, room: str,
                    total: float) -> tuple[Path, Path]:
     """The rig YAML, the report and the picture, each written whole or not at all."""
     from hmocap_ros.calibration.report import save_rig_picture
     from hmocap_ros.rig import save_rig
 
+    label = Path(str(source)).name
     stem = out.name[:-len(out.suffix)] if out.suffix else out.name
     report_path, picture_path = out.with_name(f"{stem}.report.txt"), out.with_name(f"{stem}.png")
     tmp = [p.with_name(f".{p.name}.partial") for p in (out, report_path, picture_path)]
     try:
-        save_rig(rig, tmp[0], header=f"Calibrated by hmocap calibrate from {bag.name}; {room}; "
+        save_rig(rig, tmp[0], header=f"Calibrated by hmocap calibrate from {label}; {room}; "
                                      f"reprojection RMS {total:.3f} px.")
         tmp[1].write_text(text)
         save_rig_picture(tmp[2].with_suffix(".png"), list(rig.names), solution.R, solution.t,
-                         solution.t_board, f"{bag.name}: {len(rig)} cameras, RMS {total:.3f} px")
+                         solution.t_board, f"{label}: {len(rig)} cameras, RMS {total:.3f} px")
         os.replace(tmp[2].with_suffix(".png"), picture_path)
         os.replace(tmp[1], report_path)
         os.replace(tmp[0], out)
@@ -201,20 +203,31 @@ def _write_outputs(out: Path, rig, text: str, solution, bag: Path, room: str,
 
 
 def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path]:
-    """The whole command (module docstring) but the error handling; returns the files written."""
-    from hmocap_ros.calibration.observations import Observations
-    from hmocap_ros.calibration.pipeline import calibrate_rig
-    from hmocap_ros.calibration.report import camera_rows, report_text
-    from hmocap_ros.camera_model import PinholeCamera
-    from hmocap_ros.rig import Rig
+    """The whole command on a bag (module docstring) but the error handling; returns the
+    files written."""
     from hmocap_ros.sim.calibration_session import board_from_args
 
     spec = board_from_args(ns)
     if ns.every < 1:
         raise ValueError("--every must be 1 or more")
-    bag, out = Path(ns.bag), Path(ns.out)
+    bag = Path(ns.bag)
     session = _read(bag, spec, ns.every, log)
-    views = _check_board(session, spec, bag)
+    return calibrate_session(ns, session, bag, log)
+
+
+def calibrate_session(ns: argparse.Namespace, session, source: Path,
+                      log=print) -> tuple[Path, Path, Path]:
+    """The rig from a gathered :class:`~hmocap_ros.calibration.session.CalibrationSession`
+    (of a bag or of live topics, named ``source``): board checks, intrinsics, placement,
+    bundle adjustment, room frame, and the files written."""
+    from hmocap_ros.calibration.observations import Observations
+    from hmocap_ros.calibration.pipeline import calibrate_rig
+    from hmocap_ros.calibration.report import camera_rows, report_text
+    from hmocap_ros.camera_model import PinholeCamera
+    from hmocap_ros.rig import Rig
+
+    spec, out = session.spec, Path(ns.out)
+    views = _check_board(session, spec, source)
     names = session.names
     seen = {c: sum(1 for v in views if v[0] == c) for c in range(len(names))}
     for c, name in enumerate(names):
@@ -227,11 +240,11 @@ def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path
     room_camera = None
     if not use_floor:
         if ns.room_frame not in names:
-            raise ValueError(f"--room-frame {ns.room_frame!r}: not floor nor a camera of the bag "
-                             f"({', '.join(names)})")
+            raise ValueError(f"--room-frame {ns.room_frame!r}: not floor nor a camera of "
+                             f"{source} ({', '.join(names)})")
         room_camera = names.index(ns.room_frame)
     elif not any(k[1] == 0 for k in grouped):
-        raise ValueError(f"{bag}: no camera sees the board on the floor in the first "
+        raise ValueError(f"{source}: no camera sees the board on the floor in the first "
                          f"{ns.floor_seconds:g} s; lay it there or give --room-frame CAMERA")
     log("placing the cameras")
     solution = calibrate_rig(obs, corner_points, K, D, names, floor_pose=0 if use_floor else None,
@@ -248,18 +261,33 @@ def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path
     total = float(np.sqrt(np.mean(np.sum(solution.bundle.residuals ** 2, axis=1))))
     room = "board on the floor" if use_floor else f"camera {ns.room_frame}"
     text = report_text(rows, total, room)
-    report_path, picture_path = _write_outputs(out, rig, text, solution, bag, room, total)
+    report_path, picture_path = _write_outputs(out, rig, text, solution, source, room, total)
     log(text.rstrip())
     return out, report_path, picture_path
 
 
-def main_from_args(ns: argparse.Namespace) -> int:
+def run_live_calibration(ns: argparse.Namespace, ros_args: list | None = None,
+                         log=print) -> tuple[Path, Path, Path]:
+    """``--live``: the session from the cameras' topics, then the same calibration."""
+    from hmocap_ros.commands.calibrate_live import collect_live
+    from hmocap_ros.sim.calibration_session import board_from_args
+
+    session = collect_live(ns, board_from_args(ns), ros_args or [], log)
+    return calibrate_session(ns, session, "live topics", log)
+
+
+def main_from_args(ns: argparse.Namespace, ros_args: list | None = None) -> int:
     from hmocap_ros.calibration.pipeline import CalibrationError
     from hmocap_ros.io.bag_reader import BagReadError
     from hmocap_ros.rig import RigError
 
+    if bool(ns.bag) == bool(ns.live):
+        print("hmocap calibrate: give a bag or --live (not both)", file=sys.stderr)
+        return 2
     try:
-        out, report, picture = run_calibration(ns, log=lambda line: print(line, flush=True))
+        log = lambda line: print(line, flush=True)  # noqa: E731
+        out, report, picture = (run_live_calibration(ns, ros_args, log) if ns.live
+                                else run_calibration(ns, log))
     except (BagReadError, CalibrationError, RigError, ValueError) as err:
         print(f"hmocap calibrate: {err}", file=sys.stderr)
         return 2

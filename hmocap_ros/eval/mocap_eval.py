@@ -209,9 +209,10 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
              max_frames: int | None = None, seed: int = 0, particles: int = 0, layers: int = 0,
              overrides: dict | None = None, given_shape: bool = False,
              fg_params: dict | None = None, max_people: int = 1, detector: str = "keypoints",
-             out=None) -> dict:
+             rig=None, out=None) -> dict:
     """Evaluate ``methods`` on one bag; returns the JSON-ready report (``max_people``: see
-    :func:`run_method`; ``detector``: the extremity detector of the methods that use one)."""
+    :func:`run_method`; ``detector``: the extremity detector of the methods that use one;
+    ``rig``: cameras to track with instead of the bag's, e.g. a calibrated rig)."""
     from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
 
     out = sys.stderr if out is None else out
@@ -219,9 +220,10 @@ def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
     frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,
                          detector=(ExtremityDetectionParams(detector=detector)
                                    if any(get_method(m).uses_detector for m in methods)
-                                   else None))
+                                   else None), rig=rig)
     report = {
         "bag": str(bag),
+        "rig": "the bag's" if rig is None else "given",
         "silhouettes": frames.silhouettes,
         "silhouettes_fallback": frames.fallback,
         "frame_sets": int(len(frames.stamps)),
@@ -320,6 +322,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "on the track nearest it (default 1)")
     parser.add_argument("--detector", choices=("keypoints", "skin"), default=None,
                         help="extremity detector of dd-hpf (default: extremity_detection's)")
+    parser.add_argument("--rig", metavar="RIG.yaml", default=None,
+                        help="track with this rig (e.g. from hmocap calibrate) instead of the "
+                             "bag's /camera_rig; the truth stays the bag's")
     parser.add_argument("--threads", type=int, default=None, help="numba threads")
     parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
@@ -338,11 +343,18 @@ def main_from_args(ns: argparse.Namespace) -> int:
 
     try:
         overrides = tracker_overrides(ns.param)
+        rig = None
+        if ns.rig:
+            from hmocap_ros.rig import load_rig
+
+            rig = load_rig(Path(ns.rig))
         report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
                           seed=ns.seed, particles=ns.particles, layers=ns.layers,
                           overrides=overrides, given_shape=ns.given_shape,
-                          max_people=ns.max_people,
+                          max_people=ns.max_people, rig=rig,
                           detector=ns.detector or ExtremityDetectionParams().detector)
+        if ns.rig:
+            report["rig"] = str(ns.rig)
     except (ValueError, OSError, RuntimeError) as err:
         print(f"hmocap eval mocap: {err}", file=sys.stderr)
         return 2

@@ -186,13 +186,14 @@ def _detect(pipeline, image_topics, msgs, stamp, rgb_of, masks):
 
 def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None = None,
                 slop_ns: int = 0, fg_params: dict | None = None, out=None,
-                detector=None) -> BagFrames:
+                detector=None, rig=None) -> BagFrames:
     """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
 
     max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
     ForegroundParams fields to override (``learn_frames`` is set from the bag).
     detector: ExtremityDetectionParams: also run the extremity detection on every frame set
-    (the detections of detector-driven tracking), or None.
+    (the detections of detector-driven tracking), or None. rig: the cameras to track with
+    instead of the bag's ``/camera_rig`` (e.g. a calibrated rig), with the bag's camera names.
     """
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
@@ -200,6 +201,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
 
     out = sys.stderr if out is None else out
+    given_rig = rig
     if silhouettes not in ("fg", "gt"):
         raise ValueError("silhouettes must be 'fg' or 'gt'")
     with BagReader(bag) as reader:
@@ -208,6 +210,11 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
         if rig_msg is None:
             raise ValueError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown")
         rig = rig_from_msg(rig_msg)
+        if rig is not None and given_rig is not None:
+            if set(given_rig.names) != set(rig.names):
+                raise ValueError(f"the rig's cameras ({', '.join(given_rig.names)}) are not the "
+                                 f"bag's ({', '.join(rig.names)})")
+            rig = type(given_rig)(given_rig.frame_id, tuple(given_rig[n] for n in rig.names))
         truth_by_stamp, joint_names, body_shape = _read_truth(reader, available, bag)
         names = rig.names
         image_topics = [topics.camera_image(n) for n in names]

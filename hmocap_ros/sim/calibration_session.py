@@ -6,11 +6,13 @@ then is carried through the volume the cameras see, turning to face each camera 
 (:mod:`hmocap_ros.sim.calibration_path`). :mod:`hmocap_ros.sim.calibration_render` warps the
 board through each camera's intrinsics and lens distortion over a plain textured background,
 with lighting that follows the board's tilt, lens blur and sensor noise. The rig is
-:func:`hmocap_ros.sim.mocap_rig.make_rig`'s. Same seed, same bytes.
+:func:`hmocap_ros.sim.mocap_rig.make_rig`'s unless ``--rig`` gives one. Same seed, same bytes.
 
 Output, next to each other (``BAG`` = ``--out``, e.g. ``cal.mcap``): ``BAG`` with the latched
 ``/camera_rig`` and ``/<cam>/image_raw`` (rgb8) of every camera and frame (one stamp per
 frame), and ``<stem>_rig.yaml``, the true rig, for checking a calibration against.
+``--rig RIG.yaml`` renders the session in the cameras of a given rig (e.g. the true rig of a
+mocap bag, to calibrate the cameras that recorded it).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class CalibrationSimConfig:
     floor_seconds: float = 1.0
     seed: int = 0
     board: BoardSpec = BoardSpec()
+    rig: Path | None = None
     force: bool = False
     progress: bool = True
 
@@ -55,7 +58,7 @@ def generate(config: CalibrationSimConfig, log=print) -> tuple[Path, Path, int]:
     from hmocap_ros.io.conversions import numpy_to_image
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.typestore import hmocap_typestore
-    from hmocap_ros.rig import rig_to_msg
+    from hmocap_ros.rig import load_rig, rig_to_msg
     from hmocap_ros.sim.calibration_path import board_poses
     from hmocap_ros.sim.calibration_render import BoardRenderer
     from hmocap_ros.sim.mocap_outputs import clear_outputs, output_paths, save_rig_yaml
@@ -66,7 +69,8 @@ def generate(config: CalibrationSimConfig, log=print) -> tuple[Path, Path, int]:
     out = Path(config.out)
     rig_path, _ = output_paths(out)
     clear_outputs((out, rig_path), config.force)
-    rig = make_rig(config.cameras, config.width, config.height)
+    rig = load_rig(config.rig) if config.rig is not None else make_rig(config.cameras, config.width,
+                                                                         config.height)
     seeds = np.random.SeedSequence(int(config.seed)).spawn(3)
     rng_scene, rng_path, rng_light = (np.random.default_rng(s) for s in seeds)
     renderer = BoardRenderer(rig, config.board, rng_scene)
@@ -126,6 +130,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--width", type=int, default=640, help="image width (default 640)")
     parser.add_argument("--height", type=int, default=480, help="image height (default 480)")
     parser.add_argument("--seed", type=int, default=0, help="seed of path, background and noise (default 0)")
+    parser.add_argument("--rig", type=Path, default=None,
+                        help="the cameras of this rig YAML (e.g. a mocap bag's <stem>_rig.yaml) "
+                             "instead of --cameras/--width/--height")
     add_board_arguments(parser)
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -133,17 +140,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main_from_args(ns: argparse.Namespace) -> int:
     """Run ``hmocap sim calibration`` with parsed options; print a summary."""
+    from hmocap_ros.rig import load_rig
+
     try:
         config = CalibrationSimConfig(
             out=ns.out, cameras=ns.cameras, width=ns.width, height=ns.height, fps=ns.fps,
             seconds=ns.seconds, floor_seconds=ns.floor_seconds, seed=ns.seed,
-            board=board_from_args(ns), force=ns.force, progress=not ns.quiet)
+            board=board_from_args(ns), rig=ns.rig, force=ns.force, progress=not ns.quiet)
         t0 = time.perf_counter()
         bag, rig_path, n_frames = generate(config)
-    except (FileExistsError, ValueError) as err:
+    except (FileExistsError, ValueError, OSError) as err:
         print(f"hmocap sim calibration: error: {err}", file=sys.stderr)
         return 2
-    print(f"{bag}: {n_frames} frames x {ns.cameras} cameras {ns.width}x{ns.height}, board "
+    rig = load_rig(rig_path)
+    print(f"{bag}: {n_frames} frames x {len(rig)} cameras {rig[0].width}x{rig[0].height}, board "
           f"{config.board.describe()}, {bag.stat().st_size / 1e6:.1f} MB, "
           f"{time.perf_counter() - t0:.1f} s")
     print(f"  true rig {rig_path}")
