@@ -1,19 +1,25 @@
 # hmocap_ros: `make demo` and `make test` set everything up if needed, then run.
 # DDS stays on this machine (loopback only) with its own domain: in a real
-# multi-host room, run the nodes without these two variables (see README).
+# multi-host room, run the nodes without these two variables (see docs/network.md).
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export ROS_DOMAIN_ID ?= 42
+# Fast DDS profile: a shared-memory segment that carries full-size frames whole (Fast DDS 2
+# reads the first variable, Fast DDS 3 the second).
+export FASTRTPS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds_local.xml
+export FASTDDS_DEFAULT_PROFILES_FILE ?= $(FASTRTPS_DEFAULT_PROFILES_FILE)
 export PYTHONUNBUFFERED = 1
 
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test test-slow test-mutants bench clean help
+.PHONY: setup demo test test-slow test-mutants test-faults test-multihost bench clean help
 help:
 	@echo "make demo       set up if needed, run the demo on the shipped data"
 	@echo "make test       set up if needed, run the test suite"
 	@echo "make test-slow  long evaluations (marked slow)"
 	@echo "make test-mutants  deliberate breakages the accuracy tests must catch"
+	@echo "make test-faults   nodes killed, a camera gone, stamps back, memory soak (HMOCAP_SOAK_MINUTES, default 30)"
+	@echo "make test-multihost  a pipeline split over network namespaces (root, iproute2)"
 	@echo "make bench      benchmark scripts"
 	@echo "make setup      only set up .venv (idempotent)"
 
@@ -31,6 +37,12 @@ test-slow: setup
 
 test-mutants: setup
 	$(PY) -m pytest -q -p no:cacheprovider -m mutants test/test_mutants.py
+
+test-faults: setup
+	$(PY) -m pytest -q -p no:cacheprovider -m faults test/test_faults.py
+
+test-multihost: setup
+	$(PY) -m pytest -q -p no:cacheprovider -m multihost test/test_multi_host.py
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

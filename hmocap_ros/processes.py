@@ -21,13 +21,48 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 
-def loopback_dds_env(base: Mapping[str, str] | None = None, domain_id: int | None = None) -> dict[str, str]:
-    """An environment keeping DDS on this machine: LOCALHOST discovery and a domain id.
+#: The environment variables naming a Fast DDS XML profiles file: Fast DDS 2.x (the rmw_fastrtps_cpp
+#: of ROS 2 Jazzy) reads the first, Fast DDS 3 the second.
+DDS_PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
 
-    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and ``ROS_DOMAIN_ID`` already set in ``base`` are kept
-    unless ``domain_id`` is given.
-    """
+
+def dds_profile(name: str = "local") -> Path:
+    """The package's Fast DDS profile ``config/fastdds_<name>.xml``: ``local`` (one host: a
+    shared-memory segment that holds many full-size frames, plus UDP) or ``room`` (several hosts:
+    UDP with large socket buffers). FileNotFoundError when the package has no such file."""
+    from hmocap_ros.config_files import find_config_file
+
+    path = find_config_file(f"fastdds_{name}.xml")
+    if path is None:
+        raise FileNotFoundError(f"no Fast DDS profile config/fastdds_{name}.xml in hmocap_ros")
+    return path
+
+
+def dds_profile_env(base: Mapping[str, str] | None = None, name: str = "local",
+                    override: bool = True) -> dict[str, str]:
+    """``base`` (default: this process's environment) with the profile :func:`dds_profile` named
+    in both :data:`DDS_PROFILE_VARIABLES`; with ``override=False`` a profile already named in
+    ``base`` is kept."""
     env = dict(os.environ if base is None else base)
+    if override or not any(env.get(v) for v in DDS_PROFILE_VARIABLES):
+        path = str(dds_profile(name))
+        for variable in DDS_PROFILE_VARIABLES:
+            env[variable] = path
+    return env
+
+
+def loopback_dds_env(base: Mapping[str, str] | None = None, domain_id: int | None = None) -> dict[str, str]:
+    """An environment keeping DDS on this machine: LOCALHOST discovery, a domain id and the
+    one-host Fast DDS profile (``config/fastdds_local.xml``, so full-size frames pass whole).
+
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_DOMAIN_ID`` and a profiles file already set in
+    ``base`` are kept, the domain unless ``domain_id`` is given.
+    """
+    try:
+        env = dds_profile_env(base, "local", override=False)
+    except FileNotFoundError as err:  # an install without config/: Fast DDS's own defaults
+        log.warning("%s: full-size frames may be lost", err)
+        env = dict(os.environ if base is None else base)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if domain_id is not None:
         env["ROS_DOMAIN_ID"] = str(domain_id)

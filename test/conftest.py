@@ -1,4 +1,5 @@
-"""Test-wide set-up: DDS stays on loopback, each test run gets its own ROS domain.
+"""Test-wide set-up: DDS stays on loopback with the package's one-host Fast DDS profile, each test
+run gets its own ROS domain.
 
 Set here, at import time, before any test imports rclpy, and inherited by the node
 processes the DDS tests start (see notes in README "Testing").
@@ -16,6 +17,10 @@ import tempfile
 from pathlib import Path
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+# The one-host profile (a shared-memory segment for full-size frames), by the variable of Fast DDS 2
+# and of Fast DDS 3, as hmocap_ros.processes.dds_profile_env sets them.
+for _var in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+    os.environ[_var] = str(Path(__file__).resolve().parents[1] / "config" / "fastdds_local.xml")
 # One BLAS thread, as hmocap_ros/__init__.py sets (test modules import numpy before it).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")

@@ -26,6 +26,7 @@ NODE_CONFIGS = {
     "camera_rig_publisher": ("hmocap_ros.nodes.camera_rig_publisher", "CameraRigPublisherConfig"),
     "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation", "ForegroundNodeConfig", "hmocap_ros.segmentation", "ForegroundParams"),
     "gesture_detection": ("hmocap_ros.nodes.gesture_detection", "GestureNodeConfig", "hmocap_ros.gestures", "DetectorParams"),
+    "gesture_trainer": ("hmocap_ros.nodes.gesture_trainer", "TrainerNodeConfig", "hmocap_ros.gestures.trainer", "TrainerParams"),
     "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.params", "TrackerParams"),
     "extremity_detection": ("hmocap_ros.nodes.extremity_detection", "ExtremityNodeConfig",
                             "hmocap_ros.detection.extremity_pipeline", "ExtremityDetectionParams"),
@@ -118,14 +119,21 @@ def _launched_nodes(path: Path) -> dict[str, dict]:
     return nodes
 
 
+#: Nodes outside the room's running pipeline, each with the launch file that starts it.
+SESSION_NODES = {"gesture_trainer": "gesture_trainer.launch.py"}
+
+
 def test_launch_file_starts_every_node_with_its_config():
     """launch/hmocap.launch.py starts each node executable of setup.py (every one but the
-    ``hmocap`` tool), under its own name, with its config/<node>.yaml."""
+    ``hmocap`` tool and the session nodes, which their own launch files start), under its own
+    name, with its config/<node>.yaml."""
     setup_py = (ROOT / "setup.py").read_text()
     scripts = set(re.findall(r'^\s*"(\w+) = hmocap_ros\.nodes\.\w+:main",', setup_py, re.M))
     assert scripts == set(NODE_CONFIGS)
     launched = _launched_nodes(ROOT / "launch" / "hmocap.launch.py")
-    assert set(launched) == scripts
+    assert set(launched) == scripts - set(SESSION_NODES)
+    for executable, launch_file in SESSION_NODES.items():  # started for a session, with their own launch file
+        launched[executable] = _launched_nodes(ROOT / "launch" / launch_file)[executable]
     for executable, node in launched.items():
         assert node["package"] == "hmocap_ros" and node["name"] == executable
         assert node["configs"] == [f"{executable}.yaml"], node
@@ -225,6 +233,18 @@ def test_launch_file_runs_the_pipeline_from_a_rig_file(monkeypatch, tmp_path):
 def test_launch_file_names_a_bad_rig_file_in_one_line(monkeypatch, tmp_path):
     with pytest.raises(RuntimeError, match="hmocap.launch.py: .*missing.yaml"):
         _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py", rig_file=str(tmp_path / "missing.yaml"))
+
+
+def test_launch_file_gives_every_node_the_dds_profile(monkeypatch, tmp_path):
+    variables = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+    for argument, expected in (({}, ROOT / "config" / "fastdds_local.xml"),
+                               ({"dds_profile": "room"}, ROOT / "config" / "fastdds_room.xml")):
+        _, nodes = _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py", **argument)
+        assert [n.kwargs["additional_env"] for n in nodes] == [dict.fromkeys(variables, str(expected))] * len(PIPELINE)
+    _, nodes = _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py", dds_profile="none")
+    assert all(n.kwargs["additional_env"] == {} for n in nodes)
+    with pytest.raises(RuntimeError, match="dds_profile .*nothing.xml is not a file"):
+        _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py", dds_profile=str(tmp_path / "nothing.xml"))
 
 
 def test_realsense_example_feeds_gesture_detection_the_camera_depth(monkeypatch):

@@ -7,8 +7,8 @@ publishes that camera's CameraInfo with the image's stamp, as a camera driver's 
 would, after checking that the image has the calibrated size.
 
 Subscriptions:
-  ``<camera>/image_raw`` (sensor_msgs/Image, sensor-data QoS with a queue of ``queue_depth``),
-  for each served camera.
+  ``<camera>/image_raw`` (sensor_msgs/Image, ``image_reliability`` with a queue of
+  ``queue_depth``: :func:`~hmocap_ros.nodes.common.image_qos`), for each served camera.
 Publications:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the whole rig.
   ``/tf_static`` (tf2_msgs/TFMessage, reliable, transient local, keep last 1, as tf2's static
@@ -38,7 +38,8 @@ from hmocap_ros.config_files import find_config_file
 from hmocap_ros.io.conversions import dict_to_camera_info
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.tf import TF_STATIC_TOPIC, rig_transforms, tf_message
-from hmocap_ros.nodes.common import LATCHED_QOS, declare_parameters, param, run_node, sensor_qos
+from hmocap_ros.nodes.common import (LATCHED_QOS, declare_parameters, image_qos, image_reliability_param, param,
+                                     run_node)
 from hmocap_ros.rig import Rig, RigError, load_rig, rig_to_msg
 
 NODE_NAME = "camera_rig_publisher"
@@ -54,6 +55,7 @@ class CameraRigPublisherConfig:
                                          "whose size differs from the calibration.")
     queue_depth: int = param(25, "Images queued per camera while the node is busy, and CameraInfo messages kept "
                                  "for a slow reliable subscriber; 25 holds one second at 25 fps.")
+    image_reliability: str = image_reliability_param()
     publish_tf: bool = param(True, "Publish the room frame -> camera optical frame transforms of every rig "
                                    "camera on /tf_static (latched, as tf2's static broadcaster).")
     z_up_frame: str = param("", "When set (e.g. 'map'), /tf_static also holds this frame as the parent of "
@@ -65,6 +67,7 @@ class CameraRigPublisher(Node):
     def __init__(self):
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, CameraRigPublisherConfig)
+        self.image_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         self.factory = RclpyFactory()
         self.rig_pub = self.create_publisher(CameraRig, "camera_rig", LATCHED_QOS)
         self.tf_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED_QOS) if self.config.publish_tf else None
@@ -113,7 +116,7 @@ class CameraRigPublisher(Node):
                 continue
             pub = self.create_publisher(CameraInfo, f"{name}/camera_info",
                                         QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE))
-            sub = self.create_subscription(Image, f"{name}/image_raw", self._callback(name), sensor_qos(depth))
+            sub = self.create_subscription(Image, f"{name}/image_raw", self._callback(name), self.image_qos)
             self.served[name] = (info, pub, sub)
         self.rig, self.path = rig, path
         stamp = self.get_clock().now().nanoseconds
@@ -126,7 +129,8 @@ class CameraRigPublisher(Node):
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         changed = {p.name: p.value for p in params}
-        fixed = sorted(set(changed) & {"check_image_size", "queue_depth", "publish_tf", "z_up_frame"})
+        fixed = sorted(set(changed) & {"check_image_size", "queue_depth", "image_reliability", "publish_tf",
+                                        "z_up_frame"})
         if fixed:
             return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: read at start, restart the node")
         if not {"rig_file", "cameras"} & set(changed):

@@ -35,19 +35,48 @@ from hmocap_ros.params import flat_fields, from_flat, param  # noqa: F401  (para
 #: Images and other high-rate sensor data: best effort, keep last 5.
 SENSOR_QOS = qos_profile_sensor_data
 
+#: The reliabilities of an image subscription (node parameter ``image_reliability``).
+IMAGE_RELIABILITIES = {"best_effort": ReliabilityPolicy.BEST_EFFORT, "reliable": ReliabilityPolicy.RELIABLE}
 
-def sensor_qos(depth: int) -> QoSProfile:
-    """Sensor-data QoS (best effort, volatile) that keeps the last ``depth`` messages.
+IMAGE_RELIABILITY_HELP = (
+    "Reliability of the image subscriptions: best_effort matches every camera driver (reliable and "
+    "best-effort publishers); reliable matches only reliable publishers (most drivers' default) and "
+    "has lost fragments sent again, for links that drop packets. On one host with the package's DDS "
+    "profile (config/fastdds_local.xml) best effort receives every full-size frame; docs/network.md.")
 
-    A best-effort subscription silently drops what overflows its queue. A node that must answer
-    every frame (and is fast enough on average) subscribes with a queue that holds the burst of
-    a stall: a moment of CPU starvation, or a publisher catching up; ``depth`` of one second of
-    frames costs only memory. Matches reliable and best-effort publishers alike.
+
+def image_reliability_param(default: str = "best_effort"):
+    """The ``image_reliability`` field of a node's config dataclass (checked by :func:`image_qos`)."""
+    return param(default, IMAGE_RELIABILITY_HELP)
+
+
+def image_qos(reliability: str, depth: int) -> QoSProfile:
+    """QoS of an image subscription: ``reliability`` (``best_effort`` or ``reliable``), volatile,
+    keeping the last ``depth`` frames; ValueError for another reliability or a depth below 1.
+
+    What matches (DDS request/offer): a best-effort subscription receives from reliable and
+    best-effort publishers alike; a reliable one only from reliable publishers (a best-effort
+    camera gives it nothing, with an incompatible-QoS warning). The queue holds frames that
+    arrive while the node is busy: a node that must answer every frame (and is fast enough on
+    average) keeps the burst of a stall, a moment of CPU starvation or a publisher catching up
+    (one second of frames costs only memory); what overflows it is dropped, the oldest first.
+    Whole frames reach the queue only when the transport carries them: on one host the
+    shared-memory segment of ``config/fastdds_local.xml`` (the default 512 KiB segment of Fast
+    DDS holds no 640x480 frame, and best effort then loses frames in UDP fragments).
     """
+    if reliability not in IMAGE_RELIABILITIES:
+        raise ValueError(f"image_reliability must be one of {', '.join(IMAGE_RELIABILITIES)}, got {reliability!r}")
     if depth < 1:
         raise ValueError(f"queue depth must be >= 1, got {depth}")
-    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
-                      reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=IMAGE_RELIABILITIES[reliability],
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def sensor_qos(depth: int) -> QoSProfile:
+    """Best-effort :func:`image_qos` keeping the last ``depth`` messages."""
+    return image_qos("best_effort", depth)
+
+
 #: Latched topics (camera_rig, body_shape): reliable, transient local, keep last 1.
 LATCHED_QOS = QoSProfile(
     depth=1,

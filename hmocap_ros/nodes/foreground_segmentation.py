@@ -6,16 +6,17 @@ shadow and illumination-change suppression, morphological clean-up) learns the e
 from the first frames, then adapts slowly where there is no foreground.
 
 Subscriptions:
-  ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8), per camera: sensor-data QoS (best
-  effort) with a queue of ``queue_depth`` frames, so that a stall (CPU starvation, a publisher
-  catching up) loses no frame as long as the node keeps up on average.
+  ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8), per camera: ``image_reliability``
+  (best effort: any camera driver matches) with a queue of ``queue_depth`` frames, so that a
+  stall (CPU starvation, a publisher catching up) loses no frame as long as the node keeps up
+  on average (:func:`~hmocap_ros.nodes.common.image_qos`).
 Publications:
   ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id).
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames,
   milliseconds per frame and state (learning or segmenting) per camera.
 Services:
   ``~/relearn`` (std_srvs/Trigger): forget the background of every camera and learn it again.
-Parameters: ``cameras``, ``queue_depth``, ``diagnostics_period``, ``relearn_after_size_errors``
+Parameters: ``cameras``, ``queue_depth``, ``image_reliability``, ``diagnostics_period``, ``relearn_after_size_errors``
 and every field of
 :class:`~hmocap_ros.segmentation.ForegroundParams` (``foreground_segmentation --help``).
 
@@ -41,7 +42,8 @@ from std_srvs.srv import Trigger
 
 from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to_rgb, numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node, sensor_qos
+from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, image_qos, image_reliability_param,
+                                     param, run_node)
 from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
 
 NODE_NAME = "foreground_segmentation"
@@ -51,8 +53,9 @@ NODE_NAME = "foreground_segmentation"
 class ForegroundNodeConfig:
     cameras: list[str] = param(["cam_1", "cam_2", "cam_3", "cam_4"],
                                "Camera names: the node subscribes <camera>/image_raw, publishes <camera>/foreground.")
-    queue_depth: int = param(25, "Frames queued per camera while the node is busy (best effort: what overflows "
-                                 "is dropped); 25 holds one second at 25 fps.")
+    queue_depth: int = param(25, "Frames queued per camera while the node is busy (what overflows is dropped); "
+                                 "25 holds one second at 25 fps.")
+    image_reliability: str = image_reliability_param()
     diagnostics_period: float = param(1.0, "Seconds between diagnostics messages (0 = none).")
     relearn_after_size_errors: int = param(25, "Relearn a camera's background after this many consecutive "
                                                "frames of a size other than the learnt one (0 = never).")
@@ -88,10 +91,10 @@ class ForegroundSegmentation(Node):
         compile_kernels(self.params)
         self.cameras = {name: _CameraState(self.params) for name in self.config.cameras}
         self.mask_pubs = {}
-        image_qos = sensor_qos(max(1, self.config.queue_depth))
+        images_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         for name in self.cameras:
             self.mask_pubs[name] = self.create_publisher(Image, f"{name}/foreground", SENSOR_QOS)
-            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), image_qos)
+            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), images_qos)
         self.create_service(Trigger, "~/relearn", self._relearn)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
         if self.config.diagnostics_period > 0:
