@@ -83,6 +83,19 @@ def _cmd_bench(ns, _ros_args):
     return 0
 
 
+def _bench_arguments(own: list[str]) -> tuple[list[str], list[str]]:
+    """Split ``bench NAME... [ARGS]`` into hmocap's part and the scripts': everything after
+    ``--``, or after the leading benchmark names (``hmocap bench pipeline BAG --json OUT``)."""
+    if "--" in own:
+        i = own.index("--")
+        return own[:i], own[i + 1:]
+    available = set(_benchmarks())
+    n = 1
+    while n < len(own) and own[n] in available:
+        n += 1
+    return (own[:n], own[n:]) if n > 1 else (own, [])
+
+
 def _cmd_group(ns, _ros_args):
     import importlib
 
@@ -99,6 +112,7 @@ COMMAND_GROUPS = {
             "mocap": ("hmocap_ros.sim.mocap_dataset", "multi-view RGB bag of a retargeted BVH clip, with ground truth"),
             "gestures": ("hmocap_ros.sim.gesture_dataset", "depth bag of gestures among clutter, with ground truth"),
             "calibration": ("hmocap_ros.sim.calibration_session", "multi-view bag of a ChArUco board carried through the room, with the true rig"),
+            "teacher": ("hmocap_ros.nodes.simulated_teacher", "a simulated user who follows gesture_trainer's instructions over DDS"),
         },
     ),
     "eval": (
@@ -109,6 +123,14 @@ COMMAND_GROUPS = {
             "mocap": ("hmocap_ros.eval.mocap_eval", "3D joint error and speed of the body tracker on a multi-view bag"),
             "gestures": ("hmocap_ros.eval.gesture_eval", "precision-recall and AP per gesture on a depth bag"),
             "extremities": ("hmocap_ros.eval.extremity_eval", "precision, recall and 3D error of the extremity detection on a multi-view bag"),
+        },
+    ),
+    "detect": (
+        "run a detector offline on any bag, writing its messages to a bag",
+        "Run a node's detector over a bag (no DDS, no ground truth needed) and write the messages "
+        "the node would publish, with the input frames' stamps, to a new bag.",
+        {
+            "gestures": ("hmocap_ros.commands.detect_gestures", "gesture_detection's gestures on a depth bag"),
         },
     ),
     "train": (
@@ -188,14 +210,23 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     export.add_arguments(p)
     p.set_defaults(func=lambda ns, _ros_args: export.main_from_args(ns))
 
+    from hmocap_ros.commands import track
+
+    p = sub.add_parser("track", help="run the body tracker on a multi-view bag, writing its topics to a bag",
+                       description="Track the people of a multi-view bag with the nodes' code (no DDS, "
+                                   "no ground truth needed) and write body_tracker's topics, with the "
+                                   "frame sets' stamps, to a new bag.")
+    track.add_arguments(p)
+    p.set_defaults(func=lambda ns, _ros_args: track.main_from_args(ns))
+
     from hmocap_ros.commands import calibrate
 
-    p = sub.add_parser("calibrate", help="calibrate the camera rig from a bag of a ChArUco board",
+    p = sub.add_parser("calibrate", help="calibrate the camera rig from a bag (or live topics) of a ChArUco board",
                        description="Estimate every camera's intrinsics and pose in the room from a bag of "
                                    "the room cameras seeing a ChArUco board carried through the room "
                                    "(and laid on the floor first); write the rig YAML and a report.")
     calibrate.add_arguments(p)
-    p.set_defaults(func=lambda ns, _ros_args: calibrate.main_from_args(ns))
+    p.set_defaults(func=lambda ns, ros_args: calibrate.main_from_args(ns, ros_args))
 
     p = sub.add_parser("info", help="list a bag's topics, types and counts")
     p.add_argument("bag", help=".mcap file or rosbag2 directory")
@@ -207,9 +238,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     own, ros_args = _split_ros_args(argv)
     extra = []
-    if own[:1] == ["bench"] and "--" in own:
-        i = own.index("--")
-        own, extra = own[:i], own[i + 1:]
+    if own[:1] == ["bench"]:
+        own, extra = _bench_arguments(own)
     ns = build_parser(own).parse_args(own)
     ns.extra = extra
     return int(ns.func(ns, ros_args) or 0)

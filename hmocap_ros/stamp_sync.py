@@ -45,9 +45,10 @@ Giving up on a missing view
 A camera that stopped publishing leaves its sets incomplete; two bounds let them out as partial
 sets (with ``allow_partial``):
 
-* by stamp, ``max_delay_ns``: a frame expires once a frame that much newer has been added. This
-  needs no clock (offline streams), but the sets of the last ``max_delay_ns`` of a stream wait
-  for :meth:`~StampSynchronizer.flush`.
+* by stamp, ``max_delay_ns``: a frame expires once ``min_keys`` keys have a frame that much
+  newer (one camera whose queued frames arrive ahead of the others' after a stall does not
+  expire theirs). This needs no clock (offline streams), but the sets of the last
+  ``max_delay_ns`` of a stream wait for :meth:`~StampSynchronizer.flush`.
 * by arrival time, ``max_wait_ns``: ``add`` takes the arrival time of each frame (``now_ns``,
   any monotonic clock in nanoseconds) and :meth:`~StampSynchronizer.poll`, called periodically
   with the same clock, expires the frames of every group whose newest view arrived
@@ -57,6 +58,16 @@ sets (with ``allow_partial``):
   ``max_wait_ns`` plus the polling period after the last view of its set arrived, also at the end
   of a stream and on a live stream with a dead camera. A view arriving after its set has gone
   out is dropped as ``late``.
+
+Time going back
+---------------
+A stream whose stamps jump back (a bag replayed again or in a loop, a camera driver restarted
+with a reset clock) would leave every later frame ``late`` for good. With ``max_jump_back_ns``
+a frame whose stamp lies more than that before the newest stamp seen starts the stream over:
+the pending frames are dropped (reason ``time_jump``), the history is forgotten as by
+:meth:`~StampSynchronizer.reset` (the counters are kept), the frame is taken as the first of
+the new stream, and :attr:`~StampSynchronizer.resets` and ``last_jump_ns`` tell the caller, who
+resets what else follows the stream (a tracker's motion model) and logs it.
 
 Typical use (live node: one ``add`` per image callback, ``poll`` on a timer; offline:
 :func:`synchronize`)::
@@ -78,9 +89,13 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any, Hashable, Iterable, Iterator, NamedTuple, Sequence
 
-__all__ = ["SyncedSet", "SyncStats", "StampSynchronizer", "synchronize"]
+__all__ = ["SyncedSet", "SyncStats", "StampSynchronizer", "TIME_JUMP_BACK_NS", "synchronize"]
 
 _INF = float("inf")
+#: The nodes' ``max_jump_back_ns``: stamps half a second before the newest seen mean the
+#: stream's time went back (a frame that late would be dropped anyway; a bag looped goes back
+#: by its whole length).
+TIME_JUMP_BACK_NS = 500_000_000
 
 
 class SyncedSet(NamedTuple):
@@ -101,7 +116,8 @@ class SyncStats:
     ``late`` (older than what was already emitted), ``duplicate`` (key and stamp seen before),
     ``unmatched`` (no complete set and no partial set was allowed/big enough),
     ``overflow`` (pushed out of a full queue), ``timeout`` (older than ``max_delay_ns``, or its
-    group waited ``max_wait_ns``).
+    group waited ``max_wait_ns``), ``time_jump`` (pending when the stamps went back, see
+    ``max_jump_back_ns``). ``resets``: times the stamps went back and the stream started over.
     """
 
     received: int
@@ -110,6 +126,7 @@ class SyncStats:
     pending: int
     dropped: dict
     drop_reasons: dict
+    resets: int = 0
 
     @property
     def dropped_total(self) -> int:
@@ -139,6 +156,8 @@ class StampSynchronizer:
             this long ago on the arrival clock (None: never).
         min_period_ns: a lower bound on the interval between two frames of one key (0: unknown);
             lets jittered sets out without waiting for the next frame.
+        max_jump_back_ns: a frame this much older than the newest stamp seen starts the stream
+            over (module docstring, "Time going back"); None: such a frame is dropped as late.
     """
 
     def __init__(
@@ -151,6 +170,7 @@ class StampSynchronizer:
         max_delay_ns: int | None = None,
         min_period_ns: int = 0,
         max_wait_ns: int | None = None,
+        max_jump_back_ns: int | None = None,
     ) -> None:
         self.keys = tuple(keys)
         if not self.keys:
@@ -176,12 +196,26 @@ class StampSynchronizer:
         self.min_period_ns = operator.index(min_period_ns)
         if self.min_period_ns < 0:
             raise ValueError(f"min_period_ns must be >= 0, got {min_period_ns}")
+        self.max_jump_back_ns = None if max_jump_back_ns is None else operator.index(max_jump_back_ns)
+        if self.max_jump_back_ns is not None and self.max_jump_back_ns <= 0:
+            raise ValueError(f"max_jump_back_ns must be > 0, got {max_jump_back_ns}")
         self.reset()
 
     # ---- public -------------------------------------------------------------------------
 
     def reset(self) -> None:
         """Forget all pending frames, history and counters."""
+        self._forget_stream()
+        self._received = 0
+        self._complete = 0
+        self._partial = 0
+        self._dropped: Counter = Counter()
+        self._reasons: Counter = Counter()
+        self.resets = 0
+        self.last_jump_ns = 0  # how far the stamps went back at the last restart
+
+    def _forget_stream(self) -> None:
+        """Forget the pending frames and the history of the stream (not the counters)."""
         self._stamps: dict = {k: [] for k in self.keys}  # sorted stamps per key
         self._frames: dict = {k: [] for k in self.keys}  # frames, same order
         self._watermark: dict = {k: -_INF for k in self.keys}
@@ -190,11 +224,6 @@ class StampSynchronizer:
         self._newest: float = -_INF
         self._expired: list[_Frame] = []  # sorted by stamp
         self._seen_expired: set = set()  # (key, stamp) of expired frames, for duplicates
-        self._received = 0
-        self._complete = 0
-        self._partial = 0
-        self._dropped: Counter = Counter()
-        self._reasons: Counter = Counter()
 
     @property
     def pending(self) -> int:
@@ -211,6 +240,7 @@ class StampSynchronizer:
             pending=self.pending,
             dropped={k: self._dropped.get(k, 0) for k in self.keys},
             drop_reasons=dict(self._reasons),
+            resets=self.resets,
         )
 
     def add(self, key: Hashable, stamp_ns: int, item: Any, now_ns: int | None = None) -> list[SyncedSet]:
@@ -223,6 +253,8 @@ class StampSynchronizer:
             raise KeyError(f"unknown key {key!r}; expected one of {list(self.keys)}")
         stamp = operator.index(stamp_ns)
         arrival = _INF if now_ns is None else operator.index(now_ns)
+        if self.max_jump_back_ns is not None and stamp < self._stream_stamp() - self.max_jump_back_ns:
+            self._start_over(stamp)
         self._received += 1
         stamps = self._stamps[key]
         i = bisect.bisect_left(stamps, stamp)
@@ -273,6 +305,20 @@ class StampSynchronizer:
 
     # ---- internals ----------------------------------------------------------------------
 
+    def _stream_stamp(self) -> float:
+        """How far the stream has come: the newest stamp that ``min_keys`` keys have reached
+        (the ``min_keys``-th largest watermark). One camera ahead of the others (its queue
+        delivered first after a stall) does not make the others' frames old."""
+        return sorted(self._watermark.values(), reverse=True)[self.min_keys - 1]
+
+    def _start_over(self, stamp: int) -> None:
+        """The stamps went back (module docstring): drop what is pending, forget the stream."""
+        for frame in [f for frames in self._frames.values() for f in frames] + self._expired:
+            self._drop(frame.key, "time_jump")
+        self.last_jump_ns = int(self._stream_stamp() - stamp)
+        self.resets += 1
+        self._forget_stream()
+
     def _drop(self, key, reason: str) -> None:
         self._dropped[key] += 1
         self._reasons[reason] += 1
@@ -313,7 +359,7 @@ class StampSynchronizer:
         slop = self.slop_ns
         while True:
             if self.max_delay_ns is not None:
-                limit = self._newest - self.max_delay_ns
+                limit = self._stream_stamp() - self.max_delay_ns
                 for key in self.keys:
                     while self._stamps[key] and self._stamps[key][0] < limit:
                         self._expire_head(key, "timeout")
@@ -372,7 +418,7 @@ class StampSynchronizer:
 
         bound = min(earliest(k) for k in self.keys)
         if self.max_delay_ns is not None:
-            bound = max(bound, self._newest - self.max_delay_ns)
+            bound = max(bound, self._stream_stamp() - self.max_delay_ns)
         return bound
 
     def _emit_expired(self, out: list, before: float, force: bool, deadline: float | None = None) -> None:

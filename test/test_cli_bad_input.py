@@ -3,7 +3,8 @@ non-zero exit status, never a traceback.
 
 A zoo of bad files (missing, empty, a folder, random bytes, a text file, a valid bag truncated at
 several offsets and one with bytes overwritten in the middle of its data) goes through ``hmocap
-info``, ``eval mocap``, ``eval gestures`` and ``train gestures`` in this process (``cli.main``;
+info``, ``eval mocap``, ``eval gestures``, ``train gestures``, ``detect gestures`` and ``track`` in
+this process (``cli.main``;
 none of them starts DDS) and through ``hmocap replay`` as subprocesses, in parallel, with the
 loopback DDS settings and domain id of ``conftest.py`` inherited from the environment. Impossible
 replay options (``--rate 0``, ``--rate -1``, ``--topics /nonexistent``) go the same way.
@@ -55,6 +56,8 @@ IN_PROCESS_COMMANDS = {
     "eval_mocap": (["eval", "mocap"], []),
     "eval_gestures": (["eval", "gestures"], ["--json", "OUT/eval.json"]),
     "train_gestures": (["train", "gestures"], ["--out", "OUT/forest.npz", "--quiet"]),
+    "detect_gestures": (["detect", "gestures"], ["--out", "OUT/gestures.mcap", "--quiet"]),
+    "track": (["track"], ["--out", "OUT/tracked.mcap", "--quiet"]),
 }
 
 

@@ -359,3 +359,47 @@ def test_invalid_arguments():
         StampSynchronizer(["a", "b"], min_keys=3)
     with pytest.raises(TypeError):
         StampSynchronizer(["a"]).add("a", 1.5, None)  # stamps are integer nanoseconds
+
+
+def test_stamps_going_back_start_the_stream_over():
+    # A bag replayed in a loop: after the last frame set the stamps start again 1 s earlier.
+    sync = StampSynchronizer(["a", "b"], max_jump_back_ns=500_000_000)
+    first = [s for t in range(5) for key in "ab" for s in sync.add(key, 1_000_000_000 + t * 40_000_000, t)]
+    assert [s.stamp_ns for s in first] == [1_000_000_000 + t * 40_000_000 for t in range(5)]
+    assert sync.add("a", 1_200_000_000, 5) == []  # waits for b
+    again = [s for t in range(3) for key in "ab" for s in sync.add(key, t * 40_000_000, t)]
+    assert [s.stamp_ns for s in again] == [0, 40_000_000, 80_000_000]
+    assert sync.resets == 1 and sync.last_jump_ns == 1_200_000_000
+    stats = sync.stats
+    assert stats.resets == 1 and stats.drop_reasons == {"time_jump": 1}  # the frame that waited
+    # a frame a little older than the last set is late, not a new stream
+    assert sync.add("a", 10_000_000, 9) == [] and sync.resets == 1
+    assert sync.stats.drop_reasons["late"] == 1
+    # without max_jump_back_ns, everything after the jump is late
+    plain = StampSynchronizer(["a", "b"])
+    for t in range(5):
+        for key in "ab":
+            plain.add(key, 1_000_000_000 + t * 40_000_000, t)
+    assert [s for t in range(3) for key in "ab" for s in plain.add(key, t * 40_000_000, t)] == []
+    with pytest.raises(ValueError):
+        StampSynchronizer(["a"], max_jump_back_ns=0)
+
+
+def test_a_camera_ahead_after_a_stall_does_not_expire_the_others_frames():
+    # After a stall the queued frames come round robin; cam_4 missed frames 12-19, so its queue
+    # runs ahead of the others'. Every frame set still goes out, those of the gap without cam_4.
+    keys = ["cam_1", "cam_2", "cam_3", "cam_4"]
+    sync = StampSynchronizer(keys, slop_ns=5 * MS, queue_size=100, allow_partial=True, min_keys=2,
+                             max_delay_ns=150 * MS, max_wait_ns=150 * MS, max_jump_back_ns=500 * MS)
+    queues = {k: [f for f in range(9, 28) if not (k == "cam_4" and 12 <= f < 20)] for k in keys}
+    out = [s for f in range(9) for k in keys for s in sync.add(k, f * 40 * MS, f, now_ns=f)]
+    now = 100
+    while any(queues.values()):
+        for k in keys:
+            if queues[k]:
+                f = queues[k].pop(0)
+                now += 1
+                out += sync.add(k, f * 40 * MS, f, now_ns=now)
+    assert [s.stamp_ns // (40 * MS) for s in out] == list(range(28))
+    assert [len(s.items) for s in out] == [4] * 12 + [3] * 8 + [4] * 8
+    assert sync.stats.dropped_total == 0 and sync.resets == 0
