@@ -8,9 +8,11 @@
 2. Gestures: the shipped depth bag (``data/demo/gestures_depth.mcap``) is replayed into
    ``gesture_detection``; its gestures are recorded to ``<out>/gestures.mcap``.
 
-Every node is its own process over DDS on loopback. The demo then compares what came out
-with the bags' ground truth: foreground F1, 3D joint error (mm) and the tracker's time per
-frame; gestures found with the right class within 10 pixels (at 640x480, scaled).
+Every node is its own process over DDS on loopback, with the one-host Fast DDS profile
+(``config/fastdds_local.xml``, :func:`hmocap_ros.processes.loopback_dds_env`). The demo then
+compares what came out with the bags' ground truth: foreground F1, 3D joint error (mm) and the
+tracker's time per frame; gestures found with the right class within 10 pixels (at 640x480,
+scaled).
 The body tracker queues every frame (``queue_depth``) and works through them in stamp order
 (``latest_only:=false``) at its full particle budget; the demo waits for a pose per frame with
 a person.
@@ -29,7 +31,7 @@ from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.processes import loopback_dds_env, replay_through_nodes
+from hmocap_ros.processes import DDS_PROFILE_VARIABLES, loopback_dds_env, replay_through_nodes
 from hmocap_ros.segmentation import mask_scores
 
 DATA_DIR = Path(__file__).resolve().parent / "data" / "demo"
@@ -81,7 +83,7 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
           ["--ros-args", "-p", f"cameras:=[{','.join(cameras)}]", "-p", "learn_frames:=8",
            "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
          ("extremity_detection", "hmocap_ros.nodes.extremity_detection",
-          ["--ros-args", "-p", "queue_depth:=100"], "waiting for the rig"),
+          ["--ros-args", "-p", "queue_depth:=100", "-p", "latest_only:=false"], "waiting for the rig"),
          ("body_tracker", "hmocap_ros.nodes.body_tracker", ["--ros-args", *TRACKER_ARGS], "waiting for the rig")],
         record, out_bag, env, out / "logs",
         replay_topics=[topics.CAMERA_RIG, *(topics.camera_image(c) for c in cameras)],
@@ -185,8 +187,8 @@ def run_demo(out: str | Path = "out/demo", domain_id: int | None = None) -> int:
         shutil.rmtree(out)
     out.mkdir(parents=True)
     env = loopback_dds_env(domain_id=domain_id)
-    print(f"demo: DDS domain {env.get('ROS_DOMAIN_ID', '0')}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}; "
-          f"outputs and logs in {out}")
+    print(f"demo: DDS domain {env.get('ROS_DOMAIN_ID', '0')}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
+          f"profile {env.get(DDS_PROFILE_VARIABLES[0], 'none')}; outputs and logs in {out}")
     ok_body = run_body_demo(out, env)
     ok_gestures = run_gesture_demo(out, env)
     print(f"demo: {'OK' if ok_body and ok_gestures else 'FAILED'}. To look at the result, open "

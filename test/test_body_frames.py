@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 from hmocap_ros.body.anthropometry import BodyShape, apply_shape
 from hmocap_ros.io import tf
 from hmocap_ros.tracking import body_frames as bf
-from hmocap_ros.tracking.body_tracker import (MAX_ELAPSED_PERIODS, BodyTracker, FramePeriod,
-                                              FrameSetQueue)
+from hmocap_ros.frame_sets import FramePeriod, FrameSetQueue
+from hmocap_ros.tracking.body_tracker import MAX_ELAPSED_PERIODS, BodyTracker
 from hmocap_ros.tracking.params import TrackerParams
 
 PERIOD = 40_000_000
@@ -231,3 +231,16 @@ def test_motion_model_scales_with_the_periods_between_tracked_sets(tracker):
     step = predicted[skel.translation_dofs] - tracker.estimate[skel.translation_dofs]
     np.testing.assert_allclose(step, gain * MAX_ELAPSED_PERIODS / 3 * np.array([0.05, 0.0, 0.02]), atol=1e-12)
     tracker.reset()
+
+
+def test_a_waiting_set_is_taken_once_the_input_is_quiet_or_it_waited_too_long():
+    from hmocap_ros.frame_sets import DRAIN_NS, MAX_HOLD_NS, QUIET_NS
+
+    q = FrameSetQueue(latest_only=True)
+    now = 10_000_000_000
+    assert not q.ready(now, 0, 0)  # nothing waits
+    q.put(T0, {"a": 1}, arrival_ns=now)
+    assert not q.ready(now + DRAIN_NS // 2, now, 0)          # just finished a set: let input drain
+    assert not q.ready(now + DRAIN_NS, 0, now + DRAIN_NS)     # input still arriving
+    assert q.ready(now + QUIET_NS, 0, now)                     # input quiet
+    assert q.ready(now + MAX_HOLD_NS, 0, now + MAX_HOLD_NS)    # waited long enough whatever the input

@@ -9,14 +9,17 @@ observations, or detector-driven HPF), anthropometry estimated when a person app
 Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
   is set; the masks are expected at the rig's resolution.
-  ``<camera>/foreground`` (sensor_msgs/Image mono8, sensor-data QoS), per rig camera.
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, ``image_reliability``, queue ``queue_depth``),
+  per rig camera.
   ``extremities`` (hmocap_interfaces/Extremities, reliable, a queue of ``queue_depth`` but at
   least 10), with a method that uses a detector (``dd-hpf``) only: the 3D detections of the
   extremity_detection node, matched by stamp with the masks. While that topic has a publisher, a frame set waits for its detections like for
   a camera (``max_wait_ms``); with none, frame sets go out on their masks alone and the
   method runs as its boxed schedule.
 Publications (all with the stamp of the frame set), following REP-155 (Human-Robot
-Interaction: ``humans/bodies/...`` topics and body frames):
+Interaction: ``humans/bodies/...`` topics and body frames), built by
+:class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages` (``hmocap track`` writes the
+same messages to a bag):
   ``humans/bodies/tracked`` (hmocap_interfaces/IdsList, REP-155's hri_msgs/IdsList): the ids
   of the bodies with a pose in this frame set, for every frame set processed (empty: nobody).
   ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState), per body with a pose: the
@@ -59,8 +62,12 @@ missing, ``max_wait_ms`` after its newest mask arrived (a steady-clock timer pol
 counts only time the node is idle: masks queued while the tracker works on a frame are not given
 up on. So the last frames of a stream and a live stream with a dead camera are tracked with at
 most ``max_wait_ms`` (plus a timer period) of added delay.
+Stamps that go back by more than half a second (a bag replayed again or looped, a camera
+clock reset; :data:`~hmocap_ros.stamp_sync.TIME_JUMP_BACK_NS`) start the stream over: a
+warning says by how much, and the synchroniser, the waiting sets and the tracks start afresh
+(the body shapes are kept).
 
-Keeping up (:class:`~hmocap_ros.tracking.body_tracker.FrameSetQueue`): the subscriptions only
+Keeping up (:class:`~hmocap_ros.frame_sets.FrameSetQueue`): the subscriptions only
 feed the synchroniser, whose complete sets wait in a queue; a steady-clock timer every
 ``4 ms`` tracks one set once no input has arrived for ``5 ms`` and ``5 ms`` have passed since
 the last set was done (rclpy's executor serves a due timer before the subscriptions, so this
@@ -97,7 +104,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
 from hmocap_interfaces.msg import CameraRig, Extremities, IdsList, Skeleton
 from rclpy.clock import Clock, ClockType
@@ -105,41 +111,28 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, JointState
 from tf2_msgs.msg import TFMessage
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from hmocap_ros.body.model import load_body_model
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.io.tf import TF_TOPIC, tf_message
-from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters,
-                                     param, run_node, sensor_qos)
+from hmocap_ros.io.tf import TF_TOPIC
+from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters, image_qos,
+                                     image_reliability_param, param, run_node)
 from hmocap_ros.rig import Rig, RigError, load_rig
-from hmocap_ros.stamp_sync import StampSynchronizer
-from hmocap_ros.tracking.body_frames import body_transforms
-from hmocap_ros.tracking.body_tracker import FrameSetQueue, PickedSet
+from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
+from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
+from hmocap_ros.tracking.tracker_messages import TRACKED_TOPIC, TrackerMessages, per_body_topic
 from hmocap_ros.detection.detections import detections_from_msg
 from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 
 NODE_NAME = "body_tracker"
 #: the synchroniser's key (and topic) of the extremity detections
 DETECTIONS = "extremities"
-#: REP-155's list of the bodies tracked now
-TRACKED_TOPIC = "humans/bodies/tracked"
-#: Keeping up (module docstring): the timer that tracks a waiting frame set, the quiet time of
-#: the input and the pause after a set before the next, and the longest a set waits for quiet.
-TICK_S = 0.004
-QUIET_NS = 5_000_000
-DRAIN_NS = 5_000_000
-MAX_HOLD_NS = 50_000_000
 #: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, keep last 100)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def per_body_topic(body_id: str, name: str) -> str:
-    """REP-155's topic ``name`` of body ``body_id``: ``humans/bodies/<id>/<name>``."""
-    return f"humans/bodies/{body_id}/{name}"
 
 
 @dataclass(frozen=True)
@@ -154,6 +147,7 @@ class BodyTrackerNodeConfig:
     queue_depth: int = param(5, "Masks queued per camera while the tracker is busy (best effort: older "
                                 "ones are dropped, so a live tracker works on recent frames; raise it "
                                 "when replaying a bag slowly and every frame must be tracked).")
+    image_reliability: str = image_reliability_param()
     latest_only: bool = param(True, "Live: when frame sets come faster than the tracker processes them, "
                                     "track the newest and skip (and count) the others, so the latency "
                                     "stays bounded. false: track every set in stamp order (slow bag "
@@ -172,6 +166,7 @@ class BodyTrackerNode(Node):
     def __init__(self):
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, BodyTrackerNodeConfig)
+        self.mask_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         self.params = declare_parameters(self, TrackerParams)
         self.model = load_body_model("tracking")
         self.rng = np.random.default_rng(self.config.seed)
@@ -183,7 +178,6 @@ class BodyTrackerNode(Node):
         self.sync: StampSynchronizer | None = None
         self.rig: Rig | None = None
         self.frame_id = "room"
-        self.last_shape = [None] * len(self.ids)
         self.last_state = ["searching"] * len(self.ids)
         self.frames = 0
         self.busy_ns = 0  # time spent in _process: not waiting time for the synchroniser
@@ -206,6 +200,8 @@ class BodyTrackerNode(Node):
         self.pub_tf = (self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
                        if self.config.publish_tf else None)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        self.messages: TrackerMessages | None = None  # the outputs' builder, with the rig's frame
+        self.pub_by_topic = self._publishers_by_topic()
         if self.config.max_wait_ms <= 0:
             self.get_logger().fatal(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
             raise SystemExit(2)
@@ -235,19 +231,23 @@ class BodyTrackerNode(Node):
         self.frame_id = rig.frame_id
         self.tracker = PeopleTracker(self.model, rig, self.params, self.rng,
                                      max_people=len(self.ids), ids=self.ids)
+        self.messages = TrackerMessages(self.model, self.ids, rig.frame_id, self.factory,
+                                        publish_tf=self.pub_tf is not None)
         self.use_detections = self.params.tracking_method.uses_detector
         self.sync = StampSynchronizer(
             list(rig.names) + ([DETECTIONS] if self.use_detections else []), slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
             min_keys=min(self.config.min_views_to_sync, len(rig)),
-            max_delay_ns=int(self.config.max_wait_ms * 1e6), max_wait_ns=int(self.config.max_wait_ms * 1e6))
+            max_delay_ns=int(self.config.max_wait_ms * 1e6), max_wait_ns=int(self.config.max_wait_ms * 1e6),
+            max_jump_back_ns=TIME_JUMP_BACK_NS)
+        self.sync_resets = 0
         self.queue = FrameSetQueue(self.config.latest_only)
         if first:
             # Subscribe before compiling: masks that arrive during the (cold-cache) warm-up
             # wait in the subscriptions' queues instead of being published to nobody.
             for name in rig.names:
                 self.create_subscription(Image, f"{name}/foreground", self._on_mask(name),
-                                         sensor_qos(max(1, self.config.queue_depth)))
+                                         self.mask_qos)
             if self.use_detections:
                 # as deep as the masks' queues: detections dropped while the tracker works
                 # would leave their frame sets incomplete
@@ -302,9 +302,21 @@ class BodyTrackerNode(Node):
         return on_mask
 
     def _enqueue(self, synced_sets) -> None:
+        if self.sync.resets != self.sync_resets:
+            self._start_over()
         now = time.monotonic_ns()
         for synced in synced_sets:
             self.queue.put(synced.stamp_ns, synced.items, now)
+
+    def _start_over(self) -> None:
+        """The stamps went back (a bag replayed again, a camera clock reset): the synchroniser
+        started the stream over; the waiting sets and the tracks (not the body shapes) go too."""
+        self.sync_resets = self.sync.resets
+        self.get_logger().warning(
+            f"the stamps went back by {self.sync.last_jump_ns / 1e9:.2f} s: frame sets and tracks "
+            f"start over")
+        self.queue = FrameSetQueue(self.config.latest_only)
+        self.tracker.reset(forget_shape=False)
 
     def _idle_clock_ns(self) -> int:
         """Steady time the node has not spent processing (the synchroniser's arrival clock)."""
@@ -320,9 +332,7 @@ class BodyTrackerNode(Node):
         if self.sync is None or not len(self.queue):
             return
         now = time.monotonic_ns()
-        if now - self.idle_since_ns < DRAIN_NS:
-            return
-        if now - self.last_input_ns < QUIET_NS and now - self.queue.oldest_arrival_ns() < MAX_HOLD_NS:
+        if not self.queue.ready(now, self.idle_since_ns, self.last_input_ns):
             return
         picked = self.queue.take(self.idle_since_ns, now)
         if picked is not None:
@@ -364,12 +374,12 @@ class BodyTrackerNode(Node):
             if result.state != self.last_state[k]:
                 self._log_transition(k, result, seconds)
                 self.last_state[k] = result.state
-            if result.has_pose:
-                self._publish_pose(k, stamp_ns, result)
-        tracked = self._header(IdsList(), stamp_ns)
-        tracked.ids = [body for body, result in zip(self.ids, results) if result.has_pose]
-        self.pub_tracked.publish(tracked)
-        self._publish_tf(stamp_ns, results)
+        built = self.messages.frame_set(stamp_ns, results, [t.model for t in self.tracker.trackers])
+        for topic, msg in built.messages:
+            for pub in self.pub_by_topic[topic]:
+                pub.publish(msg)
+        for error in built.errors:  # a degenerate pose must not stop the node
+            log.error(error, throttle_duration_sec=5.0)
         self._publish_diagnostics(stamp_ns, results, seconds, picked)
 
     def _log_transition(self, k: int, result, seconds: float) -> None:
@@ -395,75 +405,16 @@ class BodyTrackerNode(Node):
         msg.header.frame_id = self.frame_id
         return msg
 
-    def _publish_pose(self, k: int, stamp_ns: int, result) -> None:
-        skel = self.model.skeleton
-        body = self.ids[k]
-        js = self._header(JointState(), stamp_ns)
-        js.name = list(skel.dof_names)
-        js.position = [float(x) for x in result.params]
-        self.pub_joints[k].publish(js)
-
-        sk = self._header(Skeleton(), stamp_ns)
-        sk.body_id = body
-        sk.joint_names = list(result.joint_names)
-        sk.positions = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in result.joints]
-        sk.parents = [int(i) for i in self.model.parents]
-        confidence = result.confidence
-        sk.confidence = [] if confidence is None else [float(c) for c in confidence]
-        sk.fit_error = float(result.fit_cost)
-        self.pub_skeleton.publish(sk)
-        self.pub_markers.publish(self._markers(k, stamp_ns, result.joints))
-
-        if result.shape is not None and result.shape is not self.last_shape[k]:
-            self.last_shape[k] = result.shape
-            shape = result.shape
-            msg = self._header(BodyShapeMsg(), stamp_ns)
-            msg.body_id = body
-            msg.entity_names = list(shape.entity_names)
-            msg.bone_scale = [float(x) for x in np.ravel(shape.bone_scale)]
-            msg.radial_scale = [float(x) for x in np.ravel(shape.radial_scale)]
-            msg.global_scale = float(shape.global_scale)
-            msg.height = float(shape.height(self.tracker.trackers[k].model))
-            for pub_shape in self.pub_shapes[k]:
-                pub_shape.publish(msg)
-
-    def _publish_tf(self, stamp_ns: int, results) -> None:
-        """Every tracked body's frames in one TFMessage (:mod:`.body_frames`)."""
-        if self.pub_tf is None:
-            return
-        transforms = []
-        for body, result in zip(self.ids, results):
-            if result.transforms is None:
-                continue
-            try:
-                transforms += body_transforms(result.joint_names, self.model.parents,
-                                              result.transforms, body, self.frame_id)
-            except ValueError as err:  # a degenerate pose must not stop the node
-                self.get_logger().error(f"{body}: no frames on {TF_TOPIC}: {err}",
-                                        throttle_duration_sec=5.0)
-        if transforms:
-            self.pub_tf.publish(tf_message(transforms, stamp_ns, self.factory))
-
-    def _markers(self, k: int, stamp_ns: int, joints: np.ndarray) -> MarkerArray:
-        body = self.ids[k]
-        spheres = self._header(Marker(), stamp_ns)
-        spheres.ns, spheres.id, spheres.type, spheres.action = body, 0, Marker.SPHERE_LIST, Marker.ADD
-        spheres.scale.x = spheres.scale.y = spheres.scale.z = 0.06
-        # the first body orange as before, the others in other hues
-        spheres.color.r, spheres.color.g, spheres.color.b = ((1.0, 0.3, 0.0), (0.2, 0.9, 0.2),
-                                                             (1.0, 0.8, 0.1), (0.3, 0.5, 1.0))[k % 4]
-        spheres.color.a = 1.0
-        spheres.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in joints]
-        bones = self._header(Marker(), stamp_ns)
-        bones.ns, bones.id, bones.type, bones.action = body, 1, Marker.LINE_LIST, Marker.ADD
-        bones.scale.x = 0.02
-        bones.color.g, bones.color.b, bones.color.a = 0.8, 1.0, 1.0
-        for child, parent in enumerate(self.model.parents):
-            if parent >= 0:
-                bones.points += [spheres.points[parent], spheres.points[child]]
-        for m in (spheres, bones):
-            m.lifetime.nanosec = 500_000_000  # disappear when tracking stops
-        return MarkerArray(markers=[spheres, bones])
+    def _publishers_by_topic(self) -> dict:
+        """Topic of :class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages` -> publishers."""
+        out = {"skeleton": [self.pub_skeleton], "skeleton_markers": [self.pub_markers],
+               TRACKED_TOPIC: [self.pub_tracked], "body_shape": self.pub_shapes[0][1:]}
+        for k, body in enumerate(self.ids):
+            out[per_body_topic(body, "joint_states")] = [self.pub_joints[k]]
+            out[per_body_topic(body, "body_shape")] = self.pub_shapes[k][:1]
+        if self.pub_tf is not None:
+            out[TF_TOPIC] = [self.pub_tf]
+        return out
 
     def _publish_diagnostics(self, stamp_ns: int, results, seconds: float,
                              picked: PickedSet) -> None:

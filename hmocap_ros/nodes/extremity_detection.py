@@ -9,7 +9,7 @@ detections.
 
 Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``.
-  ``<camera>/image_raw`` (sensor_msgs/Image, rgb8/bgr8/..., sensor-data QoS) and
+  ``<camera>/image_raw`` (sensor_msgs/Image, rgb8/bgr8/..., ``image_reliability``) and
   ``<camera>/foreground`` (sensor_msgs/Image mono8, the foreground_segmentation node's), per
   rig camera, at the rig's resolution.
   ``skeleton`` (hmocap_interfaces/Skeleton), when ``use_skeleton``: the last tracked skeleton,
@@ -20,9 +20,14 @@ Publications (with the stamp of the frame set):
   oriented surface points with their extremity probability (eq. 2.16-2.18); keypoints, the
   detections with their scores. For RViz/Foxglove.
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray): frame sets, detections, views, ms per set.
-Synchronisation: a frame set goes out when every camera's (image, foreground) pair of its
+Synchronisation: a frame set is complete when every camera's (image, foreground) pair of its
 stamp (within ``slop_ms``) is there, or ``max_wait_ms`` after its newest pair with at least
-``min_views_to_sync`` views (the others are detected without them).
+``min_views_to_sync`` views (the others are detected without them). Complete sets wait in a
+:class:`~hmocap_ros.frame_sets.FrameSetQueue`: with ``latest_only`` (live) the node detects on
+the newest and skips the older ones (counted in the diagnostics), so its latency stays about
+one detection time when the cameras are faster than the detector; with ``latest_only:=false``
+it detects on every set in stamp order (slow bag replays). Stamps that go back by
+more than half a second (a bag replayed again) start the frame sets over, with a warning.
 
 Bad input (a wrong encoding or size, a view missing, no rig yet) is logged and the frame or view
 left out; a keypoint model file that is missing or corrupt is logged with its path and how to
@@ -45,13 +50,14 @@ from hmocap_ros.detection.detections import fill_msg
 from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
                                                      skeleton_labels)
 from hmocap_ros.detection.keypoint_network import ModelFileError
+from hmocap_ros.frame_sets import TICK_S, FrameSetQueue
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.point_clouds import array_to_pointcloud2
-from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters,
-                                     param, run_node, sensor_qos)
+from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters, image_qos,
+                                     image_reliability_param, param, run_node)
 from hmocap_ros.rig import Rig, RigError, load_rig
-from hmocap_ros.stamp_sync import StampSynchronizer
+from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 
 NODE_NAME = "extremity_detection"
 POINT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("probability", "<f4")])
@@ -68,6 +74,10 @@ class ExtremityNodeConfig:
                                       "camera drops out (after max_wait_ms).")
     max_wait_ms: float = param(200.0, "How long (ms, > 0) a frame set waits for a missing camera.")
     queue_depth: int = param(5, "Frames queued per camera and topic while the node is busy.")
+    latest_only: bool = param(True, "Live: when frame sets come faster than the detector, detect on the "
+                                    "newest and skip (and count) the others. false: every set, in stamp "
+                                    "order (slow bag replays; raise queue_depth too).")
+    image_reliability: str = image_reliability_param()
     skeleton_max_age_ms: float = param(500.0, "A skeleton older than this (ms) before the frame set is "
                                               "not used.")
 
@@ -76,6 +86,7 @@ class ExtremityDetectionNode(Node):
     def __init__(self):
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, ExtremityNodeConfig)
+        self.image_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         self.params = declare_parameters(self, ExtremityDetectionParams)
         if self.config.max_wait_ms <= 0:
             raise ValueError(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
@@ -89,12 +100,16 @@ class ExtremityDetectionNode(Node):
         self.frames = 0
         self.seconds = 0.0
         self.busy_ns = 0
+        self.queue = FrameSetQueue(self.config.latest_only)
+        self.skipped = 0
+        self.idle_since_ns = self.last_input_ns = time.monotonic_ns()
         self.last_counts = (0, 0)
         self.pub = self.create_publisher(Extremities, "extremities", RESULT_QOS)
         self.pub_points = self.create_publisher(PointCloud2, "extremities/points", RESULT_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
-        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync,
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync, clock=steady)
+        self.create_timer(TICK_S, self._tick, clock=steady)
         self.create_timer(1.0, self._publish_diagnostics)
         if self.config.use_skeleton:
             self.create_subscription(Skeleton, "skeleton", self._on_skeleton, RESULT_QOS)
@@ -134,9 +149,9 @@ class ExtremityDetectionNode(Node):
             list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
             min_keys=min(self.config.min_views_to_sync, len(rig)),
-            max_delay_ns=wait, max_wait_ns=wait)
+            max_delay_ns=wait, max_wait_ns=wait, max_jump_back_ns=TIME_JUMP_BACK_NS)
         if first:
-            qos = sensor_qos(max(1, self.config.queue_depth))
+            qos = self.image_qos
             for name in rig.names:
                 self.create_subscription(Image, f"{name}/image_raw", self._on_image(name), qos)
                 self.create_subscription(Image, f"{name}/foreground", self._on_mask(name), qos)
@@ -188,8 +203,15 @@ class ExtremityDetectionNode(Node):
             if image is None:
                 self.get_logger().debug(f"{name}: no image of stamp {stamp} for its mask")
                 return
-            for synced in self.sync.add(name, stamp, (image, mask), now_ns=self._idle_ns()):
-                self._process(synced.stamp_ns, synced.items)
+            self.last_input_ns = time.monotonic_ns()
+            resets = self.sync.resets
+            synced_sets = self.sync.add(name, stamp, (image, mask), now_ns=self._idle_ns())
+            if self.sync.resets != resets:
+                self.get_logger().warning(f"the stamps went back by {self.sync.last_jump_ns / 1e9:.2f} s: "
+                                          f"frame sets start over")
+                self.skeleton = None
+                self.queue = FrameSetQueue(self.config.latest_only)
+            self._enqueue(synced_sets)
 
         return on_mask
 
@@ -207,8 +229,22 @@ class ExtremityDetectionNode(Node):
     def _poll_sync(self) -> None:
         if self.sync is None:
             return
-        for synced in self.sync.poll(self._idle_ns()):
-            self._process(synced.stamp_ns, synced.items)
+        self._enqueue(self.sync.poll(self._idle_ns()))
+
+    def _enqueue(self, synced_sets) -> None:
+        now = time.monotonic_ns()
+        for synced in synced_sets:
+            self.queue.put(synced.stamp_ns, synced.items, now)
+
+    def _tick(self) -> None:
+        """Detect on a waiting frame set once the queued input has come in (module docstring)."""
+        now = time.monotonic_ns()
+        if self.sync is None or not self.queue.ready(now, self.idle_since_ns, self.last_input_ns):
+            return
+        picked = self.queue.take(self.idle_since_ns, now)
+        if picked is not None:
+            self.skipped += picked.skipped
+            self._process(picked.stamp_ns, picked.items)
 
     # ------------------------------------------------------------------ detection
 
@@ -225,7 +261,8 @@ class ExtremityDetectionNode(Node):
         try:
             self._detect(stamp_ns, items)
         finally:
-            self.busy_ns += time.monotonic_ns() - start
+            self.idle_since_ns = time.monotonic_ns()
+            self.busy_ns += self.idle_since_ns - start
 
     def _detect(self, stamp_ns: int, items: dict) -> None:
         images, masks = [], []
@@ -266,6 +303,7 @@ class ExtremityDetectionNode(Node):
                      else "waiting for the rig"),
             values=[KeyValue(key="frame_sets", value=str(self.frames)),
                     KeyValue(key="ms_per_frame_set", value=f"{ms:.1f}"),
+                    KeyValue(key="skipped_frame_sets", value=str(self.skipped)),
                     KeyValue(key="detections", value=str(self.last_counts[0])),
                     KeyValue(key="views", value=str(self.last_counts[1]))]))
         self.pub_diag.publish(out)

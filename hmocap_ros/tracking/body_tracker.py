@@ -35,7 +35,7 @@ too quickly for such a prior to help them.
 
 Time between frame sets: a live node that cannot keep up tracks the newest frame set and
 skips the others, so the frame sets a tracker processes may lie several camera frames
-apart. The frame period comes from the stamps (:class:`FramePeriod`: the median difference
+apart. The frame period comes from the stamps (:class:`~hmocap_ros.frame_sets.FramePeriod`: the median difference
 of consecutive stamps, those of frame sets seen but skipped included, see :meth:`saw`); the
 time between two processed frame sets counts in whole periods ``k`` (at least 1), and:
 
@@ -57,7 +57,6 @@ same random draws.
 """
 from __future__ import annotations
 
-import bisect
 import dataclasses
 import logging
 import time
@@ -66,6 +65,7 @@ from typing import Sequence
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.frame_sets import FramePeriod
 from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
 from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
@@ -81,8 +81,8 @@ from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult, stage_
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
 from hmocap_ros.tracking.visual_hull import room_bounds
 
-__all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "BodyTracker", "FramePeriod",
-           "FrameSetQueue", "PickedSet", "TrackResult", "TrackerParams", "TrackerState"]
+__all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "BodyTracker", "TrackResult",
+           "TrackerParams", "TrackerState"]
 
 log = logging.getLogger(__name__)
 
@@ -91,136 +91,6 @@ STAGES = ("observe", "hull", "init", "filter", "proposals", "detection")
 #: Most frame periods between two processed frame sets that the motion model accounts for
 #: (velocity extrapolation and diffusion; module docstring).
 MAX_ELAPSED_PERIODS = 4
-
-
-class FramePeriod:
-    """A stream's frame period from its stamps: the median difference of consecutive distinct
-    stamps among the :attr:`WINDOW` newest seen (a few frames dropped here and there do not
-    move a median). A stamp older than every one kept (a stream that started again) starts
-    the window anew. A median under :attr:`MIN_PERIOD_NS` is no camera's frame period
-    (stamps that count frames rather than time, as synthetic sequences number them): the
-    period is then unknown, and every time counts as one period."""
-
-    #: stamps kept
-    WINDOW = 64
-    #: shortest frame period taken for one (1 ms: 1,000 frames per second)
-    MIN_PERIOD_NS = 1_000_000
-
-    def __init__(self):
-        self._stamps: list[int] = []  # sorted, distinct
-
-    def add(self, stamp_ns: int) -> None:
-        stamp_ns = int(stamp_ns)
-        stamps = self._stamps
-        if stamps and stamp_ns < stamps[0]:
-            stamps.clear()
-        i = bisect.bisect_left(stamps, stamp_ns)
-        if i < len(stamps) and stamps[i] == stamp_ns:
-            return
-        stamps.insert(i, stamp_ns)
-        if len(stamps) > self.WINDOW:
-            del stamps[0]
-
-    @property
-    def period_ns(self) -> float | None:
-        """The median stamp difference (ns), or None before two distinct stamps or when it
-        is under :attr:`MIN_PERIOD_NS`."""
-        if len(self._stamps) < 2:
-            return None
-        period = float(np.median(np.diff(self._stamps)))
-        return period if period >= self.MIN_PERIOD_NS else None
-
-    def periods(self, dt_ns: int) -> int:
-        """Whole frame periods in ``dt_ns`` (rounded, at least 1; 1 while the period is
-        unknown or for a time that does not go forward)."""
-        period = self.period_ns
-        if period is None or period <= 0 or dt_ns <= 0:
-            return 1
-        return max(1, int(round(dt_ns / period)))
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class PickedSet:
-    """A frame set taken from a :class:`FrameSetQueue`.
-
-    stamp_ns, items: the set (the synchroniser's); waited_ns: from its completion to its
-    take; passed_over: stamps of the complete sets skipped for it (newest-only); missing:
-    frame sets that never came complete between the set taken before and this one (stamp
-    gaps counted in frame periods).
-    """
-
-    stamp_ns: int
-    items: dict
-    waited_ns: int
-    passed_over: tuple = ()
-    missing: int = 0
-
-    @property
-    def skipped(self) -> int:
-        """Frame sets not tracked between the set taken before and this one."""
-        return len(self.passed_over) + self.missing
-
-
-class FrameSetQueue:
-    """Complete frame sets waiting for a tracker that may be slower than the cameras.
-
-    ``latest_only``: :meth:`take` gives the newest set and passes over the older ones (a live
-    tracker stays at the present, at the cost of the frames in between); otherwise every set,
-    oldest first (a bag replayed slowly, where every frame must be tracked).
-
-    Frame sets that never came complete are counted too (``PickedSet.missing``): frames a
-    DDS queue of bounded depth dropped while the tracker worked, sets the synchroniser gave
-    up on. They show as gaps in the stamps, counted in frame periods (:class:`FramePeriod`,
-    fed with every stamp put). A gap before a set that arrived more than two frame periods
-    (at least :attr:`IDLE_GAP_NS`) after the tracker last became idle is a pause of the
-    stream, not frames lost while it worked, and is not counted.
-    """
-
-    #: Shortest time after the tracker became idle from which a set's arrival means the
-    #: stream paused (when the frame period is unknown or shorter than half of it).
-    IDLE_GAP_NS = 100_000_000
-
-    def __init__(self, latest_only: bool = True):
-        self.latest_only = bool(latest_only)
-        self.period = FramePeriod()
-        self._pending: dict[int, tuple[dict, int]] = {}  # stamp -> (items, arrival)
-        self._last: int | None = None                     # stamp of the last set taken
-
-    def __len__(self) -> int:
-        return len(self._pending)
-
-    def put(self, stamp_ns: int, items: dict, arrival_ns: int) -> None:
-        """A complete (or given up on) frame set, arrived at ``arrival_ns`` (monotonic)."""
-        self._pending[int(stamp_ns)] = (items, int(arrival_ns))
-        self.period.add(stamp_ns)
-
-    def oldest_arrival_ns(self) -> int | None:
-        return min((a for _, a in self._pending.values()), default=None)
-
-    def take(self, idle_since_ns: int, now_ns: int) -> PickedSet | None:
-        """The next set to track (None when none waits). ``idle_since_ns``: when the tracker
-        last finished a set (monotonic, as the arrival times); ``now_ns``: the time now."""
-        if not self._pending:
-            return None
-        stamps = sorted(self._pending)
-        if self._last is not None and stamps[-1] <= self._last:  # the stream started again
-            self._last = None
-        chosen = stamps[-1] if self.latest_only else stamps[0]
-        passed = tuple(t for t in stamps if t < chosen)
-        first_arrival = self._pending[stamps[0]][1]
-        items, arrival = self._pending.pop(chosen)
-        for t in passed:
-            del self._pending[t]
-        missing = 0
-        sequence = list(passed) + [chosen]
-        if self._last is not None:
-            period = self.period.period_ns or 0.0
-            if first_arrival - idle_since_ns <= max(2.0 * period, self.IDLE_GAP_NS):
-                sequence.insert(0, self._last)  # else the stream paused while the tracker idled
-        for a, b in zip(sequence, sequence[1:]):
-            missing += self.period.periods(b - a) - 1
-        self._last = chosen
-        return PickedSet(chosen, items, max(0, now_ns - arrival), passed, missing)
 
 
 class BodyTracker:
@@ -264,7 +134,7 @@ class BodyTracker:
         self.frame_period = FramePeriod()
         self._stamps: tuple = ()  # stamps of the last two frame sets processed
         self._elapsed = (1, 1)    # periods between those two, and from the last to this one
-        self._scaled_filters: dict[int, LayeredFilter] = {}
+        self._scaled_filters: dict[tuple, LayeredFilter] = {}
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -404,7 +274,9 @@ class BodyTracker:
                                                  detections, reference, self.particles,
                                                  self.rng)
                 timings["detection"] = time.perf_counter() - t1
-            res = lpf_run(self.particles, self._filter_for(periods),
+            confident = (self.driven.confident_layers(extremities) if self.driven is not None
+                         else None)
+            res = lpf_run(self.particles, self._filter_for(periods, confident),
                           self.weight_fn(obs, self.shape, extremities), self.rng)
             if self.driven is not None:
                 self.driven.learn(res, extremities, self.fitness.rest(self.shape))
@@ -448,17 +320,23 @@ class BodyTracker:
         self._elapsed = (before, now)
         self._stamps = (self._stamps + (stamp_ns,))[-2:]
 
-    def _filter_for(self, periods: int) -> LayeredFilter:
+    def _filter_for(self, periods: int, confident: np.ndarray | None = None) -> LayeredFilter:
         """The schedule's filter with every layer's kernel std times ``periods`` (the final
-        layer's inter-frame kernel, which diffuses for the next frame set, unchanged)."""
+        layer's inter-frame kernel, which diffuses for the next frame set, unchanged), and
+        the layers flagged in ``confident`` on ``detector.confident_particles``."""
         lpf = self.schedule.filter
-        if periods <= 1:
+        small = () if confident is None else tuple(np.flatnonzero(confident[:-1]))
+        if periods <= 1 and not small:
             return lpf
-        scaled = self._scaled_filters.get(periods)
+        key = (periods, small)
+        scaled = self._scaled_filters.get(key)
         if scaled is None:
-            layers = tuple(dataclasses.replace(layer, std=periods * lpf.stds[k])
-                           for k, layer in enumerate(lpf.layers))
-            scaled = self._scaled_filters[periods] = dataclasses.replace(lpf, layers=layers)
+            n_small = self.params.detector.confident_particles
+            layers = tuple(dataclasses.replace(
+                layer, std=periods * lpf.stds[k] if periods > 1 else layer.std,
+                n_particles=n_small if k in small else layer.n_particles)
+                for k, layer in enumerate(lpf.layers))
+            scaled = self._scaled_filters[key] = dataclasses.replace(lpf, layers=layers)
         return scaled
 
     def _diffuse_elapsed(self, periods: int) -> None:
