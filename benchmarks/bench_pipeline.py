@@ -23,7 +23,7 @@ Without arguments it renders its bags once into ``out/bench/`` (held-out data: t
 clip 13_26 from 4 s, simulator seed 401; gestures seed 402), which takes a few minutes.
 
     .venv/bin/python benchmarks/bench_pipeline.py [BAG] [--depth-bag BAG | --no-gestures]
-        [--rate 1] [--json OUT] [--offline] [--param NODE:KEY=VALUE ...]
+        [--rate 1] [--json OUT] [--offline [--offline-report JSON]] [--param NODE:KEY=VALUE ...]
     .venv/bin/hmocap bench pipeline [BAG] [--json OUT]
 
 On a machine shared with other processes every figure here degrades: run it alone.
@@ -50,10 +50,10 @@ from hmocap_ros.processes import NodeProcess, loopback_dds_env
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DIR = ROOT / "out" / "bench"
-DEFAULT_BAG = DEFAULT_DIR / "pipeline_13_26_s401.mcap"
-DEFAULT_DEPTH_BAG = DEFAULT_DIR / "pipeline_gestures_s402.mcap"
+DEFAULT_BAG = DEFAULT_DIR / "pipeline_13_26_s401_20s.mcap"
+DEFAULT_DEPTH_BAG = DEFAULT_DIR / "pipeline_gestures_s402_21s.mcap"
 CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"
-BAG_SECONDS = 8.0
+BAG_SECONDS = 20.0
 DEPTH_FPS = 30.0
 THESIS_SECONDS_PER_FRAME = "14-25 s"
 
@@ -244,6 +244,26 @@ def run(ns) -> dict:
     return report(ns, bag, cameras, monitor, cpu, replay_s)
 
 
+def offline_report(bag: Path, ns) -> dict:
+    """``hmocap eval mocap``'s report of the tracker (the node's settings of ``--param``) on every
+    frame set of ``bag``: read from ``--offline-report`` when it holds one made with these
+    settings, else computed (and written there when it is given)."""
+    from hmocap_ros.eval.mocap_eval import evaluate, tracker_overrides
+
+    tracker = sorted(f"{k}={v}" for k, v in node_params(ns.param, "body_tracker").items() if k != "method")
+    path = Path(ns.offline_report) if ns.offline_report else None
+    if path is not None and path.exists():
+        stored = json.loads(path.read_text())
+        if stored.get("bag") == str(bag) and stored.get("bench_tracker_params") == tracker:
+            return stored
+    report = evaluate(bag, ["dd-hpf"], overrides=tracker_overrides(tracker), out=sys.stderr)
+    report["bench_tracker_params"] = tracker
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(report))
+    return report
+
+
 def tracking_rate(poses: dict, inputs: dict, truth: dict, period: float) -> float:
     """Poses per second of stream time from the frame set of the first pose on: the rate once
     the start-up (visual hull, shape estimation) is over."""
@@ -300,10 +320,7 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu: dict, repla
                            "frames_per_s": len(answered) / max(len(depth_in) * depth_period, 1e-9),
                            **latency_summary(latency_ms(depth_in, answered))}
     if ns.offline:
-        from hmocap_ros.eval.mocap_eval import evaluate, tracker_overrides
-
-        tracker = [f"{k}={v}" for k, v in node_params(ns.param, "body_tracker").items() if k != "method"]
-        offline = evaluate(bag, ["dd-hpf"], overrides=tracker_overrides(tracker), out=sys.stderr)
+        offline = offline_report(bag, ns)
         per_frame = offline["methods"]["dd-hpf"]["per_frame_mm"]
         by_stamp = {s: e for s, e in zip(sorted(truth), per_frame) if e is not None}
         same = [by_stamp[s] for s in errors if s in by_stamp]
@@ -350,6 +367,9 @@ def main(argv=None) -> int:
                    help="a node's parameter (repeatable), e.g. body_tracker:filter.particles=100")
     p.add_argument("--offline", action="store_true",
                    help="also run the tracker offline on every frame set and report its error")
+    p.add_argument("--offline-report", metavar="JSON", default=None,
+                   help="with --offline: the offline report, reused when it was made with the same bag and "
+                        "tracker settings, else written there")
     p.add_argument("--json", metavar="OUT", help="write the figures as JSON")
     p.add_argument("--logs", default=str(DEFAULT_DIR / "logs"), help="node logs (default out/bench/logs)")
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's)")

@@ -318,33 +318,3 @@ def test_dd_hpf_follows_labelled_keypoint_joints(model, rig, rest):
         res0 = plain.update(list(masks), STAMP0 + f, empty)
     err0 = np.linalg.norm(res0.joints - truth, axis=1)
     assert err[wrists].mean() < err0[wrists].mean(), (err[wrists], err0[wrists])
-
-
-def test_confident_keypoints_put_the_limb_layers_on_the_small_budget(model, rig, rest):
-    """Limb layers whose joints all have a confident detection weigh
-    ``detector.confident_particles``; the torso and final layers keep the budget, a layer with
-    a joint missing or unsure keeps it too, and the skin detector's candidates never count."""
-    params = arms_out(model)
-    masks, _ = scene(model, rig, params)
-    truth = model.pose(params[None])[1][0]
-    names = list(model.joint_names)
-    pos = np.array([truth[names.index(MODEL_JOINT[k])] for k in MODEL_JOINT])
-    scores = np.full(len(pos), 0.9)
-    scores[list(MODEL_JOINT).index("left_elbow")] = 0.3  # unsure: the left shoulder layer keeps its budget
-    dets = Detections("keypoints", tuple(MODEL_JOINT), pos, scores)
-    tracker = _dd_tracker(model, rig)
-    blocks = tracker.schedule.layer_blocks
-    confident = tracker.driven.confident_layers(tracker.driven.assign(dets, truth, np.zeros((5, 3))))
-    expect = [bool(b) and "torso" not in b and "l_shoulder" not in b for b in blocks]
-    assert confident.tolist() == expect and not confident[-1] and confident.sum() >= 8
-    skin = Detections("skin", ("unknown",), pos[:1], np.ones(1))
-    assert not tracker.driven.confident_layers(tracker.driven.assign(skin, truth, np.zeros((5, 3)))).any()
-    evaluations = {}
-    for name, d in (("confident", dets), ("none", Detections.empty("keypoints"))):
-        tracker = _dd_tracker(model, rig)
-        for f in range(3):
-            res = tracker.update(list(masks), STAMP0 + f, d)
-        evaluations[name] = res.timings["evaluations"]
-    full = tracker.schedule.evaluations_per_frame
-    small = full - int(np.sum(expect)) * (100 - 60)
-    assert evaluations["none"] >= full and evaluations["confident"] < evaluations["none"] - 0.8 * (full - small)

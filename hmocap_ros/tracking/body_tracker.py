@@ -134,7 +134,7 @@ class BodyTracker:
         self.frame_period = FramePeriod()
         self._stamps: tuple = ()  # stamps of the last two frame sets processed
         self._elapsed = (1, 1)    # periods between those two, and from the last to this one
-        self._scaled_filters: dict[tuple, LayeredFilter] = {}
+        self._scaled_filters: dict[int, LayeredFilter] = {}
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -274,9 +274,7 @@ class BodyTracker:
                                                  detections, reference, self.particles,
                                                  self.rng)
                 timings["detection"] = time.perf_counter() - t1
-            confident = (self.driven.confident_layers(extremities) if self.driven is not None
-                         else None)
-            res = lpf_run(self.particles, self._filter_for(periods, confident),
+            res = lpf_run(self.particles, self._filter_for(periods),
                           self.weight_fn(obs, self.shape, extremities), self.rng)
             if self.driven is not None:
                 self.driven.learn(res, extremities, self.fitness.rest(self.shape))
@@ -320,23 +318,17 @@ class BodyTracker:
         self._elapsed = (before, now)
         self._stamps = (self._stamps + (stamp_ns,))[-2:]
 
-    def _filter_for(self, periods: int, confident: np.ndarray | None = None) -> LayeredFilter:
+    def _filter_for(self, periods: int) -> LayeredFilter:
         """The schedule's filter with every layer's kernel std times ``periods`` (the final
-        layer's inter-frame kernel, which diffuses for the next frame set, unchanged), and
-        the layers flagged in ``confident`` on ``detector.confident_particles``."""
+        layer's inter-frame kernel, which diffuses for the next frame set, unchanged)."""
         lpf = self.schedule.filter
-        small = () if confident is None else tuple(np.flatnonzero(confident[:-1]))
-        if periods <= 1 and not small:
+        if periods <= 1:
             return lpf
-        key = (periods, small)
-        scaled = self._scaled_filters.get(key)
+        scaled = self._scaled_filters.get(periods)
         if scaled is None:
-            n_small = self.params.detector.confident_particles
-            layers = tuple(dataclasses.replace(
-                layer, std=periods * lpf.stds[k] if periods > 1 else layer.std,
-                n_particles=n_small if k in small else layer.n_particles)
-                for k, layer in enumerate(lpf.layers))
-            scaled = self._scaled_filters[key] = dataclasses.replace(lpf, layers=layers)
+            layers = tuple(dataclasses.replace(layer, std=periods * lpf.stds[k])
+                           for k, layer in enumerate(lpf.layers))
+            scaled = self._scaled_filters[periods] = dataclasses.replace(lpf, layers=layers)
         return scaled
 
     def _diffuse_elapsed(self, periods: int) -> None:

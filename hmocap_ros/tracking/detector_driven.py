@@ -50,10 +50,6 @@ BLOCK_JOINTS = {
 }
 
 
-#: score a labelled joint detection needs for its layer to run on ``confident_particles``
-CONFIDENT_SCORE = 0.5
-
-
 class DetectorDriven:
     """The detections and IK particles of one tracker (see the module docstring).
 
@@ -75,8 +71,6 @@ class DetectorDriven:
             np.array(sorted({names.index(j) for b in blocks for j in BLOCK_JOINTS.get(b, ())})
                      if blocks else every, dtype=np.intp)
             for blocks in layer_blocks]
-        #: layers that may run on the small budget: limb blocks only (not the torso, not final)
-        self._limb_layer = np.array([bool(blocks) and "torso" not in blocks for blocks in layer_blocks])
 
     def reset(self) -> None:
         self.ik.reset()
@@ -117,16 +111,6 @@ class DetectorDriven:
         assigned = self.assign(detections, np.asarray(joints[0]), targets)
         self.ik.apply(particles, assigned.assigned, reference, rest, rng)
         return assigned
-
-    def confident_layers(self, assigned: Assigned | None) -> np.ndarray:
-        """Per weighting, whether the labelled detections cover every joint its block moves
-        with a score of at least :data:`CONFIDENT_SCORE`: those limb layers run on
-        ``confident_particles``. Never the torso layers or the final layer, and none for the
-        skin detector (it labels no joints)."""
-        if assigned is None or assigned.joint_scores is None or self.params.confident_particles <= 0:
-            return np.zeros(len(self._limb_layer), bool)
-        sure = assigned.joint_scores >= CONFIDENT_SCORE
-        return self._limb_layer & np.array([bool(sure[idx].all()) for idx in self._layer_joints])
 
     def layer_terms(self, assigned: Assigned | None, rest) -> list | None:
         """Per weighting, ``cost_fn(particles, joints) -> (N,)`` added to its silhouette cost,

@@ -122,17 +122,11 @@ class DetectorParams:
                                     "added to the layer's silhouette cost.")
     joint_cap: float = param(0.25, "Largest distance (m, > 0) one joint detection adds to a "
                                    "layer's cost: a wrong detection costs a bounded amount.")
-    confident_particles: int = param(60, "Particles (>= 0) of a limb layer on a frame set whose "
-                                         "labelled detections cover every joint the layer moves "
-                                         "with a score of at least 0.5; the torso and final "
-                                         "layers keep the method's budget. 0: every layer keeps "
-                                         "it.")
 
     def __post_init__(self):
         _check([(self.refine_kappa >= 0.0, "detector.refine_kappa must be >= 0"),
                 (self.joint_kappa >= 0.0, "detector.joint_kappa must be >= 0"),
-                (self.joint_cap > 0.0, "detector.joint_cap must be > 0"),
-                (self.confident_particles >= 0, "detector.confident_particles must be >= 0")])
+                (self.joint_cap > 0.0, "detector.joint_cap must be > 0")])
 
 
 @dataclass(frozen=True)
