@@ -11,6 +11,7 @@ CONSOLE_SCRIPTS = [
     "camera_rig_publisher = hmocap_ros.nodes.camera_rig_publisher:main",
     "foreground_segmentation = hmocap_ros.nodes.foreground_segmentation:main",
     "gesture_detection = hmocap_ros.nodes.gesture_detection:main",
+    "gesture_trainer = hmocap_ros.nodes.gesture_trainer:main",
     "extremity_detection = hmocap_ros.nodes.extremity_detection:main",
     "body_tracker = hmocap_ros.nodes.body_tracker:main",
 ]
@@ -24,7 +25,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/fastdds_*.xml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools"],

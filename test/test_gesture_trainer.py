@@ -125,11 +125,26 @@ def test_save_load_resume_continues(tmp_path):
         Trainer(path, p, np.random.default_rng(4), focal_px=200.0)
 
 
-def _near(status, name, box, tol):
-    return any(d.name == name and abs(d.u - box[0]) <= tol and abs(d.v - box[1]) <= tol for d in status.detections)
+def _found(trainer: Trainer, name: str, frames: list, box, focal_px: float) -> list:
+    """Score of ``name``'s best detection near the box in each of ``frames`` (a fresh detector on
+    the trainer's forest as it stands; 0 = none)."""
+    from hmocap_ros.gestures.detection import GestureDetector
+    from hmocap_ros.gestures.params import DetectorParams
+
+    det = GestureDetector(trainer.forest(), DetectorParams(min_score=0.0, min_volume=0.0), focal_px=focal_px)
+    tol = 2.5 * box[2]
+    out = []
+    for depth, stamp in frames:
+        near = [d.score for d in det.update(depth, stamp)
+                if d.name == name and abs(d.u - box[0]) <= tol and abs(d.v - box[1]) <= tol]
+        out.append(max(near, default=0.0))
+    return out[2:]  # the smoothing (eq. 3.4) settles
 
 
-def test_closed_loop_teaches_a_gesture_and_keeps_the_other(tmp_path):
+def test_closed_loop_teaches_a_second_gesture_and_keeps_the_first(tmp_path):
+    """tee is taught, then pause in the same forest; the same frames of tee held where it was
+    taught are scored before and after (a spot the session never used would test how far one
+    short round generalises, not what the second gesture does to the first)."""
     from hmocap_ros.sim.gesture_teacher import GestureTeacher, run_session
 
     p = _params(rounds=1, do_gesture_s=0.4, update_positive_s=1.5, release_s=0.3, do_negatives_s=1.5,
@@ -139,22 +154,70 @@ def test_closed_loop_teaches_a_gesture_and_keeps_the_other(tmp_path):
     tr.start("tee", teacher.next_stamp)
     run_session(tr, teacher, 4.1)
     assert tr.state == "done" and "tee" in tr.thresholds
+    box = tr.box(teacher.camera.width, teacher.camera.height)
+    tee_frames = teacher.holding("tee", box, 8)
+    before = _found(tr, "tee", tee_frames, box, teacher.focal_px)
     path = tr.save(tmp_path / "room.forest.npz")
 
     second = Trainer(path, p, np.random.default_rng(1))
     second.start("pause", teacher.next_stamp)
-    statuses = run_session(second, teacher, 4.1)
+    assert second.rehearsed == ("tee",)
+    statuses = run_session(second, teacher, p.session_s(1) + 0.1)
     assert second.state == "done" and set(second.thresholds) == {"tee", "pause"}
     assert any(s.samples > 0 for s in statuses if s.state == "do_negatives")
+    pause = _found(second, "pause", teacher.holding("pause", box, 8), box, teacher.focal_px)
+    after = _found(second, "tee", tee_frames, box, teacher.focal_px)
+    th = second.thresholds
+    assert sum(s >= th["pause"] for s in pause) >= 4, (pause, th)
+    assert sum(s >= th["tee"] for s in before) >= 4, (before, th)
+    assert sum(s >= th["tee"] for s in after) >= sum(s >= th["tee"] for s in before) - 1, (before, after, th)
+    assert np.mean(after) >= np.mean(before) - 0.1, (before, after)
 
-    box = statuses[-1].box
-    tol = 2.5 * box[2]
-    found = {}
-    for name in ("pause", "tee"):
-        frames = teacher.holding(name, box, 8)
-        shown = [second.on_frame(d, stamp) for d, stamp in frames]
-        found[name] = sum(_near(s, name, box, tol) for s in shown[2:])
-    assert found["pause"] >= 4, found
-    if found["tee"] < 4:
-        pytest.xfail(f"one short round of a second gesture taught at the same box overrides the first "
-                     f"one's leaves (rehearsal of known gestures is not part of the trainer): {found}")
+
+def test_recording_keeps_the_learnt_frames_and_their_annotation(tmp_path):
+    from hmocap_ros.eval.gesture_eval import read_gesture_bag
+    from hmocap_ros.sim.gesture_teacher import write_recording_bag
+
+    rng = np.random.default_rng(0)
+    tr = Trainer(None, _params(rounds=1), np.random.default_rng(1), focal_px=100.0, record=True)
+    tr.start("wave", 0)
+    frames = [_frame(rng) for _ in range(70)]
+    for k, d in enumerate(frames):
+        tr.on_frame(d, k * NS // 10)
+    # update_positive 20 frames (10..29) at the box centre, do_negatives 15 frames (35..49) as background
+    rec = tr.recording
+    assert [f.gesture for f in rec] == ["wave"] * 20 + [""] * 15
+    assert [f.stamp_ns for f in rec] == [k * NS // 10 for k in list(range(10, 30)) + list(range(35, 50))]
+    assert (rec[0].u, rec[0].v) == pytest.approx(tr.box(64, 48)[:2])
+    assert rec[0].depth_mm.dtype == np.uint16
+    assert np.array_equal(rec[3].depth_mm, np.rint(frames[13] * 1000).astype(np.uint16))
+
+    from hmocap_ros.pinhole_camera import PinholeCamera
+
+    camera = PinholeCamera.from_camera_info({"width": 64, "height": 48, "K": [[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]],
+                                             "D": [0.0] * 5, "distortion_model": "plumb_bob", "frame_id": "depth"},
+                                            name="depth")
+    assert write_recording_bag(tmp_path / "session.mcap", rec, camera) == 35
+    data = read_gesture_bag(tmp_path / "session.mcap")
+    assert data.focal_px == 100.0 and data.depth.shape == (35, 48, 64)
+    assert data.class_names[7] == "wave"  # after the simulator's six gestures
+    assert data.labels[0] == (7, pytest.approx(32.0), pytest.approx(0.45 * 48)) and data.labels[20] is None
+    assert np.array_equal(data.depth[3], rec[3].depth_mm)
+
+
+def test_rehearse_shows_each_known_gesture_in_turn():
+    rng = np.random.default_rng(0)
+    p = _params(rounds=1, rehearse_s=0.6)
+    tr = Trainer(None, p, np.random.default_rng(1), focal_px=100.0)
+    tr.start("wave", 0)
+    for k in range(70):
+        tr.on_frame(_frame(rng), k * NS // 10)
+    tr.start("point", 100 * NS)
+    assert tr.rehearsed == ("wave",) and p.round_s(1) == pytest.approx(5.6)
+    seen = [tr.on_frame(_frame(rng), 100 * NS + k * NS // 10) for k in range(45)]
+    rehearsing = [s for s in seen if s.state == "rehearse"]
+    # do_gesture 1 s, update_positive 2 s, release 0.5 s, then 0.6 s of 'wave': its first third is not learnt
+    assert [s.state for s in seen[34:42]] == ["release"] + ["rehearse"] * 6 + ["do_negatives"]
+    assert {s.rehearsed for s in rehearsing} == {"wave"} and "Show 'wave'" in rehearsing[0].instruction
+    assert [s.samples > 0 for s in rehearsing] == [False, False, True, True, True, True]
+    assert rehearsing[0].progress == pytest.approx(3.5 / p.session_s(1))

@@ -38,7 +38,8 @@ if ! fresh deps "$deps"; then
   mark deps "$deps"
 fi
 
-msgs=$(hash_of msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/pyproject.toml msg_defs/msg/*.msg requirements.txt)
+msgs=$(hash_of msg_defs/CMakeLists.txt msg_defs/package.xml msg_defs/pyproject.toml msg_defs/msg/*.msg msg_defs/srv/*.srv \
+  requirements.txt)
 if ! fresh interfaces "$msgs" || ! "$VENV/bin/python" -c 'import hmocap_interfaces.msg' 2>/dev/null; then
   for tool in cmake g++ make; do
     command -v $tool >/dev/null || die "'$tool' is needed to build msg_defs (hmocap_interfaces). On Debian: apt-get install cmake g++ make."

@@ -16,6 +16,8 @@
   online random forests (sec. 3.3.1, alg. 6): Poisson bagging, leaf statistics, splits.
 - :mod:`~hmocap_ros.gestures.hard_negatives`: hard negatives mined on the fly (sec. 3.3.2).
 - :mod:`~hmocap_ros.gestures.trainer`: the interactive trainer's state machine (sec. 3.4.1).
+- :mod:`~hmocap_ros.gestures.trainer_feedback`: the trainer's feedback picture (fig. 3.11).
+- :mod:`~hmocap_ros.gestures.file_watch`: a forest file replaced on disk, noticed by the detector.
 - :mod:`~hmocap_ros.gestures.depth_units`: whether a depth stream is in the unit it is read with.
 
 Typical use::

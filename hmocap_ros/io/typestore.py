@@ -20,7 +20,7 @@ from rosbags.typesys.store import Typestore
 INTERFACE_PACKAGE = "hmocap_interfaces"
 #: The custom message names, in dependency order (GestureArray needs Gesture).
 INTERFACE_MESSAGES = ("Skeleton", "Extremities", "Gesture", "GestureArray", "BodyShape", "CameraRig",
-                      "IdsList")
+                      "IdsList", "TrainerState")
 
 
 class InterfaceDefinitionsNotFound(RuntimeError):

@@ -230,6 +230,22 @@ def changed_rig(msg, current, logger):
     return rig
 
 
+def depth_camera_from_info(msg, current, logger):
+    """The PinholeCamera of a ``depth/camera_info`` message, or ``current`` when it cannot be
+    read (logged, throttled); a new camera, or one whose focal length changed, is logged."""
+    from hmocap_ros.io.conversions import ConversionError, camera_info_to_dict
+    from hmocap_ros.camera_model import PinholeCamera
+
+    try:
+        camera = PinholeCamera.from_camera_info(camera_info_to_dict(msg))
+    except (ConversionError, ValueError) as err:
+        logger.error(f"depth/camera_info: {err}", throttle_duration_sec=5.0)
+        return current
+    if current is None or camera.fx != current.fx:
+        logger.info(f"depth camera {camera.width}x{camera.height}, fx {camera.fx:g} px")
+    return camera
+
+
 def message_class(typename: str):
     """The rclpy message class for 'pkg/msg/Name' (ImportError with a clear text if unknown)."""
     import importlib

@@ -6,17 +6,21 @@ passes the volume test (eq. 3.5) is a detection (:class:`~hmocap_ros.gestures.Ge
 
 Subscriptions:
   ``depth/image_raw`` (sensor_msgs/Image 16UC1/mono16 millimetres or 32FC1 metres by REP 118,
-  or any unit through ``depth_unit_m``; sensor-data QoS with a queue of ``queue_depth``).
-  ``depth/camera_info`` (sensor_msgs/CameraInfo): the focal length, to which the forest's test
-  offsets (trained at the focal length recorded in the forest file) and the detector's pixel
-  sizes are rescaled, and the intrinsics for the 3D point of each gesture.
-Publications:
+  or any unit through ``depth_unit_m``; ``image_reliability`` with a queue of ``queue_depth``:
+  :func:`~hmocap_ros.nodes.common.image_qos`).
+  ``depth/camera_info`` (sensor_msgs/CameraInfo, the images' QoS): the focal length, to which
+  the forest's test offsets (trained at the focal length recorded in the forest file) and the
+  detector's pixel sizes are rescaled, and the intrinsics for the 3D point of each gesture.
+Publications (built by :mod:`hmocap_ros.gestures.gesture_messages`, which ``hmocap detect
+gestures`` writes to a bag):
   ``gestures`` (hmocap_interfaces/GestureArray, the depth image's stamp and frame_id), one per
   processed frame, empty when no gesture is seen.
   ``gestures/probability`` (sensor_msgs/Image mono8, 0-255 = density 0-1; only with
   ``publish_probability``): the smoothed density of the best class, for Foxglove/RViz.
 Parameters: ``model_file`` (may be changed at run time: the new forest is loaded, or the
-change is refused with the reason), ``publish_probability``, ``queue_depth`` and every field of
+change is refused with the reason; the file is watched every ``watch_period_s`` and loaded
+again when it is written, e.g. by ``gesture_trainer``; a gesture it taught is detected at its
+taught threshold with ``use_taught_thresholds``), ``publish_probability``, ``queue_depth``, ``image_reliability`` and every field of
 :class:`~hmocap_ros.gestures.DetectorParams` (``gesture_detection --help``).
 
 Depth in the wrong unit is warned of once: when the median valid depth of a frame, read with
@@ -35,21 +39,24 @@ forest).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from hmocap_interfaces.msg import Gesture, GestureArray
+from hmocap_interfaces.msg import GestureArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from hmocap_ros.camera_model import PinholeCamera
 from hmocap_ros.gestures.depth_units import implausible_depth
+from hmocap_ros.gestures.file_watch import FileWatch
+from hmocap_ros.gestures.gesture_messages import gesture_array, probability_image
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
-from hmocap_ros.io.conversions import ConversionError, camera_info_to_dict, image_to_numpy, numpy_to_image
+from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import RESULT_QOS, SENSOR_QOS, declare_parameters, param, run_node, sensor_qos
+from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, depth_camera_from_info,
+                                     image_qos, image_reliability_param, param, run_node)
 
 NODE_NAME = "gesture_detection"
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
@@ -61,16 +68,15 @@ class GestureNodeConfig:
     model_file: str = param("", "Gesture forest file (hmocap-forest .npz); empty = the shipped "
                                 "hmocap_ros/data/gesture_forest.npz. Settable at run time.")
     publish_probability: bool = param(True, "Publish the debug density image on gestures/probability.")
-    queue_depth: int = param(30, "Depth images queued while the node is busy (sensor-data QoS): a stall or "
-                                 "the burst of a replay catching up must fit.")
-
-
-def gesture_point(camera: PinholeCamera | None, u: float, v: float, depth_m: float | None):
-    """3D point (x, y, z) in the depth optical frame of pixel (u, v) at depth ``depth_m``, or None."""
-    if camera is None or depth_m is None or not np.isfinite(depth_m) or depth_m <= 0:
-        return None
-    ray = camera.undistort_points(np.array([[u, v]], float))[0]
-    return float(ray[0] * depth_m), float(ray[1] * depth_m), float(depth_m)
+    queue_depth: int = param(30, "Depth images queued while the node is busy: a stall or the burst of a replay "
+                                 "catching up must fit; 30 holds one second at 30 fps.")
+    image_reliability: str = image_reliability_param()
+    watch_period_s: float = param(1.0, "Seconds between checks of model_file on disk (0 = none): a forest file "
+                                       "written again (gesture_trainer saving a taught gesture) is loaded "
+                                       "without a restart.")
+    use_taught_thresholds: bool = param(True, "A gesture taught by gesture_trainer is detected at the threshold "
+                                              "the trainer computed for it (sec. 3.4.1, kept in the forest file) "
+                                              "instead of min_score.")
 
 
 class GestureDetection(Node):
@@ -92,9 +98,14 @@ class GestureDetection(Node):
         self.pub = self.create_publisher(GestureArray, "gestures", RESULT_QOS)
         self.prob_pub = (self.create_publisher(Image, "gestures/probability", SENSOR_QOS)
                          if self.config.publish_probability else None)
-        self.create_subscription(CameraInfo, "depth/camera_info", self._on_info, RESULT_QOS)
-        self.create_subscription(Image, "depth/image_raw", self._on_depth, sensor_qos(max(1, self.config.queue_depth)))
+        depth_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
+        # camera_info as the images: a driver publishes both with one QoS
+        self.create_subscription(CameraInfo, "depth/camera_info", self._on_info, depth_qos)
+        self.create_subscription(Image, "depth/image_raw", self._on_depth, depth_qos)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.model_watch = FileWatch(Path(self.config.model_file or DEFAULT_MODEL))
+        if self.config.watch_period_s > 0:
+            self.create_timer(self.config.watch_period_s, self._check_model_file)
         self.get_logger().info("detecting gestures" + (f" with {self.model_path.name}" if self.detector else
                                                        " once a forest is loaded"))
 
@@ -105,7 +116,10 @@ class GestureDetection(Node):
         path = Path(model_file or DEFAULT_MODEL)
         try:
             forest = load_forest(path)
-            detector = GestureDetector(forest, self.params)
+            taught = {str(k): float(v) for k, v in forest.meta.get("gesture_thresholds", {}).items()
+                      if self.config.use_taught_thresholds}
+            detector = GestureDetector(forest, replace(self.params, min_score=min([self.params.min_score,
+                                                                                   *taught.values()])))
             detector.update(np.full((8, 8), 2000, np.uint16), 0)  # compile the numba kernels now
             detector.reset()
         except (ForestFileError, OSError, ValueError) as err:
@@ -113,7 +127,8 @@ class GestureDetection(Node):
             return self.model_error
         if self.detector is not None and self.detector.focal_px is not None:
             detector.set_focal(self.detector.focal_px)
-        self.detector, self.model_path, self.model_error = detector, path, ""
+        self.detector, self.model_path, self.model_error, self.thresholds = detector, path, "", taught
+        self.model_watch = FileWatch(path)
         trained = forest.training_focal_px
         self.get_logger().info(
             f"gesture forest {path.name}: {len(forest.trees)} trees, classes {', '.join(forest.class_names[1:])}, "
@@ -122,6 +137,13 @@ class GestureDetection(Node):
             + (f", trained at fx {trained:g} px" if trained else ", training focal length unknown (offsets used as is)"))
         return ""
 
+    def _check_model_file(self) -> None:
+        """Load model_file again when it was written since it was last seen (:mod:`~hmocap_ros.gestures.file_watch`)."""
+        if self.model_watch.changed():
+            error = self._load_model(str(self.model_watch.path))
+            if error:
+                self.get_logger().error(f"{error}; the forest in use is kept")
+
     def _on_set_parameters(self, params) -> SetParametersResult:
         for p in params:
             if p.name == "model_file":
@@ -129,23 +151,18 @@ class GestureDetection(Node):
                 if error:
                     self.get_logger().error(error)
                     return SetParametersResult(successful=False, reason=error)
-            elif p.name in {f for f in DetectorParams.__dataclass_fields__} | {"publish_probability", "queue_depth"}:
+            elif p.name in {f for f in DetectorParams.__dataclass_fields__} | {"publish_probability", "queue_depth",
+                                                                             "image_reliability", "watch_period_s",
+                                                                             "use_taught_thresholds"}:
                 return SetParametersResult(successful=False, reason=f"{p.name} is read at start: restart the node")
         return SetParametersResult(successful=True)
 
     # -- input --------------------------------------------------------------------------
 
     def _on_info(self, msg: CameraInfo) -> None:
-        try:
-            camera = PinholeCamera.from_camera_info(camera_info_to_dict(msg))
-        except (ConversionError, ValueError) as err:
-            self.get_logger().error(f"depth/camera_info: {err}", throttle_duration_sec=5.0)
-            return
-        if self.camera is None or camera.fx != self.camera.fx:
-            self.get_logger().info(f"depth camera {camera.width}x{camera.height}, fx {camera.fx:g} px")
-        self.camera = camera
-        if self.detector is not None:
-            self.detector.set_focal(camera.fx)
+        self.camera = depth_camera_from_info(msg, self.camera, self.get_logger())
+        if self.detector is not None and self.camera is not None:
+            self.detector.set_focal(self.camera.fx)
 
     def _on_depth(self, msg: Image) -> None:
         log = self.get_logger()
@@ -182,7 +199,8 @@ class GestureDetection(Node):
         stamp = stamp_to_ns(msg.header.stamp)
         t0 = time.perf_counter()
         try:
-            detections = self.detector.update(depth, stamp)
+            detections = [d for d in self.detector.update(depth, stamp)
+                          if d.score >= self.thresholds.get(d.name, self.params.min_score)]
         except ValueError as err:
             log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
             return
@@ -191,20 +209,10 @@ class GestureDetection(Node):
         if self.detector.class_map is not None and not np.any(self.detector.class_map >= 0):
             log.warning("depth/image_raw has no valid depth (all zero, NaN or out of range)",
                         throttle_duration_sec=10.0)
-        out = GestureArray()
-        out.header = msg.header
-        for det in detections:
-            g = Gesture(name=det.name, class_id=int(det.class_id), score=float(det.score),
-                        volume=float(det.volume), u=float(det.u), v=float(det.v))
-            point = gesture_point(camera, det.u, det.v, det.depth_m)
-            if point is not None:
-                g.position.x, g.position.y, g.position.z = point
-                g.position_valid = True
-            out.gestures.append(g)
-        self.pub.publish(out)
+        self.pub.publish(gesture_array(detections, stamp, msg.header.frame_id, camera, self.factory))
         if self.prob_pub is not None:
-            prob = np.clip(self.detector.probability_image() * 255.0, 0, 255).astype(np.uint8)
-            self.prob_pub.publish(numpy_to_image(prob, "mono8", stamp, msg.header.frame_id, self.factory))
+            self.prob_pub.publish(probability_image(self.detector.probability_image(), stamp,
+                                                    msg.header.frame_id, self.factory))
         if self.frames % 100 == 0:
             log.info(f"{self.frames} frames, {1e3 * self.seconds / self.frames:.1f} ms per frame")
 

@@ -5,10 +5,11 @@ furnished room of the gesture simulator (:mod:`~hmocap_ros.sim.depth_scene`, peo
 :mod:`~hmocap_ros.sim.gesture_set`) doing what the last :class:`~hmocap_ros.gestures.trainer.TrainerStatus`
 asks:
 
-- ``do_gesture``: moves (a short blend) into the taught gesture with its reference point at
-  the box centre; ``update_positive`` and ``testing``: holds it there with small pose variations
+- ``do_gesture``: moves (a short blend) to a new spot of the zone (each round at another
+  distance and angle) and into the taught gesture with its reference point at the box centre; ``update_positive`` and ``testing``: holds it there with small pose variations
   (two jittered solutions of the gesture blended back and forth, a new pair every
   ``VARIATION_S``);
+- ``rehearse``: holds the known gesture the status names (``rehearsed``) in the box, as above;
 - ``release``: blends back to standing;
 - ``do_negatives``: takes of everyday motions (:data:`~hmocap_ros.sim.gesture_set.NEGATIVE_KINDS`)
   and of the simulator's gestures the forest does not know, as the bag simulator draws them
@@ -21,6 +22,10 @@ Design choices: to put the gesture in the box the person is moved parallel to th
 centre; the body may then float or sink a few centimetres, which the camera rarely sees. The
 frames are Kinect-like uint16 millimetres (0 = invalid), ``1 / fps`` apart from
 ``START_NS``. Every draw comes from Generators seeded by ``seed``: a run repeats bit for bit.
+
+:func:`write_recording_bag` writes what a trainer recorded (``Trainer(..., record=True)``) as
+an annotated gesture bag (the layout of ``hmocap sim gestures``), so that ``hmocap train
+gestures`` trains offline on exactly the frames of a session (thesis sec. 3.4.2).
 """
 
 from __future__ import annotations
@@ -28,11 +33,15 @@ from __future__ import annotations
 import numpy as np
 
 from hmocap_ros.body import load_body_model
+from hmocap_ros.io import topics
+from hmocap_ros.io.bag_writer import whole_bag
+from hmocap_ros.io.conversions import dict_to_camera_info, numpy_to_image
+from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
 from hmocap_ros.sim import gesture_set as gs
 from hmocap_ros.sim.depth_scene import make_layout, render_depth
 from hmocap_ros.sim.gesture_takes import MAX_YAW_DEG, Actor, bystander_pose, facing_yaw, lerp_pose, take_frames
 
-__all__ = ["START_NS", "VARIATION_S", "GestureTeacher", "run_session"]
+__all__ = ["START_NS", "VARIATION_S", "GestureTeacher", "run_session", "write_recording_bag"]
 
 START_NS = 1_700_000_000_000_000_000
 VARIATION_S = 1.0
@@ -89,10 +98,12 @@ class GestureTeacher:
         spec = gs.negative_spec(self.model, self.actor.subject, "idle", self.rng, camera_body=cam)
         return gs.place(self.model, gs.solve_spec(self.model, self.actor.subject, spec, restarts=0), x, z, yaw)
 
-    def _new_hold(self, gesture: str) -> None:
-        """Two jittered solutions of ``gesture`` at a spot of the zone (small pose variations)."""
+    def _new_hold(self, gesture: str, new_spot: bool = False) -> None:
+        """Two jittered solutions of ``gesture`` at a spot of the zone (small pose variations); a
+        new spot for another gesture or when ``new_spot``."""
         m, subj = self.model, self.actor.subject
-        x, z, yaw = self._spot() if self.held is None or self.held[6] != gesture else self.held[2:5]
+        same = self.held is not None and self.held[6] == gesture and not new_spot
+        x, z, yaw = self.held[2:5] if same else self._spot()
         cam = gs.world_to_body(x, z, yaw, self.camera.position)
         spec = gs.pose_spec(m, subj, gesture, self.rng, camera_body=cam)
         a = gs.solve_spec(m, subj, gs.jitter_spec(spec, self.rng, model=m))
@@ -135,13 +146,15 @@ class GestureTeacher:
 
     def _pose_for(self, status) -> np.ndarray:
         state, g = status.state, status.gesture
-        mode = {"do_gesture": "hold", "update_positive": "hold", "testing": "hold",
+        if state == "rehearse":
+            g = getattr(status, "rehearsed", "") or g
+        mode = {"do_gesture": "hold", "update_positive": "hold", "testing": "hold", "rehearse": "hold",
                 "release": "stand", "do_negatives": "negatives"}.get(state, "idle")
         if (mode, g) != self.mode:
             self.mode, self.frames_in_mode = (mode, g), 0
             if mode == "hold":
-                if self.held is None or self.held[6] != g:
-                    self._new_hold(g)
+                if self.held is None or self.held[6] != g or state == "do_gesture":
+                    self._new_hold(g, new_spot=state == "do_gesture")
                 self.queue = self._blend_to(self._held_pose(status))
             elif mode == "stand":
                 self.queue = self._blend_to(self._standing())
@@ -195,3 +208,35 @@ def run_session(trainer, teacher: GestureTeacher, seconds: float) -> list:
         status = trainer.on_frame(depth, stamp)
         out.append(status)
     return out
+
+
+def write_recording_bag(path, recording, camera) -> int:
+    """Write a trainer's recorded frames (:class:`~hmocap_ros.gestures.trainer.RecordedFrame`)
+    seen by ``camera`` (a :class:`~hmocap_ros.sim.depth_scene` camera) as an annotated bag:
+    ``/depth/image_raw`` (16UC1 mm), ``/depth/camera_info`` and ``/ground_truth/gestures`` (the
+    frame's gesture at the box centre, with the simulator's class id, :data:`GESTURE_CLASSES`;
+    a name it does not have gets the next free id in order of appearance). Returns the number of
+    frames written."""
+    factory = RosbagsFactory()
+    ids = {}
+    n = 0
+    with whole_bag(path) as bag:
+        for f in recording:
+            stamp = int(f.stamp_ns)
+            gestures = []
+            if f.gesture:
+                if f.gesture not in ids:
+                    ids[f.gesture] = (gs.class_id(f.gesture) if f.gesture in gs.GESTURE_CLASSES
+                                      else len(gs.GESTURE_CLASSES) + 1 + sum(
+                                          g not in gs.GESTURE_CLASSES for g in ids))
+                gestures.append(factory.make(
+                    "hmocap_interfaces/msg/Gesture", name=f.gesture, class_id=ids[f.gesture], score=1.0, volume=1.0,
+                    u=float(f.u), v=float(f.v), position=factory.make("geometry_msgs/msg/Point", x=0.0, y=0.0, z=0.0),
+                    position_valid=True))
+            bag.write(topics.DEPTH_IMAGE, numpy_to_image(f.depth_mm, "16UC1", stamp, camera.frame_id, factory), stamp)
+            bag.write(topics.DEPTH_INFO, dict_to_camera_info(camera.to_camera_info_dict(), stamp, factory), stamp)
+            bag.write(topics.GT_GESTURES, factory.make("hmocap_interfaces/msg/GestureArray",
+                                                       header=make_header(factory, stamp, camera.frame_id),
+                                                       gestures=gestures), stamp)
+            n += 1
+    return n
