@@ -153,7 +153,7 @@ def test_bad_requests_and_input_are_refused_and_the_node_keeps_running(tmp_path)
     assert answers[2].startswith("ANSWER False not a gesture name")
     assert answers[3].startswith("ANSWER True teaching 'wave'")
     assert answers[4].startswith("ANSWER False already teaching 'wave'")
-    assert answers[5].startswith("ANSWER True cancelled teaching 'wave' in round 1")
+    assert answers[5].startswith("ANSWER True cancelled teaching 'wave' after 0 complete round(s)")
     assert answers[6] == "ANSWER False no session to cancel"
     assert "encoding '8UC1'" in log and "Traceback" not in log, log
     assert not Path(tmp_path / "new.forest.npz").exists()  # cancelled: nothing written

@@ -237,7 +237,8 @@ class GestureTrainer(Node):
         gesture, rnd = self.trainer.gesture, self.trainer.round
         self.trainer.cancel()
         response.success = True
-        response.message = f"cancelled teaching '{gesture}' in round {rnd}: the forest is as it was before the round"
+        response.message = (f"cancelled teaching '{gesture}' after {rnd - 1} complete round(s): the forest "
+                            f"is as it was before the round")
         self.get_logger().info(response.message)
         self._publish_state(self.trainer.status(self.stats.last_stamp or 0, *self._image_size()))
         return response
