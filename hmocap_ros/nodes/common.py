@@ -246,6 +246,22 @@ def depth_camera_from_info(msg, current, logger):
     return camera
 
 
+def depth_from_msg(msg, encodings, logger):
+    """The image of a ``depth/image_raw`` message as a numpy array, or None (logged, throttled)
+    when its encoding is not one of ``encodings`` or it cannot be converted."""
+    from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+
+    if msg.encoding not in encodings:
+        logger.error(f"depth/image_raw has encoding '{msg.encoding}'; expected one of {encodings}",
+                     throttle_duration_sec=5.0)
+        return None
+    try:
+        return image_to_numpy(msg)
+    except ConversionError as err:
+        logger.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
+        return None
+
+
 def message_class(typename: str):
     """The rclpy message class for 'pkg/msg/Name' (ImportError with a clear text if unknown)."""
     import importlib

@@ -53,10 +53,9 @@ from hmocap_ros.gestures.depth_units import implausible_depth
 from hmocap_ros.gestures.file_watch import FileWatch
 from hmocap_ros.gestures.gesture_messages import gesture_array, probability_image
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
-from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, depth_camera_from_info,
-                                     image_qos, image_reliability_param, param, run_node)
+                                     depth_from_msg, image_qos, image_reliability_param, param, run_node)
 
 NODE_NAME = "gesture_detection"
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
@@ -169,14 +168,8 @@ class GestureDetection(Node):
         if self.detector is None:
             log.error(f"{self.model_error}: depth frames are dropped", throttle_duration_sec=10.0)
             return
-        if msg.encoding not in DEPTH_ENCODINGS:
-            log.error(f"depth/image_raw has encoding '{msg.encoding}'; expected one of {DEPTH_ENCODINGS}",
-                      throttle_duration_sec=5.0)
-            return
-        try:
-            depth = image_to_numpy(msg)
-        except ConversionError as err:
-            log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
+        depth = depth_from_msg(msg, DEPTH_ENCODINGS, log)
+        if depth is None:
             return
         if not self.unit_warned:
             reason = implausible_depth(depth, self.params.depth_format)

@@ -62,10 +62,10 @@ from hmocap_ros.gestures.depth_features import depth_to_metres
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
 from hmocap_ros.gestures.trainer import INSTRUCTIONS, Trainer, TrainerParams, TrainerStatus
 from hmocap_ros.gestures.trainer_feedback import feedback_image
-from hmocap_ros.io.conversions import ConversionError, image_to_numpy, numpy_to_image
+from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, ns_to_stamp, stamp_to_ns
-from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, depth_camera_from_info, image_qos,
-                                     image_reliability_param, param, run_node)
+from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, depth_camera_from_info,
+                                     depth_from_msg, image_qos, image_reliability_param, param, run_node)
 from hmocap_ros.nodes.gesture_detection import DEPTH_ENCODINGS
 
 NODE_NAME = "gesture_trainer"
@@ -274,14 +274,8 @@ class GestureTrainer(Node):
         stamp = stamp_to_ns(msg.header.stamp)
         received = info.get("received_timestamp", 0) if info else 0
         self.stats.frame(stamp, (time.time_ns() - received) * 1e-9 if received else 0.0)
-        if msg.encoding not in DEPTH_ENCODINGS:
-            log.error(f"depth/image_raw has encoding '{msg.encoding}'; expected one of {DEPTH_ENCODINGS}",
-                      throttle_duration_sec=5.0)
-            return
-        try:
-            depth = image_to_numpy(msg)
-        except ConversionError as err:
-            log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
+        depth = depth_from_msg(msg, DEPTH_ENCODINGS, log)
+        if depth is None:
             return
         self.frame_id = msg.header.frame_id
         t0 = time.perf_counter()
