@@ -1,6 +1,6 @@
 """``hmocap calibrate BAG --out rig.yaml``: the camera rig from a bag of a ChArUco board
 (``hmocap calibrate --live --out rig.yaml``: from the cameras' topics,
-:mod:`~hmocap_ros.commands.calibrate_live`).
+:mod:`~hmocap_ros.nodes.calibration_collector`).
 
 Reads every ``/<cam>/image_raw`` of the bag, detects the board's corners
 (:mod:`hmocap_ros.calibration.detection`), takes each camera's intrinsics from the bag
@@ -269,7 +269,7 @@ def calibrate_session(ns: argparse.Namespace, session, source: Path,
 def run_live_calibration(ns: argparse.Namespace, ros_args: list | None = None,
                          log=print) -> tuple[Path, Path, Path]:
     """``--live``: the session from the cameras' topics, then the same calibration."""
-    from hmocap_ros.commands.calibrate_live import collect_live
+    from hmocap_ros.nodes.calibration_collector import collect_live
     from hmocap_ros.sim.calibration_session import board_from_args
 
     session = collect_live(ns, board_from_args(ns), ros_args or [], log)
