@@ -105,7 +105,7 @@ from dataclasses import dataclass
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
-from hmocap_interfaces.msg import CameraRig, Extremities, IdsList, Skeleton
+from hmocap_interfaces.msg import Extremities, IdsList, Skeleton
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -117,9 +117,9 @@ from hmocap_ros.body.model import load_body_model
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.tf import TF_TOPIC
-from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters, image_qos,
-                                     image_reliability_param, param, run_node)
-from hmocap_ros.rig import Rig, RigError, load_rig
+from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, image_qos,
+                                     image_reliability_param, param, run_node, take_rig)
+from hmocap_ros.rig import Rig
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
 from hmocap_ros.tracking.params import TrackerParams
@@ -210,20 +210,7 @@ class BodyTrackerNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync, clock=steady)
         self.create_timer(TICK_S, self._tick, clock=steady)
-        if self.config.rig_file:
-            try:
-                self._set_rig(load_rig(self.config.rig_file))
-            except (RigError, OSError) as err:
-                self.get_logger().fatal(f"cannot load the rig: {err}")
-                raise SystemExit(2) from err
-        else:
-            self.create_subscription(CameraRig, "camera_rig", self._on_rig, LATCHED_QOS)
-            self.get_logger().info("waiting for the rig on camera_rig")
-
-    def _on_rig(self, msg: CameraRig) -> None:
-        rig = changed_rig(msg, self.rig, self.get_logger())
-        if rig is not None:
-            self._set_rig(rig)
+        take_rig(self, self.config.rig_file, self._set_rig)
 
     def _set_rig(self, rig: Rig) -> None:
         first = self.rig is None

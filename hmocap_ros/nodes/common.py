@@ -215,6 +215,31 @@ def run_node(
     return 0
 
 
+def take_rig(node: Node, rig_file: str, set_rig: Callable) -> None:
+    """Give ``set_rig`` the rig of ``rig_file`` now (ValueError naming the file when it cannot
+    be read: the node does not start), or, with no file, every changed rig of the latched
+    ``camera_rig`` topic (:func:`changed_rig`)."""
+    from hmocap_interfaces.msg import CameraRig
+
+    from hmocap_ros.rig import RigError, load_rig
+
+    if rig_file:
+        try:
+            rig = load_rig(rig_file)
+        except (RigError, OSError) as err:
+            raise ValueError(f"cannot load the rig: {err}") from err
+        set_rig(rig)
+        return
+
+    def on_rig(msg) -> None:
+        rig = changed_rig(msg, node.rig, node.get_logger())
+        if rig is not None:
+            set_rig(rig)
+
+    node.create_subscription(CameraRig, "camera_rig", on_rig, LATCHED_QOS)
+    node.get_logger().info("waiting for the rig on camera_rig")
+
+
 def changed_rig(msg, current, logger):
     """The rig of a ``camera_rig`` message when it differs from ``current`` (a node's rig or
     None); None when it is the same rig or invalid (logged)."""

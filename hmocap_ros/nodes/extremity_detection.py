@@ -41,7 +41,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Vector3
-from hmocap_interfaces.msg import CameraRig, Extremities, Skeleton
+from hmocap_interfaces.msg import Extremities, Skeleton
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Image, PointCloud2
@@ -54,9 +54,9 @@ from hmocap_ros.frame_sets import TICK_S, FrameSetQueue
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.point_clouds import array_to_pointcloud2
-from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, changed_rig, declare_parameters, image_qos,
-                                     image_reliability_param, param, run_node)
-from hmocap_ros.rig import Rig, RigError, load_rig
+from hmocap_ros.nodes.common import (RESULT_QOS, declare_parameters, image_qos, image_reliability_param,
+                                     param, run_node, take_rig)
+from hmocap_ros.rig import Rig
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 
 NODE_NAME = "extremity_detection"
@@ -113,21 +113,9 @@ class ExtremityDetectionNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         if self.config.use_skeleton:
             self.create_subscription(Skeleton, "skeleton", self._on_skeleton, RESULT_QOS)
-        if self.config.rig_file:
-            try:
-                self._set_rig(load_rig(self.config.rig_file))
-            except (RigError, OSError) as err:
-                raise ValueError(f"cannot load the rig: {err}") from err
-        else:
-            self.create_subscription(CameraRig, "camera_rig", self._on_rig, LATCHED_QOS)
-            self.get_logger().info("waiting for the rig on camera_rig")
+        take_rig(self, self.config.rig_file, self._set_rig)
 
     # ------------------------------------------------------------------ set-up
-
-    def _on_rig(self, msg: CameraRig) -> None:
-        rig = changed_rig(msg, self.rig, self.get_logger())
-        if rig is not None:
-            self._set_rig(rig)
 
     def _make_pipeline(self, rig: Rig) -> ExtremityPipeline:
         model = self.config.model_file or None
