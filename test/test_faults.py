@@ -30,6 +30,7 @@ import numpy as np
 import pytest
 
 from hmocap_ros.demo import DEMO_BAG, DEMO_RIG, GESTURE_BAG
+from hmocap_ros.eval.pipeline_stats import process_rss_mb
 from hmocap_ros.io import topics as bag_topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.bag_writer import BagWriter
@@ -259,16 +260,6 @@ def test_stamps_jumping_back_start_the_tracker_over(tmp_path):
     assert len(posed & set(after)) >= 15  # the person is tracked again after the jump
 
 
-def _rss_kb(pid: int) -> int | None:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1])
-    except OSError:
-        return None
-    return None
-
-
 def test_soak_memory_stays_flat(tmp_path):
     minutes = float(os.environ.get("HMOCAP_SOAK_MINUTES", "30"))
     period = float(os.environ.get("HMOCAP_SOAK_SAMPLE_S", "10"))
@@ -283,8 +274,8 @@ def test_soak_memory_stays_flat(tmp_path):
         while time.monotonic() - t0 < minutes * 60:
             series["t_s"].append(round(time.monotonic() - t0, 1))
             for name, proc in room.procs.items():
-                kb = _rss_kb(proc.proc.pid)
-                series["rss_mb"][name].append(None if kb is None else round(kb / 1024, 2))
+                mb = process_rss_mb(proc.proc.pid)
+                series["rss_mb"][name].append(None if mb is None else round(mb, 2))
             series["recorded"].append({t: room.count(t) for t in RECORDED})
             assert all(code is None for code in room.all_running().values()), room.all_running()
             time.sleep(period)

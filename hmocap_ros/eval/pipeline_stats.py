@@ -16,6 +16,7 @@ Definitions:
 
 from __future__ import annotations
 
+import os
 import struct
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -78,8 +79,6 @@ def process_cpu_seconds(pid: int) -> float | None:
         fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     except OSError:
         return None
-    import os
-
     ticks = os.sysconf("SC_CLK_TCK")
     return sum(int(fields[k]) for k in (11, 12, 13, 14)) / ticks  # utime stime cutime cstime
 
