@@ -13,6 +13,7 @@ images, the depth images and every output, and notes when each arrives. Reported
   ``skipped_frame_sets`` diagnostics);
 - latency (stamp to publication: an output's arrival minus the arrival of the frame set it
   was computed from) p50 / p95 / max per output topic;
+- outputs that arrived after one with a newer stamp, per topic (``out_of_order``);
 - CPU per node (cores: CPU seconds over the replay's wall seconds);
 - the mean joint error (mm) of the published poses against the bag's ground truth, and with
   ``--offline`` the same tracker run offline on every frame set (``hmocap eval mocap``) beside
@@ -108,6 +109,9 @@ class Monitor:
         rclpy.init(args=["bench_pipeline_monitor"])
         self.node = rclpy.create_node("bench_pipeline_monitor")
         self.arrivals: dict[str, dict[int, float]] = {t: {} for t in watch}
+        #: per topic, messages whose stamp is older than one that came before them
+        self.out_of_order: dict[str, int] = {t: 0 for t in watch}
+        self._newest: dict[str, int] = {}
         self.kept: dict[str, dict[int, bytes]] = {t: {} for t in keep}
         self.skipped = 0
         self.tracker_seconds: list[float] = []
@@ -129,6 +133,9 @@ class Monitor:
         def on_message(data: bytes) -> None:
             now = time.monotonic()
             stamp = header_stamp_ns(data)
+            if stamp < self._newest.get(topic, stamp):
+                self.out_of_order[topic] += 1
+            self._newest[topic] = max(stamp, self._newest.get(topic, stamp))
             arrivals.setdefault(stamp, now)
             if kept is not None:
                 kept[stamp] = data
@@ -301,6 +308,7 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu: dict, repla
         "poses_per_s": len([s for s in poses if s in truth]) / max(len(person_in) * period, 1e-9),
         "poses_per_s_tracking": tracking_rate(poses, inputs, truth, period),
         "frame_sets_skipped": monitor.skipped,
+        "out_of_order": {t: n for t, n in monitor.out_of_order.items() if t != topics.camera_image(cameras[-1])},
         **latency_summary(latency_ms(inputs, poses)),
         "mean_error_mm": float(np.mean(list(errors.values()))) if errors else float("nan"),
         "tracker_seconds_per_frame": float(np.median(monitor.tracker_seconds)) if monitor.tracker_seconds else float("nan"),
@@ -355,6 +363,8 @@ def print_report(r: dict) -> None:
               f"{g['frames_per_s']:.1f} frames/s, latency p50 {g['latency_p50_ms']:.0f} ms, p95 "
               f"{g['latency_p95_ms']:.0f} ms")
     print("  CPU (cores): " + ", ".join(f"{n} {c:.2f}" for n, c in r["cpu_cores"].items()))
+    late = {t: n for t, n in r["out_of_order"].items() if n}
+    print("  outputs out of stamp order: " + (", ".join(f"{t} {n}" for t, n in late.items()) or "none"))
 
 
 def main(argv=None) -> int:
