@@ -107,3 +107,31 @@ def test_whole_bag_is_complete_or_absent(tmp_path, name):
         bag.write("/text", msg, 1_000)
     with BagReader(path) as reader:
         assert [m.msg.data for m in reader.messages()] == ["frame"]
+
+
+def test_generated_bags_do_not_depend_on_the_wall_clock(tmp_path, monkeypatch):
+    """A generated bag's bytes are a function of its messages: ``whole_bag`` closes chunks by
+    size only. A writer that flushed on a timer would cut chunks wherever the clock (a loaded
+    machine) made it, and the same data set would come out in other bytes."""
+    import hmocap_ros.io.bag_writer as bag_writer
+
+    factory = RosbagsFactory(hmocap_typestore())
+    msgs = [factory.make("std_msgs/msg/String", data=f"frame {i}") for i in range(20)]
+
+    def write(path, seconds_per_message):
+        clock = iter(np.arange(1000) * seconds_per_message)
+        monkeypatch.setattr(bag_writer.time, "monotonic", lambda: float(next(clock)))
+        with whole_bag(path) as bag:
+            for i, msg in enumerate(msgs):
+                bag.write("/text", msg, 1_000 + i)
+        return path.read_bytes()
+
+    (tmp_path / "idle").mkdir()
+    (tmp_path / "loaded").mkdir()
+    assert write(tmp_path / "idle" / "g.mcap", 0.0) == write(tmp_path / "loaded" / "g.mcap", 5.0)
+    # a recorder keeps its timed flush (what a killed recorder loses is bounded by it)
+    clock = iter(np.arange(1000) * 5.0)
+    monkeypatch.setattr(bag_writer.time, "monotonic", lambda: float(next(clock)))
+    with BagWriter(tmp_path / "recorded.mcap") as bag:
+        bag.write("/text", msgs[0], 1_000)
+        assert bag._unflushed == 0

