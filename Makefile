@@ -12,10 +12,12 @@ export PYTHONUNBUFFERED = 1
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test test-slow test-mutants test-faults test-multihost bench clean help
+.PHONY: setup demo test test-fresh test-slow test-mutants test-faults test-multihost bench clean help
 help:
 	@echo "make demo       set up if needed, run the demo on the shipped data"
 	@echo "make test       set up if needed, run the test suite"
+	@echo "make test-fresh what CI runs: a clean clone of HEAD, set up from nothing, then make test"
+	@echo "                (HMOCAP_FRESH_LOAD=1: one core busy; HMOCAP_FRESH_OTHER_CPU=1: an AVX2 CPU's rounding)"
 	@echo "make test-slow  long evaluations (marked slow)"
 	@echo "make test-mutants  deliberate breakages the accuracy tests must catch"
 	@echo "make test-faults   nodes killed, a camera gone, stamps back, memory soak (HMOCAP_SOAK_MINUTES, default 30)"
@@ -31,6 +33,9 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q -p no:cacheprovider
+
+test-fresh:
+	@bash tools/test_fresh.sh
 
 test-slow: setup
 	$(PY) -m pytest -q -m slow
