@@ -100,3 +100,39 @@ def load_tool():
         return module
 
     return load
+
+
+# ----------------------------------------------------------------------------- make test-mutants
+_mutant_outcomes: dict[str, str] = {}
+
+
+def pytest_runtest_logreport(report) -> None:
+    """Note the outcome of each ``test_mutant_is_caught[name]`` for the summary below."""
+    if "test_mutant_is_caught[" not in report.nodeid:
+        return
+    name = report.nodeid.rsplit("[", 1)[1].rstrip("]")
+    if report.when == "call" or (report.when == "setup" and not report.passed):
+        if hasattr(report, "wasxfail"):
+            _mutant_outcomes[name] = "survives (strict xfail)" if report.skipped else "CAUGHT, but marked xfail"
+        else:
+            _mutant_outcomes[name] = "caught" if report.passed else "SURVIVES"
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    """After ``make test-mutants``: every mutant, its breakage, the tests that must catch it
+    and whether they did (a survivor is either a strict xfail with its reason or a failure)."""
+    if not _mutant_outcomes:
+        return
+    import test_mutants
+
+    write = terminalreporter.write_line
+    terminalreporter.section("mutants")
+    for name, mutant in test_mutants.MUTANTS.items():
+        if name not in _mutant_outcomes:
+            continue
+        breakage = " ".join((mutant.apply.__doc__ or "").strip().split("\n\n")[0].split())
+        write(f"{name}: {_mutant_outcomes[name]} -- {breakage}")
+        for node in mutant.catching:
+            write(f"    {node}")
+        if mutant.survives:
+            write(f"    reason it survives: {mutant.survives}")

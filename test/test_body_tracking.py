@@ -309,19 +309,18 @@ def test_rejection_kernel_eq_2_13():
 
 @pytest.fixture(scope="module")
 def shape_estimate(model, rig):
-    """``(estimate, truth)`` BodyShapes: the start-up estimator on two frames of the subject."""
+    """``(estimate, truth)`` BodyShapes: the tracker's start-up (sec. 2.3) on two frames of the
+    subject, as the node runs it (``startup.frames`` 2 at 120 particles)."""
     shape = subject_shape()
     params = clip_poses(model, 0, 2, shape)
     masks, _ = render_masks(model, rig, params, shape)
-    fitness = SilhouetteFitness(model, rig, working_scale=0.5)
-    obs = [fitness.observe(list(m)) for m in masks]
-    hull = visual_hull(obs[0].masks, obs[0].K, obs[0].R, obs[0].t, obs[0].D, room_bounds(rig))
-    est = AnthropometryEstimator(fitness, EstimationParams(n_particles=120, frames=2),
-                                 np.random.default_rng(0), room=room_bounds(rig))
-    est.start(obs[0], hull)
-    for o in obs:
-        est.step(o)
-    return est.shape(), shape
+    tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
+        "method": "hpf-apo", "startup.frames": 2, "startup.particles": 120,
+        "startup.working_scale": 0.5, "weighting.working_scale": 0.5,
+        "startup.min_foreground": 30, "filter.particles": 20}), np.random.default_rng(0))
+    states = [tracker.update(list(m), STAMP0 + f).state for f, m in enumerate(masks)]
+    assert states == ["initialising", "tracking"] and tracker.shape is not None
+    return tracker.shape, shape
 
 
 def scaled_to_height(model, shape: BodyShape) -> BodyShape:

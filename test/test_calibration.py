@@ -57,9 +57,36 @@ def test_bundle_adjustment_recovers_perturbed_rig():
     tb0 = tb + rng.normal(0, 0.05, tb.shape)
     result = bundle_adjust(obs, spec.corner_points(), 0, R0, t0, Rb0, tb0, K, D[:, :5])
     assert result.n_dropped == 0
-    assert np.abs(result.residuals).max() < 1e-6
-    assert np.abs(result.t_cam - t_w).max() < 1e-7
-    assert rotation_angle_deg(result.R_cam, R_w).max() < 1e-5
+    # exact corners: exact up to where the solver stops (see the floor-frame test below)
+    assert np.abs(result.residuals).max() < 1e-4  # px
+    assert np.abs(result.t_cam - t_w).max() < 1e-5  # m
+    assert rotation_angle_deg(result.R_cam, R_w).max() < 1e-4
+
+
+def test_bundle_adjustment_drops_the_corners_far_from_their_projection():
+    """One corner in forty detected 15-40 px off (a marker misread): after the first pass the
+    adjustment drops every such corner and solves again, which gives the exact rig back. The
+    robust loss alone only bounds their pull: the rig it leaves is millimetres off."""
+    rig = make_rig(3, 320, 240)
+    spec = BoardSpec()
+    rng = np.random.default_rng(3)
+    obs, R_board, t_board = _synthetic(rig, spec, rng)
+    K, R, t, D = rig.arrays()
+    R_w = R @ R[0].T
+    t_w = t - np.einsum("kij,j->ki", R_w, t[0])
+    Rb = np.einsum("ij,pjk->pik", R[0], R_board)
+    tb = t_board @ R[0].T + t[0]
+    bad = rng.choice(len(obs.pixels), size=len(obs.pixels) // 40, replace=False)
+    offset = rng.normal(size=(len(bad), 2))
+    offset *= rng.uniform(15.0, 40.0, (len(bad), 1)) / np.linalg.norm(offset, axis=1, keepdims=True)
+    pixels = obs.pixels.copy()
+    pixels[bad] += offset
+    misread = Observations(obs.camera, obs.pose, obs.corner, pixels, obs.n_cameras, obs.n_poses)
+    result = bundle_adjust(misread, spec.corner_points(), 0, R_w, t_w, Rb, tb, K, D[:, :5])
+    assert result.n_dropped == len(bad)
+    assert np.abs(result.residuals).max() < 1e-4  # px
+    assert np.abs(result.t_cam - t_w).max() < 1e-5  # m
+    assert rotation_angle_deg(result.R_cam, R_w).max() < 1e-4
 
 
 def test_floor_frames_as_one_board_pose_give_the_room_frame():

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fixtures.image_free import WRISTS, image_free_baselines
 from hmocap_ros.body import BodyShape, load_body_model
 from hmocap_ros.cli import main as cli_main
 from hmocap_ros.eval.metrics import joint_errors, match_joints, mpjpe, summarize_errors
@@ -91,6 +92,14 @@ def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path):
     assert res["params"]["startup.frames"] == 1 and res["params"]["filter.sweeps"] == 2
     assert report["methods"]["hpf"]["params"]["method"] == "hpf"
     assert res["frames_with_pose"] == 3 and np.isfinite(res["mean_mm"])
+    # what the trackers must beat on these frames: the A-pose stood at the true pelvis is
+    # 195 mm off (its wrists 658); over three frames the person barely moves, so the mean of
+    # the true poses is no baseline here
+    base = image_free_baselines(DEMO_BAG, frames=3)
+    for method, figures in report["methods"].items():
+        wrist = np.mean([figures["per_joint"][w]["mean_mm"] for w in WRISTS])
+        assert figures["mean_mm"] < 0.5 * base["a_pose"], (method, figures["mean_mm"], base)
+        assert wrist < 0.6 * base["a_pose_wrist"], (method, wrist, base)
     anthro = res["anthropometry"]
     assert set(anthro) >= {"estimated_m", "true_m", "error_mm", "mean_abs_error_mm",
                            "neutral_mean_abs_error_mm"}

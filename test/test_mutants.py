@@ -106,6 +106,63 @@ def shadow_suppression_off(mp: pytest.MonkeyPatch) -> None:
     mp.setattr(background_model, "classify_and_update", classify_and_update)
 
 
+def detector_terms_ignored(mp: pytest.MonkeyPatch) -> None:
+    """dd-hpf without its detection terms: no joint term in any layer, no refinement layer
+    (eq. 2.20-2.21); it runs as hpf-apo with IK particles."""
+    from hmocap_ros.tracking.detector_driven import DetectorDriven
+
+    mp.setattr(DetectorDriven, "layer_terms", lambda self, assigned, rest: None)
+
+
+def keypoints_on_the_other_side(mp: pytest.MonkeyPatch) -> None:
+    """Labelled keypoints attached to the model's joints of the other side (``left_*`` on
+    ``r_*``)."""
+    from hmocap_ros.detection.detections import MODEL_JOINT
+    from hmocap_ros.tracking import detector_driven
+
+    other = {"l": "r", "r": "l"}
+    mp.setattr(detector_driven, "MODEL_JOINT",
+               {label: other[joint[0]] + joint[1:] for label, joint in MODEL_JOINT.items()})
+
+
+def landmark_undistortion_skipped(mp: pytest.MonkeyPatch) -> None:
+    """The views' landmarks triangulated as they are, in the distorted image."""
+    from hmocap_ros.pinhole_camera import PinholeCamera
+
+    mp.setattr(PinholeCamera, "undistort_pixels", lambda self, pixels: np.asarray(pixels, float))
+
+
+def bundle_adjustment_keeps_outliers(mp: pytest.MonkeyPatch) -> None:
+    """The bundle adjustment never drops an observation, however far from its projection."""
+    from hmocap_ros.calibration import bundle_adjustment
+
+    real = bundle_adjustment.bundle_adjust
+
+    def bundle_adjust(*args, **kwargs):
+        kwargs["outlier_px"] = np.inf
+        return real(*args, **kwargs)
+
+    mp.setattr(bundle_adjustment, "bundle_adjust", bundle_adjust)
+    mp.setattr("hmocap_ros.calibration.pipeline.bundle_adjust", bundle_adjust)
+
+
+def startup_shape_estimation_off(mp: pytest.MonkeyPatch) -> None:
+    """The tracker's start-up keeps the model's proportions (scaled to the hull), whatever
+    ``startup.estimate_shape`` says."""
+    import dataclasses
+
+    from hmocap_ros.tracking import startup
+
+    real = startup.StartUp.__init__
+
+    def __init__(self, params, *args, **kwargs):
+        params = dataclasses.replace(
+            params, startup=dataclasses.replace(params.startup, estimate_shape=False))
+        real(self, params, *args, **kwargs)
+
+    mp.setattr(startup.StartUp, "__init__", __init__)
+
+
 @dataclass(frozen=True)
 class Mutant:
     apply: Callable[[pytest.MonkeyPatch], None]
@@ -132,6 +189,23 @@ MUTANTS = {
                  "freezing it loses nothing the tests can see"),
     "forest_votes_shuffled": Mutant(forest_votes_shuffled, (
         "test_gesture_cli.py::test_shipped_forest_detects_gestures_on_the_demo_bag",)),
+    "detector_terms_ignored": Mutant(detector_terms_ignored, (
+        "test_detector_driven.py::"
+        "test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are",)),
+    "keypoints_on_the_other_side": Mutant(keypoints_on_the_other_side, (
+        "test_detector_driven.py::"
+        "test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are",)),
+    "landmark_undistortion_skipped": Mutant(landmark_undistortion_skipped, (
+        "test_keypoint_triangulation.py::"
+        "test_landmarks_of_wide_angle_lenses_are_undistorted_before_triangulation",)),
+    "bundle_adjustment_keeps_outliers": Mutant(bundle_adjustment_keeps_outliers, (
+        "test_calibration.py::test_bundle_adjustment_drops_the_corners_far_from_their_projection",)),
+    "startup_shape_estimation_off": Mutant(startup_shape_estimation_off, (
+        TRACKING + "test_anthropometry_estimation_beats_the_model_proportions",
+        TRACKING + "test_anthropometry_estimation_beats_a_fit_of_the_stature_alone"),
+        survives="the per-entity estimation does not yet beat a fit of the stature alone, and "
+                 "the hull's stature alone beats the model's proportions: a start-up that "
+                 "keeps the proportions scaled to the hull loses nothing the tests can see"),
     "shadow_suppression_off": Mutant(shadow_suppression_off, (
         "test_segmentation.py::test_cast_shadow_is_not_foreground",
         "test_segmentation.py::test_foreground_beats_naive_differencing_with_shadows_and_light_changes")),

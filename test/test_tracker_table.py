@@ -10,38 +10,12 @@ import json
 import numpy as np
 import pytest
 
-from hmocap_ros.eval.metrics import match_joints
+from fixtures.image_free import WRISTS, image_free_baselines
 
 pytestmark = pytest.mark.slow
 
 CLIP, SECONDS, SEED = "002_01", 0.6, 103  # the walk, held out (mocap_table's seed of its index)
 METHODS = ("dd-hpf", "hpf")
-WRISTS = ("l_wrist", "r_wrist")
-
-
-def _baselines(bag) -> dict:
-    """Mean and wrist errors (mm) of the A-pose at the true pelvis and of the mean pose."""
-    from hmocap_ros.body import load_body_model
-    from hmocap_ros.eval.mocap_frames import load_frames
-
-    model = load_body_model("tracking")
-    frames = load_frames(bag, silhouettes="gt")
-    truth = frames.truth[frames.has_truth]
-    m, g = match_joints(list(model.joint_names), list(frames.joint_names))
-    gt = truth[:, g]
-    names = [model.joint_names[i] for i in m]
-    rest = np.asarray(model.pose(model.rest_pose(None)[None])[1][0])
-    pelvis = truth[:, list(frames.joint_names).index("pelvis")]
-    a_pose = rest[m][None] - rest[model.joint_index("pelvis")] + pelvis[:, None]
-    wrists = [names.index(w) for w in WRISTS]
-
-    def mm(a, b):
-        return 1000.0 * np.linalg.norm(a - b, axis=-1)
-
-    return {"frames": len(gt), "a_pose": mm(a_pose, gt).mean(),
-            "a_pose_wrist": mm(a_pose, gt)[:, wrists].mean(),
-            "mean_pose": mm(gt.mean(axis=0), gt).mean(),
-            "mean_pose_wrist": mm(gt.mean(axis=0), gt)[:, wrists].mean()}
 
 
 def test_short_tracker_table_beats_image_free_answers(tmp_path, load_tool):
@@ -55,7 +29,7 @@ def test_short_tracker_table_beats_image_free_answers(tmp_path, load_tool):
     stem = table.bag_stem(f"{CLIP}.bvh", SECONDS, SEED, False)
     bag = tmp_path / f"{stem}.mcap"
     report = json.loads((tmp_path / f"{stem}_keypoints.json").read_text())
-    base = _baselines(bag)
+    base = image_free_baselines(bag)
     figures = {m: report["methods"][m] for m in METHODS}
     text = out.read_text()
     for m, res in figures.items():
