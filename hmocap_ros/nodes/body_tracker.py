@@ -152,6 +152,10 @@ class BodyTrackerNodeConfig:
                                     "track the newest and skip (and count) the others, so the latency "
                                     "stays bounded. false: track every set in stamp order (slow bag "
                                     "replays that must answer every frame; raise queue_depth too).")
+    budget_ms: float = param(30.0, "Live (latest_only): milliseconds a frame set may take; the "
+                                   "keypoint-first filter (kf-hpf) spends on its particles only "
+                                   "what fits, and the keypoint fit is the pose when nothing "
+                                   "does. 0: no limit.")
     publish_tf: bool = param(True, "Publish each tracked body's frames on /tf: room -> body_<id> (the "
                                    "pelvis) and <joint>_<id> along the skeleton (REP-155 names).")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
@@ -350,7 +354,9 @@ class BodyTrackerNode(Node):
         detections = items.get(DETECTIONS)
         t0 = time.perf_counter()
         try:
-            results = self.tracker.update(masks, stamp_ns, detections)
+            budget = (self.config.budget_ms / 1000.0
+                      if self.config.latest_only and self.config.budget_ms > 0 else None)
+            results = self.tracker.update(masks, stamp_ns, detections, budget)
         except Exception as err:  # a tracker bug must not take the room's node down
             log.error(f"tracking failed on frame {stamp_ns}: {err!r}; restarting the track")
             self.tracker.reset(forget_shape=False)

@@ -68,7 +68,7 @@ from hmocap_ros.lpf.layered_filter import Layer, LayeredFilter, annealed_filter
 from hmocap_ros.tracking.methods import TrackingMethod, get_method
 
 __all__ = [
-    "BODY_BLOCKS", "DEFAULT_SIGMA0", "SIGMA0_FACTOR", "SWEEP_DECAY", "BodySchedule",
+    "BODY_BLOCKS", "DEFAULT_SIGMA0", "SIGMA0_FACTOR", "SWEEP_DECAY", "BodySchedule", "block_dims",
     "body_sigma0", "clip_body_pose", "make_schedule", "pose_kernel", "schedule_for",
 ]
 
@@ -215,7 +215,7 @@ class BodySchedule:
         return int(sum(s.n_particles or self.n_particles for s in steps))
 
 
-def _block_dims(skel: Skeleton) -> list[np.ndarray]:
+def block_dims(skel: Skeleton) -> list[np.ndarray]:
     """DoF indices of each layer: a shoulder layer also samples its elbow."""
     dims = [skel.group_dofs(b) for b in BODY_BLOCKS]
     for side in ("l", "r"):
@@ -228,7 +228,7 @@ def _block_dims(skel: Skeleton) -> list[np.ndarray]:
 def _hierarchical(skel: Skeleton, method: TrackingMethod, n_particles: int,
                   sigma0: np.ndarray, *, survival_rate: float, refine_nu: float, kernel,
                   sweeps: int = 1) -> BodySchedule:
-    blocks = _block_dims(skel)
+    blocks = block_dims(skel)
     boxed = method.boxed
     d = skel.n_dofs
     # the blocks weighed in order, ``sweeps`` times over the kinematic tree; without boxes

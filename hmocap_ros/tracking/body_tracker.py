@@ -69,10 +69,12 @@ from hmocap_ros.frame_sets import FramePeriod
 from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
 from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
-from hmocap_ros.tracking.body_layers import BodySchedule, schedule_for
+from hmocap_ros.tracking.body_layers import BodySchedule, pose_kernel, root_room_limits, schedule_for
 from hmocap_ros.tracking.detector_driven import DetectorDriven
-from hmocap_ros.detection.detections import Detections
-from hmocap_ros.tracking.detection_assignment import Assigned
+from hmocap_ros.detection.detections import MODEL_JOINT, Detections
+from hmocap_ros.tracking.detection_assignment import EFFECTOR_LABELS, Assigned
+from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape, load_corrections
+from hmocap_ros.tracking.keypoint_first import BLOCK_KEYPOINTS, KeypointFirst
 from hmocap_ros.tracking.layer_weighting import fit_cost, layer_vertices, layer_weight_fn, warm_up
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
@@ -87,7 +89,7 @@ __all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "BodyTracker",
 log = logging.getLogger(__name__)
 
 #: Stages timed per frame (``TrackResult.timings``), besides the weighting's own.
-STAGES = ("observe", "hull", "init", "filter", "proposals", "detection")
+STAGES = ("observe", "hull", "init", "filter", "proposals", "detection", "fit")
 #: Most frame periods between two processed frame sets that the motion model accounts for
 #: (velocity extrapolation and diffusion; module docstring).
 MAX_ELAPSED_PERIODS = 4
@@ -129,12 +131,39 @@ class BodyTracker:
         self.proposer = LimbProposer(model, ("l_arm", "r_arm"))
         self.start_proposer = LimbProposer(model, ("l_arm", "r_arm", "l_leg", "r_leg"))
         self.research = ResearchPolicy(p.research)
+        self.keypoint_first = None
+        if self.method.keypoint_first:
+            f = p.filter
+            lo, hi = root_room_limits(*self.room)
+            kernel = pose_kernel(self.skel, lo, hi, f.jump_fraction, f.jump_scale,
+                                 f.reseed_fraction)
+            self.keypoint_first = KeypointFirst(model, p.keypoints, p.detector,
+                                                self.schedule.n_particles, f.survival_rate,
+                                                kernel, (lo, hi))
+            self._size_corrections = load_corrections()
         self.driven = (DetectorDriven(model, self.schedule.layer_blocks, p.detector)
-                       if self.method.uses_detector else None)
+                       if self.method.uses_detector and self.keypoint_first is None else None)
+        #: why the last frame set ran the silhouette filter instead of the keypoint-first one
+        self.fallback_reason = ""
+        self._fallback_logged = False
         self.frame_period = FramePeriod()
         self._stamps: tuple = ()  # stamps of the last two frame sets processed
         self._elapsed = (1, 1)    # periods between those two, and from the last to this one
         self._scaled_filters: dict[int, LayeredFilter] = {}
+        #: per joint, the body block that places it: the block of the nearest ancestor with
+        #: DoFs (a wrist's is its elbow's)
+        groups = {int(j): g for j, g in zip(self.skel.dof_joint, self.skel.dof_groups)}
+        parents = np.asarray(model.parents)
+        self._joint_blocks = []
+        for j in range(self.skel.n_joints):
+            a = int(parents[j]) if j else 0
+            while a > 0 and a not in groups:
+                a = int(parents[a])
+            self._joint_blocks.append(groups.get(a, "torso"))
+        #: the last keypoint-first frame: (labels fitted, labels dropped, uncertain blocks)
+        self.last_keypoints: tuple = ((), (), ())
+        #: running mean of the seconds one weight evaluation takes (the live budget's unit)
+        self._seconds_per_evaluation = 2e-4
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -153,6 +182,9 @@ class BodyTracker:
             self.driven.reset()
         if forget_shape:
             self.shape: BodyShape | None = self.given_shape
+            self.keypoint_shape = (KeypointShape(self.model, self._size_corrections)
+                                   if self.keypoint_first is not None
+                                   and self.given_shape is None else None)
 
     @property
     def shape_known(self) -> bool:
@@ -199,7 +231,8 @@ class BodyTracker:
 
     def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int,
                detections: Detections | None = None,
-               exclude: np.ndarray | None = None) -> TrackResult:
+               exclude: np.ndarray | None = None,
+               budget_s: float | None = None) -> TrackResult:
         """Process one frame set: one foreground mask per rig camera (None where missing).
 
         detections: the extremity detector's 3D detections of this frame set
@@ -207,7 +240,9 @@ class BodyTracker:
         use a detector (``dd-hpf``), which without them run as their boxed schedule. exclude: (K, 3) room
         points where people followed by other trackers stand
         (:class:`~.people_tracker.PeopleTracker`): a start never takes a person within
-        :data:`SAME_PERSON_RADIUS` of one of them.
+        :data:`SAME_PERSON_RADIUS` of one of them. budget_s: seconds this frame set may
+        take (a live node's frame period); ``kf-hpf`` then spends on its filter only the
+        weight evaluations that fit in it (:mod:`.keypoint_first`); None: no limit.
         """
         t_start = time.perf_counter()
         self._note_stamp(int(stamp_ns))
@@ -229,6 +264,14 @@ class BodyTracker:
             self._person_absent()
             return self._result(stamp_ns, obs, t_start, timings)
         self._absent_frames = 0
+        if self.state.looking and self.keypoint_first is not None:
+            t0 = time.perf_counter()
+            fit = self._start_from_keypoints(detections, exclude)
+            timings["fit"] = time.perf_counter() - t0
+            if fit is not None:
+                return self._result(stamp_ns, obs, t_start, timings, self._fit_cost(obs),
+                                    extremities=self._keypoint_assigned(fit, detections),
+                                    spread=self._fit_spread(fit))
         if self.state.looking:
             t0 = time.perf_counter()
             started = self._start(masks, obs, stamp_ns, exclude)
@@ -238,7 +281,178 @@ class BodyTracker:
                 return self._result(stamp_ns, obs, t_start, timings)
         if self.state == TrackerState.INITIALISING:
             return self._initialise(masks, obs, stamp_ns, t_start, timings)
+        if self.keypoint_first is not None:
+            return self._track_keypoints(detections, obs, stamp_ns, t_start, timings, budget_s)
         return self._track(detections, obs, stamp_ns, t_start, timings)
+
+    # ------------------------------------------------------------------ keypoint-first
+
+    def _start_from_keypoints(self, detections: Detections | None, exclude) -> object:
+        """A track started on the body fitted to the keypoints alone (:mod:`.keypoint_fit`),
+        or None (no keypoints, no hips, fewer than ``keypoints.min_start_keypoints`` fitted,
+        or a person another tracker follows)."""
+        if detections is None or not len(detections):
+            return None
+        kf = self.keypoint_first
+        self._measure_shape(detections, ())
+        fit = kf.fitter.fit(detections, self.fitness.rest(self.shape))
+        if fit is None or len(fit.labels) < self.params.keypoints.min_start_keypoints:
+            return None
+        pelvis = fit.params[self.skel.translation_dofs]
+        if exclude is not None and len(exclude) and np.min(np.linalg.norm(
+                (np.asarray(exclude) - pelvis)[:, [0, 2]], axis=1)) < SAME_PERSON_RADIUS:
+            return None
+        region = self.params.startup.track_region
+        if region and not (region[0] <= pelvis[0] <= region[2]
+                           and region[1] <= pelvis[2] <= region[3]):
+            return None
+        self.estimate = fit.params.copy()
+        self._previous_estimate = None
+        self.particles = np.repeat(fit.params[None], self.schedule.n_particles, axis=0)
+        self._bad_frames = 0
+        self.research.reset()
+        self.state = TrackerState.TRACKING
+        log.info("track started from %d keypoints at (%.2f, %.2f) m", len(fit.labels),
+                 pelvis[0], pelvis[2])
+        return fit
+
+    def _track_keypoints(self, detections: Detections | None, obs: Observation, stamp_ns: int,
+                         t_start: float, timings: dict,
+                         budget_s: float | None = None) -> TrackResult:
+        """One keypoint-first frame (:mod:`.keypoint_first`): fit, check, the filter on what
+        stays uncertain. Without keypoints, the silhouette filter."""
+        kf = self.keypoint_first
+        t0 = time.perf_counter()
+        reference = self._predict()
+        periods = min(self._elapsed[1], MAX_ELAPSED_PERIODS)
+        rest = self.fitness.rest(self.shape)
+        fit, dropped = (kf.fit(detections, rest, obs, reference, periods)
+                        if detections is not None and len(detections) else (None, []))
+        timings["fit"] = time.perf_counter() - t0
+        if fit is None:
+            self._fall_back("no keypoints in the frame set")
+            return self._track(None, obs, stamp_ns, t_start, timings)
+        if self._measure_shape(detections, dropped):
+            rest = self.fitness.rest(self.shape)
+        if self.fallback_reason:
+            log.info("keypoints again: keypoint-first tracking")
+            self.fallback_reason = ""
+        t0 = time.perf_counter()
+        uncertain = kf.uncertain_blocks(fit, detections)
+        evaluations = None
+        if budget_s is not None:
+            left = budget_s - (time.perf_counter() - t_start)
+            evaluations = max(left, 0.0) / self._seconds_per_evaluation
+        n = kf.layer_particles(uncertain, evaluations)
+        schedule = kf.frame_filter(uncertain, periods, n) if n else None
+        res = None
+        if schedule is None:
+            if not uncertain or self.particles is None:
+                self.particles = np.repeat(fit.params[None], self.schedule.n_particles, axis=0)
+            estimate = fit.params.copy()
+        else:
+            particles = kf.frame_particles(fit.params, self.particles, uncertain, periods,
+                                           self.rng, n)
+            particles = kf.first_diffusion(particles, uncertain, periods, self.rng)
+            weight = layer_weight_fn(self.fitness, self.model, schedule,
+                                     kf.layer_vertices(schedule), self.params.weighting, obs,
+                                     rest, kf.terms(schedule, fit, detections, rest))
+            try:
+                res = lpf_run(particles, schedule.filter, weight, self.rng)
+            except ValueError as err:
+                log.warning("frame %d: filter failed (%s); keeping the keypoint fit", stamp_ns,
+                            err)
+            if res is not None:
+                self.particles = res.particles
+                estimate = res.estimate.copy()
+            else:
+                estimate = fit.params.copy()
+        timings["filter"] = time.perf_counter() - t0
+        if self.fitness.times.evaluations:
+            spent = self.fitness.times.weighting_seconds() / self.fitness.times.evaluations
+            self._seconds_per_evaluation = 0.8 * self._seconds_per_evaluation + 0.2 * spent
+        self._previous_estimate = self.estimate
+        self.estimate = estimate
+        spread = (joint_spread(self.model, res.weighted_particles, res.weights, rest.joints)
+                  if res is not None else self._fit_spread(fit))
+        fit_cost = self._fit_cost(obs)
+        self._check_loss(fit_cost, stamp_ns)
+        self.last_keypoints = (tuple(fit.labels), tuple(dropped), tuple(uncertain))
+        return self._result(stamp_ns, obs, t_start, timings, fit_cost,
+                            res.layers if res is not None else (),
+                            self._keypoint_assigned(fit, detections), spread)
+
+    def _measure_shape(self, detections: Detections | None, dropped) -> bool:
+        """Measure the keypoints of a new track's first ``keypoints.shape_frames`` frame sets
+        (:mod:`.keypoint_anthropometry`) and solve the shape again whenever their count
+        doubles; True when the shape changed."""
+        ks = self.keypoint_shape
+        limit = self.params.keypoints.shape_frames
+        if ks is None or len(ks) >= limit or detections is None or not len(detections):
+            return False
+        if dropped:
+            keep = [i for i, lab in enumerate(detections.labels) if lab not in dropped]
+            detections = Detections(detections.detector, tuple(detections.labels[i] for i in keep),
+                                    detections.positions[keep], detections.scores[keep])
+        ks.add(detections)
+        n = len(ks)
+        if n & (n - 1) and n != limit:  # solved at 1, 2, 4, 8, ... and at the limit
+            return False
+        shape = ks.shape()
+        if shape is None:
+            return False
+        self.shape = shape
+        return True
+
+    def _fall_back(self, reason: str) -> None:
+        """Note (once per cause, in the log and ``fallback_reason``) that a frame set runs the
+        silhouette filter instead of the keypoint-first one."""
+        if reason != self.fallback_reason:
+            log.warning("%s: tracking on the silhouettes alone until keypoints come back",
+                        reason)
+        self.fallback_reason = reason
+
+    def _keypoint_assigned(self, fit, detections: Detections) -> Assigned:
+        """The fitted keypoints as the tracker's per-joint detections (confidence, diagnostics)."""
+        names = list(self.model.joint_names)
+        joints = np.full((len(names), 3), np.nan)
+        scores = np.zeros(len(names))
+        effectors = np.full((len(EFFECTOR_LABELS), 3), np.nan)
+        for label in fit.labels:
+            pos = detections.position(label)
+            score = max(float(s) for lab, s in zip(detections.labels, detections.scores)
+                        if lab == label)
+            joint = MODEL_JOINT.get(label)
+            if joint in names:
+                joints[names.index(joint)], scores[names.index(joint)] = pos, score
+            if label in EFFECTOR_LABELS:
+                effectors[EFFECTOR_LABELS.index(label)] = pos
+        return Assigned(detections.positions, effectors, joints, scores)
+
+    def _fit_spread(self, fit) -> np.ndarray:
+        """Per joint, the RMS residual (m) of the fitted keypoints of its body block (of all
+        of them for a joint whose block has none): how far the keypoints and the body
+        disagree, in place of the particles' spread where no filter ran."""
+        resid = dict(zip(fit.labels, fit.residuals))
+        overall = float(np.sqrt(np.mean(np.square(fit.residuals))))
+        out = np.full(self.skel.n_joints, overall)
+        for j, group in enumerate(self._joint_blocks):
+            own = [resid[k] for k in BLOCK_KEYPOINTS.get(group, ()) if k in resid]
+            if own:
+                out[j] = float(np.sqrt(np.mean(np.square(own))))
+        return out
+
+    def _check_loss(self, fit_cost: float, stamp_ns: int) -> None:
+        lost = self.params.lost
+        if not np.isfinite(fit_cost) or fit_cost > lost.cost:
+            self._bad_frames += 1
+        else:
+            self._bad_frames = 0
+        if self._bad_frames >= lost.frames:
+            log.info("frame %d: fit cost %.2f above %.2f for %d frames: track lost", stamp_ns,
+                     fit_cost, lost.cost, self._bad_frames)
+            self.state = TrackerState.LOST
+            self._bad_frames = 0
 
     def _initialise(self, masks, obs: Observation, stamp_ns: int, t_start: float,
                     timings: dict) -> TrackResult:
@@ -292,16 +506,7 @@ class BodyTracker:
         self.estimate = res.estimate.copy()
         self._search_if_due(obs, stamp_ns, timings)
         fit_cost = self._fit_cost(obs)
-        lost = self.params.lost
-        if not np.isfinite(fit_cost) or fit_cost > lost.cost:
-            self._bad_frames += 1
-        else:
-            self._bad_frames = 0
-        if self._bad_frames >= lost.frames:
-            log.info("frame %d: fit cost %.2f above %.2f for %d frames: track lost", stamp_ns,
-                     fit_cost, lost.cost, self._bad_frames)
-            self.state = TrackerState.LOST
-            self._bad_frames = 0
+        self._check_loss(fit_cost, stamp_ns)
         return self._result(stamp_ns, obs, t_start, timings, fit_cost, res.layers, extremities,
                             spread)
 

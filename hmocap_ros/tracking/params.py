@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hmocap_ros.params import group, param
+from hmocap_ros.tracking.keypoint_first import KeypointFirstParams
 from hmocap_ros.tracking.methods import get_method, method_names
 
 __all__ = ["DetectorParams", "FilterParams", "HullParams", "LostParams", "ResearchParams",
@@ -270,6 +271,7 @@ class TrackerParams:
     filter: FilterParams = group(FilterParams, "layered particle filter and kernels")
     weighting: WeightingParams = group(WeightingParams, "silhouette weighting and boxes")
     detector: DetectorParams = group(DetectorParams, "detector-driven tracking")
+    keypoints: KeypointFirstParams = group(KeypointFirstParams, "keypoint-first tracking")
     startup: StartupParams = group(StartupParams, "start-up and anthropometry")
     hull: HullParams = group(HullParams, "visual hull")
     research: ResearchParams = group(ResearchParams, "fresh searches while tracking")

@@ -82,12 +82,14 @@ class PeopleTracker:
                 tracker.saw(stamp)
 
     def update(self, masks: Sequence[np.ndarray | None], stamp_ns: int,
-               detections: Detections | None = None) -> list[TrackResult]:
+               detections: Detections | None = None,
+               budget_s: float | None = None) -> list[TrackResult]:
         """One frame set through every slot, in slot order; one result per slot.
 
         detections: the frame set's 3D detections. Unlabelled skin candidates go to every
         slot (each assigns them to its own body, eq. 2.19); a keypoint detector's labelled
-        joints are one person's, the first slot's."""
+        joints are one person's, the first slot's. budget_s: seconds each slot may take
+        (:meth:`BodyTracker.update`)."""
         results = []
         for k, tracker in enumerate(self.trackers):
             others = [t.position for j, t in enumerate(self.trackers) if j != k]
@@ -95,7 +97,8 @@ class PeopleTracker:
             mine = detections if (k == 0 or detections is None
                                   or detections.detector == "skin") else None
             results.append(tracker.update(masks, stamp_ns, mine,
-                                          exclude=others if len(others) else None))
+                                          exclude=others if len(others) else None,
+                                          budget_s=budget_s))
         self._drop_duplicates(results)
         return results
 

@@ -1,0 +1,263 @@
+"""The skinned body fitted to one frame set's labelled 3D keypoints (inverse kinematics over
+the whole kinematic tree): the centre of the keypoint-first filter (:mod:`.keypoint_first`).
+
+The keypoints (:class:`~hmocap_ros.detection.detections.Detections` of the keypoint
+detector: head, hands, feet, shoulders, elbows, wrists, hips, knees, ankles, each with a
+score) are matched to points of the body model (:data:`MODEL_POINTS`): a joint, the
+midpoint of a joint and an end site (the hands: wrist and hand tip; the head: head joint
+and head top), or an end site (the feet: the toes), as the detector's body points are
+defined (:mod:`hmocap_ros.detection.keypoint_triangulation`, step 4).
+
+The fit minimises over the 30 pose DoFs, within the joint limits,
+
+    E(theta) = sum_k w_k rho(|P_k(theta) - p_k| / s) + sum_d ((theta_d - prior_d) / sigma_d)^2
+
+with ``p_k`` the keypoints, ``P_k`` the model points on the body's estimated shape, ``w_k``
+the keypoint's score, ``s`` = ``keypoint_std`` and ``rho`` Huber's loss at ``robust_scale``
+(a keypoint far from where the others put the body costs linearly, so one wrong keypoint
+pulls its limb less than its square would). The prior is the predicted pose, with
+``sigma_d`` the DoF's motion std over the elapsed frames times ``prior_scale``: it holds the
+DoFs no keypoint sees (the neck's twist, an ankle whose foot is not detected) and breaks
+the ties the keypoints leave. Levenberg-Marquardt with a forward-difference Jacobian (one
+batch of D + 1 poses through :class:`~hmocap_ros.body.pose_points.PosePoints` per
+iteration), iteratively reweighted for Huber's loss, each step clipped to the limits.
+
+Without a prior (a new track) the root is placed first: the pelvis at the hips' midpoint
+(the model's rest offset of pelvis from hips), the heading from the hips' and shoulders'
+left-right axes; the fit then starts from the rest pose there.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hmocap_ros.body.pose_points import PosePoints
+from hmocap_ros.detection.detections import Detections
+from hmocap_ros.params import param
+from hmocap_ros.tracking.body_layers import body_sigma0, clip_body_pose
+
+__all__ = ["MODEL_POINTS", "KeypointFitParams", "KeypointFit", "FitResult"]
+
+#: keypoint label -> the model point it is: ("joint", name), ("mid", joint, end site) or
+#: ("end", end site)
+MODEL_POINTS = {
+    "head": ("mid", "head", "head_top"),
+    "left_hand": ("mid", "l_wrist", "l_hand_tip"), "right_hand": ("mid", "r_wrist", "r_hand_tip"),
+    "left_foot": ("end", "l_toe"), "right_foot": ("end", "r_toe"),
+    **{f"{side}_{part}": ("joint", f"{side[0]}_{part}")
+       for side in ("left", "right")
+       for part in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")},
+}
+#: finite-difference step of the Jacobian (rad / m)
+_STEP = 1e-5
+
+
+@dataclass(frozen=True)
+class KeypointFitParams:
+    """The body fitted to the keypoints (:mod:`.keypoint_fit`)."""
+
+    keypoint_std: float = param(0.03, "Std (m, > 0) of a keypoint of score 1 about its body "
+                                      "point: the scale of the keypoint residuals.")
+    robust_scale: float = param(2.0, "Huber threshold in keypoint stds (> 0): residuals "
+                                     "beyond it cost linearly.")
+    prior_scale: float = param(3.0, "Std of the prior on each DoF about the predicted pose, "
+                                    "in motion stds over the elapsed frames (> 0).")
+    iterations: int = param(10, "Levenberg-Marquardt iterations per fit (>= 1).")
+    min_score: float = param(0.3, "Keypoints with a lower score are not fitted (in [0, 1]).")
+
+    def __post_init__(self):
+        bad = [name for name, ok in (
+            ("keypoint_std", self.keypoint_std > 0), ("robust_scale", self.robust_scale > 0),
+            ("prior_scale", self.prior_scale > 0), ("iterations", self.iterations >= 1),
+            ("min_score", 0.0 <= self.min_score <= 1.0)) if not ok]
+        if bad:
+            raise ValueError("keypoint fit: out of range: " + ", ".join(bad))
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """A fit: ``params`` (D,) the pose; ``labels`` the keypoints fitted, ``residuals`` (K,)
+    their distance (m) to their body points; ``cost`` the final E (module docstring)."""
+
+    params: np.ndarray
+    labels: tuple
+    residuals: np.ndarray
+    cost: float
+
+
+class KeypointFit:
+    """Fits ``model`` (the tracking body) to labelled keypoints (module docstring)."""
+
+    def __init__(self, model, params: KeypointFitParams | None = None, room=None):
+        self.model = model
+        self.skel = model.skeleton
+        self.params = params or KeypointFitParams()
+        self.room = room
+        joints = list(map(str, model.joint_names))
+        ends = list(map(str, model.end_site_names))
+        n_joints = len(joints)
+        self.labels = tuple(MODEL_POINTS)
+        # each label's body point as weights over the joints then the end sites
+        self._matrix = np.zeros((len(self.labels), n_joints + len(ends)))
+        for k, label in enumerate(self.labels):
+            spec = MODEL_POINTS[label]
+            if spec[0] == "joint":
+                self._matrix[k, joints.index(spec[1])] = 1.0
+            elif spec[0] == "end":
+                self._matrix[k, n_joints + ends.index(spec[1])] = 1.0
+            else:
+                self._matrix[k, joints.index(spec[1])] = 0.5
+                self._matrix[k, n_joints + ends.index(spec[2])] = 0.5
+        self._sigma0 = body_sigma0(self.skel)
+        self._rest_key = None  # the rest the kernel was built on
+        self._kernel: PosePoints | None = None
+        lo, hi = np.asarray(self.skel.lower, float), np.asarray(self.skel.upper, float)
+        wrap = np.zeros(self.skel.n_dofs, bool)
+        wrap[np.asarray(self.skel.wrap_dofs, int)] = True
+        self._lower = np.where(wrap, -np.inf, lo)
+        self._upper = np.where(wrap, np.inf, hi)
+        self._pelvis = joints.index("pelvis")
+        self._hips = (joints.index("l_hip"), joints.index("r_hip"))
+
+    # ------------------------------------------------------------------ model points
+
+    def kernel(self, rest) -> PosePoints:
+        """The forward kinematics on ``rest`` (rebuilt when the rest changes)."""
+        if self._kernel is None or rest is not self._rest_key:
+            self._kernel = PosePoints.of(self.model, rest)
+            self._rest_key = rest  # held, so that its identity stays its own
+        return self._kernel
+
+    def body_points(self, params: np.ndarray, rest) -> np.ndarray:
+        """(B, L, 3) the body point of every label (:data:`MODEL_POINTS`) of poses (B, D)."""
+        joints, ends = self.kernel(rest).points(params)
+        return np.einsum("lp,bpc->blc", self._matrix, np.concatenate([joints, ends], axis=1))
+
+    def targets(self, detections: Detections | None, drop=()) -> tuple:
+        """``(rows, positions (K, 3), scores (K,))`` of the keypoints to fit: the best-scored
+        detection per label of :data:`MODEL_POINTS` with a score of at least ``min_score``,
+        except the labels in ``drop``."""
+        rows, pos, score = [], [], []
+        if detections is not None:
+            for k, label in enumerate(self.labels):
+                if label in drop:
+                    continue
+                p = detections.position(label)
+                if p is None or not np.all(np.isfinite(p)):
+                    continue
+                s = max(float(detections.scores[i]) for i, lab in enumerate(detections.labels)
+                        if lab == label)
+                if s >= self.params.min_score:
+                    rows.append(k)
+                    pos.append(p)
+                    score.append(s)
+        return (np.array(rows, dtype=np.intp), np.array(pos, float).reshape(-1, 3),
+                np.array(score, float))
+
+    # ------------------------------------------------------------------ start
+
+    def initial_pose(self, rows: np.ndarray, positions: np.ndarray, rest) -> np.ndarray | None:
+        """A rest pose placed at the keypoints' hips and turned to their heading, or None
+        without both hips."""
+        named = {self.labels[r]: p for r, p in zip(rows, positions)}
+        if "left_hip" not in named or "right_hip" not in named:
+            return None
+        skel = self.skel
+        x = np.zeros(skel.n_dofs)
+        rest_joints = np.asarray(skel.joints_rest if rest is None else rest.joints)
+        hips_mid_rest = 0.5 * (rest_joints[self._hips[0]] + rest_joints[self._hips[1]])
+        offset = rest_joints[self._pelvis] - hips_mid_rest
+        across = named["left_hip"] - named["right_hip"]
+        if "left_shoulder" in named and "right_shoulder" in named:
+            across = across + (named["left_shoulder"] - named["right_shoulder"])
+        # the body faces +z with +x its left: yaw turns +x onto the left-right axis
+        yaw = float(np.arctan2(-across[2], across[0]))
+        c, s = np.cos(yaw), np.sin(yaw)
+        turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+        x[skel.translation_dofs] = 0.5 * (named["left_hip"] + named["right_hip"]) + turn @ offset
+        x[skel.dof_index("root_yaw")] = yaw
+        return x
+
+    # ------------------------------------------------------------------ fit
+
+    def fit(self, detections: Detections | None, rest, prior: np.ndarray | None = None,
+            periods: float = 1.0, drop=()) -> FitResult | None:
+        """The pose (module docstring) of one frame set's keypoints, started from ``prior``
+        (the predicted pose, also the prior's centre) or, without one, from
+        :meth:`initial_pose`. ``periods``: frame periods since the prior's frame (the
+        prior's stds grow with it). None when there is no keypoint to fit, or no prior and
+        no hips."""
+        rows, positions, scores = self.targets(detections, drop)
+        if len(rows) == 0:
+            return None
+        p = self.params
+        if prior is None:
+            start = self.initial_pose(rows, positions, rest)
+            if start is None:
+                return None
+            prior_w = np.full(self.skel.n_dofs, 1.0 / np.pi)  # a new track: only a nudge
+            prior_w[self.skel.translation_dofs] = 1.0
+            centre = start
+        else:
+            start = centre = np.asarray(prior, float)
+            prior_w = 1.0 / (p.prior_scale * max(periods, 1.0) * self._sigma0)
+        x = start.copy()
+        matrix = self._matrix[rows]
+        sqrt_w = np.sqrt(scores) / p.keypoint_std
+        kernel = self.kernel(rest)
+        n = self.skel.n_dofs
+        probe = np.vstack([np.zeros(n), _STEP * np.eye(n)])
+        lam = 1e-3
+
+        def points_of(poses):
+            joints, ends = kernel.points(poses)
+            return np.einsum("lp,bpc->blc", matrix, np.concatenate([joints, ends], axis=1))
+
+        def energy(x, pts):
+            d = np.linalg.norm(pts - positions, axis=1) * sqrt_w
+            return float(np.sum(_huber(d, p.robust_scale)) + np.sum(((x - centre) * prior_w) ** 2))
+
+        pts = points_of(x[None])[0]
+        e = energy(x, pts)
+        for _ in range(p.iterations):
+            batch = points_of(x[None] + probe)
+            pts = batch[0]
+            jac = (batch[1:] - pts[None]).transpose(1, 2, 0).reshape(-1, n) / _STEP  # (3K, D)
+            resid = pts - positions
+            dist = np.linalg.norm(resid, axis=1) * sqrt_w
+            irls = sqrt_w * np.sqrt(_huber_weight(dist, p.robust_scale))  # (K,)
+            w3 = np.repeat(irls, 3)
+            a = jac * w3[:, None]
+            r = resid.reshape(-1) * w3
+            hess = a.T @ a + np.diag(prior_w ** 2)
+            grad = a.T @ r + prior_w ** 2 * (x - centre)
+            improved = False
+            for _ in range(6):
+                step = np.linalg.solve(hess + lam * np.diag(np.diag(hess) + 1e-9), -grad)
+                trial = np.clip(x + step, self._lower, self._upper)
+                trial_pts = points_of(trial[None])[0]
+                e_trial = energy(trial, trial_pts)
+                if e_trial < e:
+                    x, e, pts = trial, e_trial, trial_pts
+                    lam = max(lam * 0.3, 1e-7)
+                    improved = True
+                    break
+                lam *= 10.0
+            if not improved or np.abs(step).max() < 1e-5:
+                break
+        if self.room is not None:
+            x = clip_body_pose(self.skel, x[None].copy(), *self.room)[0]
+            pts = points_of(x[None])[0]
+        residuals = np.linalg.norm(pts - positions, axis=1)
+        return FitResult(x, tuple(self.labels[r] for r in rows), residuals, e)
+
+
+def _huber(d: np.ndarray, c: float) -> np.ndarray:
+    """Huber's loss of normalised residuals ``d >= 0`` (the square below ``c``)."""
+    return np.where(d <= c, d * d, 2.0 * c * d - c * c)
+
+
+def _huber_weight(d: np.ndarray, c: float) -> np.ndarray:
+    """IRLS weight of Huber's loss: 1 below ``c``, ``c / d`` beyond."""
+    return np.where(d <= c, 1.0, c / np.maximum(d, 1e-12))
