@@ -98,17 +98,17 @@ class KeypointFit:
         ends = list(map(str, model.end_site_names))
         n_joints = len(joints)
         self.labels = tuple(MODEL_POINTS)
-        # each label's body point as weights over the joints then the end sites
-        self._matrix = np.zeros((len(self.labels), n_joints + len(ends)))
+        # each label's body point, the mean of two of the joints and end sites (indexed
+        # joints first; the same one twice for a joint or an end site alone)
+        self._ends = np.zeros((len(self.labels), 2), np.intp)
         for k, label in enumerate(self.labels):
             spec = MODEL_POINTS[label]
             if spec[0] == "joint":
-                self._matrix[k, joints.index(spec[1])] = 1.0
+                self._ends[k] = joints.index(spec[1])
             elif spec[0] == "end":
-                self._matrix[k, n_joints + ends.index(spec[1])] = 1.0
+                self._ends[k] = n_joints + ends.index(spec[1])
             else:
-                self._matrix[k, joints.index(spec[1])] = 0.5
-                self._matrix[k, n_joints + ends.index(spec[2])] = 0.5
+                self._ends[k] = (joints.index(spec[1]), n_joints + ends.index(spec[2]))
         self._sigma0 = body_sigma0(self.skel)
         self._rest_key = None  # the rest the kernel was built on
         self._kernel: PosePoints | None = None
@@ -131,8 +131,13 @@ class KeypointFit:
 
     def body_points(self, params: np.ndarray, rest) -> np.ndarray:
         """(B, L, 3) the body point of every label (:data:`MODEL_POINTS`) of poses (B, D)."""
-        joints, ends = self.kernel(rest).points(params)
-        return np.einsum("lp,bpc->blc", self._matrix, np.concatenate([joints, ends], axis=1))
+        return self._points(self.kernel(rest), params, self._ends)
+
+    @staticmethod
+    def _points(kernel: PosePoints, params: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        joints, sites = kernel.points(params)
+        both = np.concatenate([joints, sites], axis=1)
+        return 0.5 * (both[:, ends[:, 0]] + both[:, ends[:, 1]])
 
     def targets(self, detections: Detections | None, drop=()) -> tuple:
         """``(rows, positions (K, 3), scores (K,))`` of the keypoints to fit: the best-scored
@@ -203,7 +208,7 @@ class KeypointFit:
             start = centre = np.asarray(prior, float)
             prior_w = 1.0 / (p.prior_scale * max(periods, 1.0) * self._sigma0)
         x = start.copy()
-        matrix = self._matrix[rows]
+        chosen = self._ends[rows]
         sqrt_w = np.sqrt(scores) / p.keypoint_std
         kernel = self.kernel(rest)
         n = self.skel.n_dofs
@@ -211,8 +216,7 @@ class KeypointFit:
         lam = 1e-3
 
         def points_of(poses):
-            joints, ends = kernel.points(poses)
-            return np.einsum("lp,bpc->blc", matrix, np.concatenate([joints, ends], axis=1))
+            return self._points(kernel, poses, chosen)
 
         def energy(x, pts):
             d = np.linalg.norm(pts - positions, axis=1) * sqrt_w
@@ -232,7 +236,7 @@ class KeypointFit:
             r = resid.reshape(-1) * w3
             hess = a.T @ a + np.diag(prior_w ** 2)
             grad = a.T @ r + prior_w ** 2 * (x - centre)
-            improved = False
+            before = e
             for _ in range(6):
                 step = np.linalg.solve(hess + lam * np.diag(np.diag(hess) + 1e-9), -grad)
                 trial = np.clip(x + step, self._lower, self._upper)
@@ -241,10 +245,9 @@ class KeypointFit:
                 if e_trial < e:
                     x, e, pts = trial, e_trial, trial_pts
                     lam = max(lam * 0.3, 1e-7)
-                    improved = True
                     break
                 lam *= 10.0
-            if not improved or np.abs(step).max() < 1e-5:
+            if before - e <= 1e-4 * before:  # converged (or no step improves)
                 break
         if self.room is not None:
             x = clip_body_pose(self.skel, x[None].copy(), *self.room)[0]
