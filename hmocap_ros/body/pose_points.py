@@ -14,6 +14,7 @@ with the swing vector ``s = flex * a_flex + abd * a_abd``.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numba
@@ -148,6 +149,12 @@ class PosePoints:
         return cls(kinds, dof_idx, n_dofs, axes, parents,
                    np.asarray(skel.translation_dofs, np.int64), offsets, end_parents,
                    end_offsets)
+
+    def with_sites(self, parents, offsets) -> "PosePoints":
+        """The same kinematics with other end sites: ``parents`` (S,) joint indices and
+        ``offsets`` (S, 3) in the parent's frame at rest (model axes, metres)."""
+        return dataclasses.replace(self, end_parents=np.asarray(parents, np.int64),
+                                   end_offsets=np.asarray(offsets, np.float64).reshape(-1, 3))
 
     def points(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         params = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)

@@ -73,8 +73,9 @@ from hmocap_ros.tracking.body_layers import BodySchedule, pose_kernel, root_room
 from hmocap_ros.tracking.detector_driven import DetectorDriven
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.tracking.detection_assignment import EFFECTOR_LABELS, Assigned
-from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape, load_corrections
+from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape, size_corrections
 from hmocap_ros.tracking.keypoint_first import BLOCK_KEYPOINTS, KeypointFirst
+from hmocap_ros.tracking.keypoint_fit import load_keypoint_model
 from hmocap_ros.tracking.layer_weighting import fit_cost, layer_vertices, layer_weight_fn, warm_up
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
@@ -137,10 +138,11 @@ class BodyTracker:
             lo, hi = root_room_limits(*self.room)
             kernel = pose_kernel(self.skel, lo, hi, f.jump_fraction, f.jump_scale,
                                  f.reseed_fraction)
+            landmarks = load_keypoint_model()
             self.keypoint_first = KeypointFirst(model, p.keypoints, p.detector,
                                                 self.schedule.n_particles, f.survival_rate,
-                                                kernel, (lo, hi))
-            self._size_corrections = load_corrections()
+                                                kernel, (lo, hi), landmarks["offsets"])
+            self._size_corrections = size_corrections(landmarks["size_corrections"])
         self.driven = (DetectorDriven(model, self.schedule.layer_blocks, p.detector)
                        if self.method.uses_detector and self.keypoint_first is None else None)
         #: why the last frame set ran the silhouette filter instead of the keypoint-first one
@@ -182,7 +184,8 @@ class BodyTracker:
             self.driven.reset()
         if forget_shape:
             self.shape: BodyShape | None = self.given_shape
-            self.keypoint_shape = (KeypointShape(self.model, self._size_corrections)
+            self.keypoint_shape = (KeypointShape(self.model, self._size_corrections,
+                                                 self.keypoint_first.fitter)
                                    if self.keypoint_first is not None
                                    and self.given_shape is None else None)
 

@@ -9,11 +9,10 @@ distance, twice wrist to hand, ankle to foot, the hips' midpoint to the shoulder
 the shoulders' midpoint to the head. A measure over a track is the median over its frames (a
 wrong keypoint in a few frames does not move it), divided by its *correction*: the ratio of
 the keypoint distance to the same distance between the body model's points
-(:data:`~.keypoint_fit.MODEL_POINTS`) of the subject, which differs from 1 where the
-network's landmarks lie off the model's joints (BlazePose's shoulders sit above and outside
-the model's shoulder joints). The corrections ship with the body model
-(``hmocap_ros/data/keypoint_sizes.json``), measured once on simulated clips that no
-evaluation uses (``tools/learn_keypoint_sizes.py``).
+(:data:`~.keypoint_fit.MODEL_POINTS`, their landmark offsets included) of the subject:
+what the offsets leave of the network's bias. The corrections ship with the body model
+(``hmocap_ros/data/keypoint_model.json``), measured once on simulated clips that no
+evaluation uses (``tools/learn_keypoint_model.py``).
 
 The shape: the global scale ``g`` and the bone scale factors ``b`` of the entities that
 minimise
@@ -32,20 +31,16 @@ not see (the radial factors) stay 1, scaled by the global scale like the rest.
 """
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 
 from hmocap_ros.body.anthropometry import ENTITIES, ENTITY_NAMES, BodyShape, apply_shape
 
-__all__ = ["CORRECTIONS_FILE", "MEASURES", "KeypointShape", "frame_measures", "load_corrections",
-           "model_log_measures"]
+__all__ = ["MEASURES", "KeypointShape", "frame_measures", "model_log_measures",
+           "size_corrections"]
 
 #: measure (an entity of ENTITY_NAMES) -> the keypoint distances it averages
 MEASURES = ("clavicles", "upperarms", "lowerarms", "legs", "lowerlegs", "hip_width", "hands",
             "feet", "torso", "head")
-CORRECTIONS_FILE = Path(__file__).resolve().parents[1] / "data" / "keypoint_sizes.json"
 #: relative prior std of the aggregate entities' factors (held at 1)
 _AGGREGATE_STD = 1e-3
 #: relative prior std of the global scale (people's statures: about 4 % of the mean)
@@ -87,10 +82,8 @@ def frame_measures(named: dict) -> np.ndarray:
     return np.array([out[m] for m in MEASURES])
 
 
-def load_corrections(path: str | Path | None = None) -> np.ndarray:
-    """(M,) the corrections of :data:`MEASURES` (module docstring); 1 where the file has none."""
-    data = json.loads(Path(CORRECTIONS_FILE if path is None else path).read_text())
-    table = data["corrections"]
+def size_corrections(table: dict) -> np.ndarray:
+    """(M,) the corrections of :data:`MEASURES` from ``{measure: ratio}`` (1 where absent)."""
     return np.array([float(table.get(m, 1.0)) for m in MEASURES])
 
 
@@ -114,13 +107,18 @@ def _linearised(model, fit, about: np.ndarray, step: float = 0.02):
 class KeypointShape:
     """The measures of a track's first frames and the shape they give (module docstring).
 
-    model: the tracking body; corrections: (M,) per measure (:func:`load_corrections`);
-    min_score: keypoints below it are not measured; size_std: sigma (relative).
+    model: the tracking body; corrections: (M,) per measure (:func:`size_corrections`);
+    fit: the :class:`~.keypoint_fit.KeypointFit` whose body points the measures compare with
+    (its landmark offsets); min_score: keypoints below it are not measured; size_std: sigma
+    (relative).
     """
 
-    def __init__(self, model, corrections: np.ndarray, min_score: float = 0.5,
+    def __init__(self, model, corrections: np.ndarray, fit=None, min_score: float = 0.5,
                  size_std: float = 0.03):
+        from hmocap_ros.tracking.keypoint_fit import KeypointFit
+
         self.model = model
+        self.fit = fit if fit is not None else KeypointFit(model)
         self.corrections = np.asarray(corrections, float)
         self.min_score = min_score
         self.size_std = size_std
@@ -157,9 +155,7 @@ class KeypointShape:
         have = np.isfinite(measured) & (measured > 0)
         if not have.any():
             return None
-        from hmocap_ros.tracking.keypoint_fit import KeypointFit
-
-        fit = KeypointFit(self.model)
+        fit = self.fit
         target = np.log(measured[have])
         x = np.zeros(len(ENTITY_NAMES) + 1)
         for about in (x, None):

@@ -179,11 +179,12 @@ class KeypointFirst:
 
     model: the tracking body; params: the tracker's ``keypoints`` group; detector: its
     ``detector`` group (the keypoint term's kappa and cap); n_particles: an uncertain
-    block's layer size; survival_rate, kernel: the schedule's; room: the room box.
+    block's layer size; survival_rate, kernel: the schedule's; room: the room box;
+    offsets: the landmark offsets of :func:`~.keypoint_fit.load_keypoint_model`.
     """
 
     def __init__(self, model, params: KeypointFirstParams, detector, n_particles: int,
-                 survival_rate: float, kernel, room=None):
+                 survival_rate: float, kernel, room=None, offsets: dict | None = None):
         self.model = model
         self.skel = model.skeleton
         self.params = params
@@ -191,7 +192,7 @@ class KeypointFirst:
         self.n_particles = int(n_particles)
         self.survival_rate = survival_rate
         self.kernel = kernel
-        self.fitter = KeypointFit(model, params.fit, room)
+        self.fitter = KeypointFit(model, params.fit, room, offsets)
         self.sigma0 = body_sigma0(self.skel)
         self.block_dims = dict(zip(BODY_BLOCKS, block_dims(self.skel)))
         self.own_dims = {b: self.skel.group_dofs(b) for b in BODY_BLOCKS}

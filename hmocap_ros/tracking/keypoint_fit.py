@@ -6,7 +6,14 @@ detector: head, hands, feet, shoulders, elbows, wrists, hips, knees, ankles, eac
 score) are matched to points of the body model (:data:`MODEL_POINTS`): a joint, the
 midpoint of a joint and an end site (the hands: wrist and hand tip; the head: head joint
 and head top), or an end site (the feet: the toes), as the detector's body points are
-defined (:mod:`hmocap_ros.detection.keypoint_triangulation`, step 4).
+defined (:mod:`hmocap_ros.detection.keypoint_triangulation`, step 4), each moved by the
+landmark's *offset*: where the network puts that landmark relative to the model's point, a
+fixed vector in the frame of the joint the point hangs on (BlazePose's hip landmarks lie
+several centimetres from the model's hip joints). The offsets ship with the body model
+(``hmocap_ros/data/keypoint_model.json``, :func:`load_keypoint_model`), measured once on
+simulated clips no evaluation uses (``tools/learn_keypoint_model.py``: the median, over the
+frames, of each keypoint's residual from the true pose's body point, turned into the joint's
+frame).
 
 The fit minimises over the 30 pose DoFs, within the joint limits,
 
@@ -28,7 +35,9 @@ left-right axes; the fit then starts from the rest pose there.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -37,7 +46,19 @@ from hmocap_ros.detection.detections import Detections
 from hmocap_ros.params import param
 from hmocap_ros.tracking.body_layers import body_sigma0, clip_body_pose
 
-__all__ = ["MODEL_POINTS", "KeypointFitParams", "KeypointFit", "FitResult"]
+__all__ = ["KEYPOINT_MODEL_FILE", "MODEL_POINTS", "KeypointFitParams", "KeypointFit",
+           "FitResult", "load_keypoint_model"]
+
+#: the landmark offsets and size corrections of the shipped body model
+KEYPOINT_MODEL_FILE = Path(__file__).resolve().parents[1] / "data" / "keypoint_model.json"
+
+
+def load_keypoint_model(path: str | Path | None = None) -> dict:
+    """``{"offsets": {label: (3,)}, "size_corrections": {measure: ratio}}`` of the keypoint
+    detector on the body model (module docstring; :mod:`.keypoint_anthropometry`)."""
+    data = json.loads(Path(KEYPOINT_MODEL_FILE if path is None else path).read_text())
+    return {"offsets": {k: np.asarray(v, float) for k, v in data.get("offsets", {}).items()},
+            "size_corrections": {k: float(v) for k, v in data.get("size_corrections", {}).items()}}
 
 #: keypoint label -> the model point it is: ("joint", name), ("mid", joint, end site) or
 #: ("end", end site)
@@ -89,26 +110,35 @@ class FitResult:
 class KeypointFit:
     """Fits ``model`` (the tracking body) to labelled keypoints (module docstring)."""
 
-    def __init__(self, model, params: KeypointFitParams | None = None, room=None):
+    def __init__(self, model, params: KeypointFitParams | None = None, room=None,
+                 offsets: dict | None = None):
         self.model = model
         self.skel = model.skeleton
         self.params = params or KeypointFitParams()
         self.room = room
         joints = list(map(str, model.joint_names))
         ends = list(map(str, model.end_site_names))
-        n_joints = len(joints)
         self.labels = tuple(MODEL_POINTS)
-        # each label's body point, the mean of two of the joints and end sites (indexed
-        # joints first; the same one twice for a joint or an end site alone)
-        self._ends = np.zeros((len(self.labels), 2), np.intp)
+        # each label's body point as a site on one joint: the joint itself, its end site, or
+        # the midpoint of the two; plus the landmark's learnt offset in that joint's frame
+        self._site_joint = np.zeros(len(self.labels), np.intp)
+        self._site_end = np.full(len(self.labels), -1, np.intp)
+        self._site_share = np.zeros(len(self.labels))
+        end_parents = np.asarray(model.end_site_parents)
         for k, label in enumerate(self.labels):
             spec = MODEL_POINTS[label]
             if spec[0] == "joint":
-                self._ends[k] = joints.index(spec[1])
-            elif spec[0] == "end":
-                self._ends[k] = n_joints + ends.index(spec[1])
+                self._site_joint[k] = joints.index(spec[1])
             else:
-                self._ends[k] = (joints.index(spec[1]), n_joints + ends.index(spec[2]))
+                e = ends.index(spec[-1])
+                self._site_joint[k] = end_parents[e]
+                self._site_end[k] = e
+                self._site_share[k] = 1.0 if spec[0] == "end" else 0.5
+        self.offsets = np.zeros((len(self.labels), 3))
+        if offsets is not None:
+            for k, label in enumerate(self.labels):
+                if label in offsets:
+                    self.offsets[k] = offsets[label]
         self._sigma0 = body_sigma0(self.skel)
         self._rest_key = None  # the rest the kernel was built on
         self._kernel: PosePoints | None = None
@@ -123,21 +153,23 @@ class KeypointFit:
     # ------------------------------------------------------------------ model points
 
     def kernel(self, rest) -> PosePoints:
-        """The forward kinematics on ``rest`` (rebuilt when the rest changes)."""
+        """The forward kinematics of the labels' body points on ``rest`` (rebuilt when the
+        rest changes): one site per label on its joint."""
         if self._kernel is None or rest is not self._rest_key:
-            self._kernel = PosePoints.of(self.model, rest)
+            base = PosePoints.of(self.model, rest)
+            joints = np.asarray(self.skel.joints_rest if rest is None else rest.joints)
+            ends = np.asarray(self.model.end_sites_rest if rest is None else rest.end_sites)
+            vec = np.zeros((len(self.labels), 3))
+            has_end = self._site_end >= 0
+            vec[has_end] = self._site_share[has_end, None] * (
+                ends[self._site_end[has_end]] - joints[self._site_joint[has_end]])
+            self._kernel = base.with_sites(self._site_joint, vec + self.offsets)
             self._rest_key = rest  # held, so that its identity stays its own
         return self._kernel
 
     def body_points(self, params: np.ndarray, rest) -> np.ndarray:
         """(B, L, 3) the body point of every label (:data:`MODEL_POINTS`) of poses (B, D)."""
-        return self._points(self.kernel(rest), params, self._ends)
-
-    @staticmethod
-    def _points(kernel: PosePoints, params: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        joints, sites = kernel.points(params)
-        both = np.concatenate([joints, sites], axis=1)
-        return 0.5 * (both[:, ends[:, 0]] + both[:, ends[:, 1]])
+        return self.kernel(rest).points(params)[1]
 
     def targets(self, detections: Detections | None, drop=()) -> tuple:
         """``(rows, positions (K, 3), scores (K,))`` of the keypoints to fit: the best-scored
@@ -208,7 +240,7 @@ class KeypointFit:
             start = centre = np.asarray(prior, float)
             prior_w = 1.0 / (p.prior_scale * max(periods, 1.0) * self._sigma0)
         x = start.copy()
-        chosen = self._ends[rows]
+
         sqrt_w = np.sqrt(scores) / p.keypoint_std
         kernel = self.kernel(rest)
         n = self.skel.n_dofs
@@ -216,7 +248,7 @@ class KeypointFit:
         lam = 1e-3
 
         def points_of(poses):
-            return self._points(kernel, poses, chosen)
+            return kernel.points(poses)[1][:, rows]
 
         def energy(x, pts):
             d = np.linalg.norm(pts - positions, axis=1) * sqrt_w
