@@ -271,3 +271,30 @@ def test_detector_finds_the_labelled_keypoints_in_3d(scene, caplog):
         assert np.linalg.norm(without_masks.as_dict()["left_hand"] - targets["left_hand"]) < 0.08
     finally:
         detector.close()
+
+
+def test_ssd_anchors_decoding_and_weighted_nms_follow_mediapipe():
+    from hmocap_ros.detection.pose_detector import decode_detections, ssd_anchors, weighted_nms
+
+    anchors = ssd_anchors()
+    # strides 8, 16 (2 anchors a cell) and three layers of 32 merged (6 a cell): 2254 anchors
+    assert anchors.shape == (28 * 28 * 2 + 14 * 14 * 2 + 7 * 7 * 6, 2) == (2254, 2)
+    np.testing.assert_allclose(anchors[:2], [[0.5 / 28, 0.5 / 28]] * 2)
+    np.testing.assert_allclose(anchors[1568], [0.5 / 14, 0.5 / 14])
+    np.testing.assert_allclose(anchors[-1], [6.5 / 7, 6.5 / 7])
+    raw = np.zeros((3, 12))
+    raw[0, :4] = [22.4, -11.2, 44.8, 89.6]  # centre offset (0.1, -0.05) of the input, size 0.2 x 0.4
+    raw[0, 4:6] = [0.0, 22.4]  # keypoint 0: 0.1 below the anchor
+    logits = np.array([3.0, -3.0, 200.0])  # sigmoid 0.95, 0.05 (dropped), clipped to 100 -> 1
+    scores, boxes, keypoints = decode_detections(raw, logits, np.array([[0.5, 0.5]] * 3))
+    assert scores == pytest.approx([1 / (1 + np.exp(-3.0)), 1.0])
+    np.testing.assert_allclose(boxes[0], np.array([0.5, 0.25, 0.7, 0.65]) * 224, atol=1e-9)
+    np.testing.assert_allclose(keypoints[0, 0], [0.5 * 224, 0.6 * 224], atol=1e-9)
+    # two overlapping boxes merge into their score-weighted mean; a distant one stays apart
+    boxes = np.array([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60]], float)
+    points = np.array([np.full((4, 2), 0.0), np.full((4, 2), 3.0), np.full((4, 2), 55.0)])
+    merged = weighted_nms(np.array([0.6, 0.9, 0.7]), boxes, points)
+    assert [m[0] for m in merged] == [0.9, 0.7]
+    np.testing.assert_allclose(merged[0][1], (0.9 * boxes[1] + 0.6 * boxes[0]) / 1.5)
+    np.testing.assert_allclose(merged[0][2], np.full((4, 2), 0.9 * 3.0 / 1.5))
+    np.testing.assert_allclose(merged[1][2], points[2])

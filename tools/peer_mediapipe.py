@@ -17,6 +17,9 @@ keypoints (``--json OUT`` writes them)::
 
     .venv/bin/python tools/peer_mediapipe.py --bags held_out_1.mcap held_out_2.mcap --json peer.json
 
+``--extremities REPORT.json ...`` (one ``hmocap eval extremities --json`` report per bag, same
+order) prints the package's keypoints beside the peer, joint by joint.
+
 MediaPipe is not a dependency of hmocap_ros (its last wheel with the pose model inside,
 0.10.14, needs numpy < 2): the first run creates a separate venv, ``.venv-peer``, with
 ``pip install mediapipe==0.10.14 "numpy<2"`` and runs ``peer_mediapipe_worker.py`` in it.
@@ -134,6 +137,24 @@ def per_joint_report(bags: list[str], python: Path, max_reprojection_px: float) 
     return out
 
 
+#: our joint -> the label of the extremity detector's report
+_EXTREMITY_LABEL = {j: ("left_" if j[0] == "l" else "right_") + j[2:] for j in LANDMARKS}
+
+
+def side_by_side(peer: dict, ours: dict) -> list[str]:
+    """Lines: per joint the peer's and the keypoints' mean error (mm) and share of frames
+    within 10 cm, and the difference."""
+    lines = [f"{'joint':11s} {'peer mm':>8s} {'ours mm':>8s} {'diff':>6s}  {'peer<10cm':>9s} "
+             f"{'ours<10cm':>9s}"]
+    for j, s in peer["joints"].items():
+        o = ours["labels"].get(_EXTREMITY_LABEL[j], {})
+        mine = o.get("mean_error_mm", float("nan"))
+        theirs = s["mean_error_mm"] if s["mean_error_mm"] is not None else float("nan")
+        lines.append(f"{j:11s} {theirs:8.1f} {mine:8.1f} {mine - theirs:+6.1f}  "
+                     f"{s['recall_100mm']:9.2f} {o.get('recall', float('nan')):9.2f}")
+    return lines
+
+
 def _label(method: str, detector: str) -> str:
     """The table label of a method; DD-HPF+ names its detector."""
     label = METHODS[method].label
@@ -156,12 +177,20 @@ def main(argv=None) -> int:
     p.add_argument("--bags", nargs="+", default=None,
                    help="measure the peer per joint on these bags (with ground truth) instead")
     p.add_argument("--json", default=None, help="with --bags: write the figures here")
+    p.add_argument("--extremities", nargs="+", default=None, metavar="REPORT",
+                   help="with --bags: hmocap eval extremities --json reports, one per bag, "
+                        "printed beside the peer")
     ns = p.parse_args(argv)
     python = peer_python(Path(ns.peer_venv))
     if ns.bags:
+        if ns.extremities and len(ns.extremities) != len(ns.bags):
+            p.error("--extremities needs one report per bag")
         report = per_joint_report(ns.bags, python, ns.max_reprojection_px)
         if ns.json:
             Path(ns.json).write_text(json.dumps(report, indent=1))
+        for bag, ours in zip(ns.bags, ns.extremities or ()):
+            print(f"\n{Path(bag).name}: the peer and the package's keypoints ({ours})")
+            print("\n".join(side_by_side(report[bag], json.loads(Path(ours).read_text()))))
         return 0
     work = Path(ns.workdir)
     joints = list(LANDMARKS)
