@@ -258,7 +258,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                         except ValueError as err:
                             warn(f"{topic}: {err} (no detections from this view)")
                             images.append(None)
-                    detections = pipeline.detect(images, masks, previous, stamp)
+                    detections = pipeline.detect(images, masks, previous)
                     writer.write(EXTREMITIES_TOPIC, _extremities_msg(detections, stamp, rig.frame_id, factory),
                                  stamp)
                 results = people.update(masks, int(stamp), detections)

@@ -114,24 +114,23 @@ class ExtremityPipeline:
             self.keypoints.close()
 
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
-               previous: dict | None = None, stamp_ns: int | None = None) -> Detections:
+               previous: dict | None = None) -> Detections:
         """Detections of one frame set: per camera an RGB image (H, W, 3) uint8 and a
-        foreground mask (H, W) at the rig's resolution, either None where missing; ``stamp_ns``:
-        the frame set's stamp (keypoints: smoothed over time with it)."""
+        foreground mask (H, W) at the rig's resolution, either None where missing."""
         t0 = time.perf_counter()
         if len(images) != len(self.cameras) or len(masks) != len(self.cameras):
             raise ValueError(f"expected {len(self.cameras)} images and masks, got "
                              f"{len(images)} and {len(masks)}")
         images, masks = _checked(self.cameras, images, masks)
         if self.keypoints is not None:
-            out = self._keypoints(images, masks, previous, stamp_ns)
+            out = self._keypoints(images, masks, previous)
         else:
             out = self._skin(images, masks, previous)
         self.last_seconds = time.perf_counter() - t0
         return out
 
-    def _keypoints(self, images, masks, previous, stamp_ns) -> Detections:
-        kp = self.keypoints.detect(images, masks, previous, stamp_ns)
+    def _keypoints(self, images, masks, previous) -> Detections:
+        kp = self.keypoints.detect(images, masks, previous)
         return Detections("keypoints", tuple(kp.labels), kp.positions, kp.scores)
 
     def _skin(self, images, masks, previous) -> Detections:

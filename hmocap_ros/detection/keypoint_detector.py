@@ -48,9 +48,7 @@ import numpy as np
 from hmocap_ros.camera_model import project_points
 from hmocap_ros.detection.keypoint_network import PoseLandmarkNetwork, ViewLandmarks
 from hmocap_ros.detection.keypoint_roi import Roi, box_roi, landmarks_roi, skeleton_roi
-from hmocap_ros.detection.keypoint_smoothing import KeypointSmoother, SmoothingParams
-from hmocap_ros.detection.keypoint_triangulation import (KEYPOINT_LABELS, Keypoints3D,
-                                                         triangulate_views)
+from hmocap_ros.detection.keypoint_triangulation import Keypoints3D, triangulate_views
 from hmocap_ros.detection.pose_detector import PoseDetector
 from hmocap_ros.params import param
 
@@ -107,12 +105,6 @@ class KeypointParams:
     swap_margin: float = param(
         0.5, "The sides of views are renamed only when the consensus gained exceeds this share "
              "of the renamed views' weight (>= 0).")
-    smoothing_min_cutoff_hz: float = param(
-        0.05, "One-euro filter of the keypoints over time: cutoff frequency (Hz, > 0) of a "
-              "still keypoint (MediaPipe's landmark smoothing).")
-    smoothing_beta: float = param(
-        80.0, "One-euro filter: rise of the cutoff (Hz) per body size (1.7 m) per second of "
-              "the keypoint's speed (>= 0).")
     workers: int = param(
         2, "Threads running the networks, one landmark network and one pose detector each "
            "(>= 1): the views of a frame set run in parallel.")
@@ -135,8 +127,6 @@ class KeypointParams:
             "min_score": 0 <= self.min_score <= 1, "workers": int(self.workers) >= 1,
             "threads": int(self.threads) >= 1,
             "swap_margin": self.swap_margin >= 0,
-            "smoothing_min_cutoff_hz": self.smoothing_min_cutoff_hz > 0,
-            "smoothing_beta": self.smoothing_beta >= 0,
         }
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
@@ -232,8 +222,6 @@ class KeypointDetector:
         self._tracks: list[Roi | None] = [None] * len(self.cameras)
         self.last_timings: dict[str, float] = {}
         self.last_sources: list[str | None] = [None] * len(self.cameras)
-        self._smoother = KeypointSmoother(KEYPOINT_LABELS, SmoothingParams(
-            self.params.smoothing_min_cutoff_hz, self.params.smoothing_beta))
 
     def close(self) -> None:
         """Stop the worker threads."""
@@ -242,10 +230,8 @@ class KeypointDetector:
             self._pool = None
 
     def reset(self) -> None:
-        """Drop every view's track (the next crops come from the skeleton or the detector) and
-        the keypoints' smoothing."""
+        """Drop every view's track: the next crops come from the skeleton or the detector."""
         self._tracks = [None] * len(self.cameras)
-        self._smoother.reset()
 
     def _skip(self, camera, cause: str) -> None:
         if cause not in self._reported:
@@ -304,13 +290,10 @@ class KeypointDetector:
                                                                   camera.height) else None
 
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
-               previous: dict[str, np.ndarray] | None = None,
-               stamp_ns: int | None = None) -> Keypoints3D:
+               previous: dict[str, np.ndarray] | None = None) -> Keypoints3D:
         """3D keypoints of one frame set: per camera an RGB uint8 image (or None) and a uint8
         foreground mask (or None; ``masks=None``: none at all); ``previous``: label -> (3,) room
-        position of the last skeleton's keypoints, optional; ``stamp_ns``: the frame set's
-        stamp, with which the keypoints are smoothed over time (:mod:`.keypoint_smoothing`;
-        None: not smoothed). A view without an image, with an
+        position of the last skeleton's keypoints, optional. A view without an image, with an
         image of the wrong size or type, or with a mask without foreground is skipped, logged
         once per cause; so is a view where the detector finds nobody (without a mask)."""
         masks = [None] * len(self.cameras) if masks is None else list(masks)
@@ -347,9 +330,6 @@ class KeypointDetector:
                 self._skip(self.cameras[v], "the pose detector finds nobody")
         used_masks = [m if plan is not None else None for m, plan in zip(masks, plans)]
         result = triangulate_views(self.cameras, views, used_masks, previous, self.params)
-        if stamp_ns is not None and len(result.labels):
-            result = Keypoints3D(result.labels, self._smoother.filter(
-                result.labels, result.positions, int(stamp_ns)), result.scores, result.views_used)
         t3 = time.perf_counter()
         timings.update(triangulation=t3 - t2, total=t3 - t0)
         self.last_timings = timings

@@ -14,10 +14,8 @@ the bag's silhouettes) and scores, per label, as the detector tests of thesis se
 * skin candidates are unlabelled: each is counted for the nearest true extremity (head or hand)
   within ``radius``, else as a false detection (precision over all candidates).
 
-The detector runs without the last skeleton, so that the figures do not depend on a tracker:
-the keypoint crops come from each view's own track (its previous landmarks) and the pose
-detector, the skin detector's carving box from the foregrounds. The frame sets go through in
-order, every one of them, as a recording is replayed.
+The detector runs without the last skeleton (the crops and carving boxes come from the
+foregrounds alone), so that the figures do not depend on a tracker.
 """
 from __future__ import annotations
 

@@ -178,7 +178,7 @@ def _detect(pipeline, image_topics, msgs, stamp, rgb_of, masks):
             log.warning("frame %d, %s: %s (no detections from this view)", stamp, topic, err)
             images.append(None)
     try:
-        return pipeline.detect(images, list(masks), stamp_ns=stamp)
+        return pipeline.detect(images, list(masks))
     except ValueError as err:
         log.warning("frame %d: extremity detection failed: %s", stamp, err)
         return None

@@ -266,7 +266,7 @@ class ExtremityDetectionNode(Node):
             masks.append(mask)
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            det = self.pipeline.detect(images, masks, self._previous(stamp_ns), stamp_ns)
+            det = self.pipeline.detect(images, masks, self._previous(stamp_ns))
         except Exception as err:  # a detector bug must not take the room's node down
             self.get_logger().error(f"extremity detection failed on frame {stamp_ns}: {err!r}")
             return
