@@ -20,7 +20,8 @@ images, the depth images and every output, and notes when each arrives. Reported
   ``gestures`` message), with ``core_ms_per_input_set`` per frame set that came in beside it;
 - the replay's own timing (``replay_seconds``: from its first to its last publication;
   ``replay_bag_seconds``: the bag's span over the rate; ``replay_behind_max_s``,
-  ``replay_behind_p95_s``: how late its messages went out), from the replay's timing line:
+  ``replay_behind_p95_s``: how late its messages went out; ``replay_cpu_seconds``), from the
+  replay's timing line:
   a replay that keeps real time does not limit the figures above;
 - the mean joint error (mm) of the published poses against the bag's ground truth, and with
   ``--offline`` the same tracker run offline on every frame set (``hmocap eval mocap``) beside
@@ -356,7 +357,8 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu_s: dict, wal
 def print_report(r: dict) -> None:
     print(f"\n{Path(r['bag']).name}: {r['cameras']} cameras, replay at rate {r['rate']:g}: "
           f"{r['replay_bag_seconds']:.1f} s of bag published in {r['replay_seconds']:.1f} s, at most "
-          f"{r['replay_behind_max_s']:.2f} s behind (p95 {r['replay_behind_p95_s']:.3f} s); "
+          f"{r['replay_behind_max_s']:.2f} s behind (p95 {r['replay_behind_p95_s']:.3f} s), "
+          f"{r['replay_cpu_seconds']:.1f} CPU s; "
           f"{r['machine']['cpus']} CPUs")
     print(f"  frame sets in {r['frame_sets_in']} ({r['frame_sets_with_person']} with a person), poses out "
           f"{r['poses_out']}, {r['poses_per_s']:.2f} poses/s ({r['poses_per_s_tracking']:.2f} from the first "

@@ -62,9 +62,10 @@ def test_cpu_per_frame_set_and_the_replay_timing_line():
     assert per["kp"]["core_ms_per_set"] == pytest.approx(30.0)
     assert np.isnan(per["idle"]["core_ms_per_set"])  # answered nothing
     out = "replaying x.mcap: 5 topics at rate 1\nreplay timing: bag_s=20.000 wall_s=20.250 " \
-          "behind_max_s=0.310 behind_p95_s=0.020\n  /cam_1/image_raw: 500 messages published\n"
+          "behind_max_s=0.310 behind_p95_s=0.020 cpu_s=2.5\n  /cam_1/image_raw: 500 messages published\n"
     assert replay_timing(out) == {"replay_bag_seconds": 20.0, "replay_seconds": 20.25,
-                                  "replay_behind_max_s": 0.31, "replay_behind_p95_s": 0.02}
+                                  "replay_behind_max_s": 0.31, "replay_behind_p95_s": 0.02,
+                                  "replay_cpu_seconds": 2.5}
     assert all(np.isnan(v) for v in replay_timing("no such line").values())
 
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from hmocap_ros.detection.keypoint_roi import Roi, alignment_roi, crop_transform
+from hmocap_ros.detection.keypoint_roi import ROI_SCALE, Roi, alignment_roi, crop_transform
 from hmocap_ros.detection.tflite_model import MODEL_DIR, load_model
 
 __all__ = ["DEFAULT_DETECTOR_MODEL", "DETECTOR_INPUT_SIZE", "PoseDetection", "PoseDetector",
@@ -129,9 +129,10 @@ class PoseDetection:
     box: np.ndarray
     keypoints: np.ndarray
 
-    def roi(self) -> Roi | None:
-        """The landmark network's crop (MediaPipe's ``pose_detection_to_roi``)."""
-        return alignment_roi(self.keypoints[0], self.keypoints[1])
+    def roi(self, scale: float = ROI_SCALE) -> Roi | None:
+        """The landmark network's crop (MediaPipe's ``pose_detection_to_roi``; ``scale``: the
+        crop's side over the body circle's diameter)."""
+        return alignment_roi(self.keypoints[0], self.keypoints[1], scale)
 
 
 class PoseDetector:

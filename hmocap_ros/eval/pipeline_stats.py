@@ -106,9 +106,10 @@ def core_ms_per_set(cpu_s: Mapping[str, float], answered: Mapping[str, int], set
 
 def replay_timing(output: str) -> dict:
     """The figures of ``hmocap replay``'s timing line (``replay timing: bag_s=... wall_s=...
-    behind_max_s=... behind_p95_s=...``), NaN when it printed none."""
+    behind_max_s=... behind_p95_s=... cpu_s=...``), NaN when it printed none."""
     keys = {"bag_s": "replay_bag_seconds", "wall_s": "replay_seconds",
-            "behind_max_s": "replay_behind_max_s", "behind_p95_s": "replay_behind_p95_s"}
+            "behind_max_s": "replay_behind_max_s", "behind_p95_s": "replay_behind_p95_s",
+            "cpu_s": "replay_cpu_seconds"}
     out = {v: float("nan") for v in keys.values()}
     for line in output.splitlines():
         if line.startswith("replay timing:"):
