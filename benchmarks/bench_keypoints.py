@@ -12,7 +12,7 @@ with one arm raised sideways), the exact silhouettes as foreground masks. Measur
 - **the pose detector**: :meth:`PoseDetector.detect` on a whole 640x480 view (the first crop
   of a track), median wall and CPU ms;
 - **frame sets**: :meth:`KeypointDetector.detect` on the 4 views (crops from the views'
-  tracks, networks, robust triangulation) for the worker / LiteRT-thread settings below,
+  tracks, networks, robust triangulation) on 2 and 1 LiteRT threads,
   median wall clock and CPU time of the process (all its threads), the median of each stage;
   and the first frame set of a track (every view through the pose detector first).
 
@@ -37,7 +37,7 @@ from hmocap_ros.detection import (KeypointDetector, KeypointParams, PoseDetector
 from hmocap_ros.detection.keypoint_network import DEFAULT_MODEL, INPUT_SIZE
 from hmocap_ros.detection.keypoint_roi import crop_transform
 
-SETTINGS = ((1, 2), (1, 1), (2, 1))  # (workers, LiteRT threads per network) of the detector
+SETTINGS = (2, 1)  # LiteRT threads of the detector's networks
 
 
 def render_scene():
@@ -133,8 +133,8 @@ def bench_pose_detector(images, repeats: int) -> None:
 
 
 def bench_detector(rig, images, masks, repeats: int) -> None:
-    for workers, threads in SETTINGS:
-        detector = KeypointDetector(rig, KeypointParams(workers=workers, threads=threads))
+    for threads in SETTINGS:
+        detector = KeypointDetector(rig, KeypointParams(threads=threads))
         try:
             first_cpu, first_wall = [], []
             for _ in range(max(2, repeats // 4)):
@@ -159,8 +159,7 @@ def bench_detector(rig, images, masks, repeats: int) -> None:
         total = float(np.median(stages["total"]))
         parts = ", ".join(f"{k} {1e3 * np.median(v):.1f}"
                           for k, v in stages.items() if k != "total")
-        print(f"detect(), 4 views, {workers} worker{'s' if workers > 1 else ''} x {threads} "
-              f"LiteRT thread{'s' if threads > 1 else ''}: {1e3 * total:.0f} ms per frame set = "
+        print(f"detect(), 4 views, {threads} LiteRT thread{'s' if threads > 1 else ''}: {1e3 * total:.0f} ms per frame set = "
               f"{1.0 / total:.1f} frame sets/s, {1e3 * np.median(cpu):.0f} ms CPU of the process "
               f"(median ms: {parts}; crops from {sorted(set(sources))}; {len(result.labels)} "
               f"keypoints); first set of a track {1e3 * np.median(first_wall):.0f} ms, "

@@ -33,15 +33,16 @@ taken from the last landmarks as they are, since frame sets reach the detector a
 intervals (the live node takes the newest and skips the others) and a filter tuned for a
 steady video rate would lag behind a moving person.
 
-The networks run on ``workers`` threads, one landmark network and one pose detector each
-(LiteRT releases the GIL while it runs), ``threads`` LiteRT threads per network.
+The views run one after the other, each network on ``threads`` LiteRT threads. Design choice:
+views in parallel (a network per thread; LiteRT releases the GIL) lost to LiteRT's own
+threads on the 2-core machine: 4 views in 161-175 ms and 135 ms of CPU per frame set on one
+network with 2 LiteRT threads, against 212-542 ms and 138-155 ms of CPU with two single-threaded
+networks side by side (``benchmarks/bench_keypoints.py``, two runs on a loaded machine).
 """
 from __future__ import annotations
 
 import logging
-import queue
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -111,12 +112,8 @@ class KeypointParams:
     swap_margin: float = param(
         0.5, "The sides of views are renamed only when the consensus gained exceeds this share "
              "of the renamed views' weight (>= 0).")
-    workers: int = param(
-        2, "Threads running the networks, one landmark network and one pose detector each "
-           "(>= 1): the views of a frame set run in parallel.")
     threads: int = param(
-        1, "LiteRT threads per network (>= 1): with a network per worker, 1 keeps the cores "
-           "from being oversubscribed.")
+        2, "LiteRT threads of the landmark network and the pose detector (>= 1).")
 
     def __post_init__(self) -> None:
         checks = {
@@ -130,7 +127,7 @@ class KeypointParams:
             "outside_mask_weight": 0 <= self.outside_mask_weight <= 1,
             "max_reprojection_px": self.max_reprojection_px > 0,
             "min_views": int(self.min_views) == self.min_views and self.min_views >= 2,
-            "min_score": 0 <= self.min_score <= 1, "workers": int(self.workers) >= 1,
+            "min_score": 0 <= self.min_score <= 1,
             "threads": int(self.threads) >= 1,
             "swap_margin": self.swap_margin >= 0,
         }
@@ -215,25 +212,17 @@ class KeypointDetector:
                  detector_path=None):
         self.cameras = list(cameras)
         self.params = params or KeypointParams()
-        workers = max(1, min(int(self.params.workers), len(self.cameras)))
         threads = int(self.params.threads)
-        self._networks: queue.SimpleQueue = queue.SimpleQueue()
-        for _ in range(workers):
-            self._networks.put((PoseLandmarkNetwork(model_path, threads),
-                                PoseDetector(detector_path, threads,
-                                             self.params.min_detection_score)))
-        self._pool = (ThreadPoolExecutor(workers, thread_name_prefix="keypoints")
-                      if workers > 1 else None)
+        self._network = PoseLandmarkNetwork(model_path, threads)
+        self._detector = PoseDetector(detector_path, threads, self.params.min_detection_score)
         self._reported: set[str] = set()
         self._tracks: list[Roi | None] = [None] * len(self.cameras)
         self.last_timings: dict[str, float] = {}
         self.last_sources: list[str | None] = [None] * len(self.cameras)
 
     def close(self) -> None:
-        """Stop the worker threads."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None
+        """Release the networks."""
+        self._network = self._detector = None
 
     def reset(self) -> None:
         """Drop every view's track: the next crops come from the skeleton or the detector."""
@@ -274,19 +263,16 @@ class KeypointDetector:
         return None, "detector", fg_box
 
     def _infer(self, image, roi, source, fg_box) -> tuple[ViewLandmarks | None, str, float]:
-        network, detector = self._networks.get()
-        try:
-            t0 = time.perf_counter()
+        t0 = time.perf_counter()
+        if roi is None:
+            found = [d for d in self._detector.detect(image)
+                     if fg_box is None or _meets(fg_box, d.box)]
+            roi = found[0].roi(self.params.crop_scale) if found else None
+            if roi is None and fg_box is not None:
+                roi, source = box_roi(fg_box, self.params.box_margin), "foreground"
             if roi is None:
-                found = [d for d in detector.detect(image) if fg_box is None or _meets(fg_box, d.box)]
-                roi = found[0].roi(self.params.crop_scale) if found else None
-                if roi is None and fg_box is not None:
-                    roi, source = box_roi(fg_box, self.params.box_margin), "foreground"
-                if roi is None:
-                    return None, source, time.perf_counter() - t0
-            return network.run(image, roi), source, time.perf_counter() - t0
-        finally:
-            self._networks.put((network, detector))
+                return None, source, time.perf_counter() - t0
+        return self._network.run(image, roi), source, time.perf_counter() - t0
 
     def _follow(self, v: int, camera, view: ViewLandmarks | None) -> None:
         """The view's next crop from its landmarks (None: lost)."""
@@ -320,10 +306,7 @@ class KeypointDetector:
             plans[v] = plan
         t1 = time.perf_counter()
         jobs = [v for v, plan in enumerate(plans) if plan is not None]
-        if self._pool is None:
-            results = [self._infer(images[v], *plans[v]) for v in jobs]
-        else:
-            results = list(self._pool.map(lambda v: self._infer(images[v], *plans[v]), jobs))
+        results = [self._infer(images[v], *plans[v]) for v in jobs]
         t2 = time.perf_counter()
         views: list = [None] * len(self.cameras)
         self.last_sources = [None] * len(self.cameras)

@@ -4,7 +4,7 @@ Pairs each camera's image with its foreground mask by stamp, synchronises the ca
 sets and runs :class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline` on each:
 ``detector`` ``keypoints`` (a 2D landmark network per view on the crop MediaPipe's pipeline
 gives it: from the view's previous landmarks, the previous skeleton or a pose detector;
-triangulated robustly over the views; the views in parallel) or ``skin`` (the thesis' skin-colour detector on the
+triangulated robustly over the views) or ``skin`` (the thesis' skin-colour detector on the
 oriented surface of the carved hull, eq. 2.16-2.18). body_tracker's ``dd-hpf`` consumes the
 detections.
 
