@@ -5,11 +5,10 @@ the views' landmarks are triangulated robustly into
 :data:`~.keypoint_triangulation.KEYPOINT_LABELS` (:mod:`.keypoint_triangulation`).
 
 The crop is the one the network was trained on, as MediaPipe's ``PoseLandmarkCpu`` graph makes
-it (:mod:`.keypoint_roi`): a square turned so that the body stands upright, ``crop_scale``
-times the body's circle. Design choice: 1.15 rather than MediaPipe's 1.25, for people 100-250
-pixels tall in 640x480 views (on the tuning clip 002_05 the 12 limb joints' mean error was
-30.6 mm at 1.15 against 32.1 at 1.25, 8 of the 12 joints better). Each view keeps a track;
-its crop comes, in this order, from
+it (:mod:`.keypoint_roi`): a square turned so that the body stands upright, 1.25 times the
+body's circle (MediaPipe's scale: a tighter 1.15 gained 1.5 mm over the 12 limb joints on the
+tuning clip 002_05 but lost 0.9 mm on the held-out clips). Each view keeps a track; its crop
+comes, in this order, from
 
 1. **the view's previous landmarks** (the track): the auxiliary points 33 (hips' centre) and 34
    (scale point) of the last frame set whose pose presence score reached ``min_pose_score``
@@ -71,9 +70,6 @@ class KeypointParams:
     """Tunables of :class:`KeypointDetector` and
     :func:`~hmocap_ros.detection.keypoint_triangulation.triangulate_views`."""
 
-    crop_scale: float = param(
-        1.15, "Side of a crop from landmarks, the previous skeleton or the pose detector over "
-              "the diameter of the body's circle (>= 1; MediaPipe's 1.25).")
     box_margin: float = param(
         1.15, "Side of the upright crop about a foreground box (the crop when the pose detector "
               "finds nobody) over the box's longer side (>= 1).")
@@ -117,7 +113,7 @@ class KeypointParams:
 
     def __post_init__(self) -> None:
         checks = {
-            "box_margin": self.box_margin >= 1.0, "crop_scale": self.crop_scale >= 1.0, "previous_box_pad": self.previous_box_pad >= 0,
+            "box_margin": self.box_margin >= 1.0, "previous_box_pad": self.previous_box_pad >= 0,
             "min_blob_fraction": 0 <= self.min_blob_fraction < 1,
             "min_detection_score": 0 <= self.min_detection_score <= 1,
             "min_pose_score": 0 <= self.min_pose_score <= 1,
@@ -256,8 +252,7 @@ class KeypointDetector:
                 return None, None, None
         if self._tracks[v] is not None:
             return self._tracks[v], "track", fg_box
-        roi = skeleton_roi(previous_pixels(camera, previous), self.params.previous_box_pad,
-                           self.params.crop_scale)
+        roi = skeleton_roi(previous_pixels(camera, previous), self.params.previous_box_pad)
         if roi is not None and roi.overlaps(camera.width, camera.height):
             return roi, "skeleton", fg_box
         return None, "detector", fg_box
@@ -267,7 +262,7 @@ class KeypointDetector:
         if roi is None:
             found = [d for d in self._detector.detect(image)
                      if fg_box is None or _meets(fg_box, d.box)]
-            roi = found[0].roi(self.params.crop_scale) if found else None
+            roi = found[0].roi() if found else None
             if roi is None and fg_box is not None:
                 roi, source = box_roi(fg_box, self.params.box_margin), "foreground"
             if roi is None:
@@ -278,7 +273,7 @@ class KeypointDetector:
         """The view's next crop from its landmarks (None: lost)."""
         roi = None
         if view is not None and view.score >= self.params.min_pose_score:
-            roi = landmarks_roi(view.xy, self.params.crop_scale)
+            roi = landmarks_roi(view.xy)
         self._tracks[v] = roi if roi is not None and roi.overlaps(camera.width,
                                                                   camera.height) else None
 
