@@ -14,7 +14,15 @@ images, the depth images and every output, and notes when each arrives. Reported
 - latency (stamp to publication: an output's arrival minus the arrival of the frame set it
   was computed from) p50 / p95 / max per output topic;
 - outputs that arrived after one with a newer stamp, per topic (``out_of_order``);
-- CPU per node (cores: CPU seconds over the replay's wall seconds);
+- CPU per node: cores (CPU seconds over the run's wall seconds) and ``core_ms_per_set``, CPU
+  milliseconds per frame set the node answered (segmentation: per set of masks of the last
+  camera; extremities: per ``extremities`` message; tracker: per pose; gestures: per
+  ``gestures`` message), with ``core_ms_per_input_set`` per frame set that came in beside it;
+- the replay's own timing (``replay_seconds``: from its first to its last publication;
+  ``replay_bag_seconds``: the bag's span over the rate; ``replay_behind_max_s``,
+  ``replay_behind_p95_s``: how late its messages went out; ``replay_cpu_seconds``), from the
+  replay's timing line:
+  a replay that keeps real time does not limit the figures above;
 - the mean joint error (mm) of the published poses against the bag's ground truth, and with
   ``--offline`` the same tracker run offline on every frame set (``hmocap eval mocap``) beside
   it, on all frames and on the frames published live;
@@ -42,8 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.eval.pipeline_stats import (frame_period_s, header_stamp_ns, latency_ms, latency_summary,
-                                            pose_errors, process_cpu_seconds)
+from hmocap_ros.eval.pipeline_stats import (core_ms_per_set, frame_period_s, header_stamp_ns, latency_ms,
+                                            latency_summary, pose_errors, process_cpu_seconds, replay_timing)
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
 from hmocap_ros.io.msg_factory import stamp_to_ns
@@ -234,21 +242,21 @@ def run(ns) -> dict:
         for r in replays:
             if r.wait(3600) != 0:
                 raise RuntimeError(f"the replay failed:\n{r.output()}")
-        replay_s = time.monotonic() - t0
+        replay = replay_timing(replays[0].output())
         # The last outputs: wait until nothing new arrives for 3 s.
         last, quiet = -1, time.monotonic()
-        while time.monotonic() - quiet < 3.0 and time.monotonic() - t0 < replay_s + 120:
+        while time.monotonic() - quiet < 3.0 and time.monotonic() - t0 < replay["replay_seconds"] + 120:
             n = sum(monitor.count(t) for t in watch)
             if n != last:
                 last, quiet = n, time.monotonic()
             time.sleep(0.1)
         wall = time.monotonic() - t0
-        cpu = {n: ((process_cpu_seconds(p.proc.pid) or 0.0) - cpu0[n]) / wall for n, p in procs.items()}
+        cpu_s = {n: (process_cpu_seconds(p.proc.pid) or 0.0) - cpu0[n] for n, p in procs.items()}
     finally:
         for p in procs.values():
             p.stop()
         monitor.close()
-    return report(ns, bag, cameras, monitor, cpu, replay_s)
+    return report(ns, bag, cameras, monitor, cpu_s, wall, replay)
 
 
 def offline_report(bag: Path, ns) -> dict:
@@ -281,7 +289,8 @@ def tracking_rate(poses: dict, inputs: dict, truth: dict, period: float) -> floa
     return len([s for s in poses if s in truth]) / max(len(after) * period, 1e-9)
 
 
-def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu: dict, replay_s: float) -> dict:
+def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu_s: dict, wall: float,
+           replay: dict) -> dict:
     from rclpy.serialization import deserialize_message
 
     from hmocap_ros.nodes.common import message_class
@@ -298,11 +307,16 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu: dict, repla
     errors = pose_errors(estimates, truth)
     person_in = [s for s in inputs if s in truth]
     poses = arrivals["/skeleton"]
+    answered = {"foreground_segmentation": len(arrivals[topics.camera_foreground(cameras[-1])]),
+                "extremity_detection": len(arrivals["/extremities"]), "body_tracker": len(poses)}
+    if ns.depth_bag is not None:
+        answered["gesture_detection"] = len(arrivals["/gestures"])
+    per_set = core_ms_per_set(cpu_s, answered, len(inputs))
     out = {
         "bag": str(bag), "cameras": len(cameras), "rate": ns.rate,
         "machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine()},
         "node_params": list(ns.param),
-        "replay_seconds": replay_s,
+        **replay,
         "frame_sets_in": len(inputs), "frame_sets_with_person": len(person_in),
         "poses_out": len(poses),
         "poses_per_s": len([s for s in poses if s in truth]) / max(len(person_in) * period, 1e-9),
@@ -316,7 +330,9 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu: dict, repla
                         **latency_summary(latency_ms(inputs, arrivals["/extremities"]))},
         "foreground": {c: len(arrivals[topics.camera_foreground(c)]) for c in cameras},
         "foreground_latency": latency_summary(latency_ms(inputs, arrivals[topics.camera_foreground(cameras[-1])])),
-        "cpu_cores": cpu,
+        "cpu_cores": {n: c / wall for n, c in cpu_s.items()},
+        "core_ms_per_set": {n: v["core_ms_per_set"] for n, v in per_set.items()},
+        "core_ms_per_input_set": {n: v["core_ms_per_input_set"] for n, v in per_set.items()},
         "first_pose_after_person_s": (min(poses[s] for s in poses) - min(inputs[s] for s in person_in)
                                       if poses and person_in else float("nan")),
     }
@@ -339,8 +355,11 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu: dict, repla
 
 
 def print_report(r: dict) -> None:
-    print(f"\n{Path(r['bag']).name}: {r['cameras']} cameras, replay at rate {r['rate']:g} "
-          f"({r['replay_seconds']:.1f} s); {r['machine']['cpus']} CPUs")
+    print(f"\n{Path(r['bag']).name}: {r['cameras']} cameras, replay at rate {r['rate']:g}: "
+          f"{r['replay_bag_seconds']:.1f} s of bag published in {r['replay_seconds']:.1f} s, at most "
+          f"{r['replay_behind_max_s']:.2f} s behind (p95 {r['replay_behind_p95_s']:.3f} s), "
+          f"{r['replay_cpu_seconds']:.1f} CPU s; "
+          f"{r['machine']['cpus']} CPUs")
     print(f"  frame sets in {r['frame_sets_in']} ({r['frame_sets_with_person']} with a person), poses out "
           f"{r['poses_out']}, {r['poses_per_s']:.2f} poses/s ({r['poses_per_s_tracking']:.2f} from the first "
           f"pose on), skipped {r['frame_sets_skipped']}, first pose "
@@ -363,6 +382,8 @@ def print_report(r: dict) -> None:
               f"{g['frames_per_s']:.1f} frames/s, latency p50 {g['latency_p50_ms']:.0f} ms, p95 "
               f"{g['latency_p95_ms']:.0f} ms")
     print("  CPU (cores): " + ", ".join(f"{n} {c:.2f}" for n, c in r["cpu_cores"].items()))
+    print("  CPU ms per frame set answered (per set in): " + ", ".join(
+        f"{n} {c:.0f} ({r['core_ms_per_input_set'][n]:.0f})" for n, c in r["core_ms_per_set"].items()))
     late = {t: n for t, n in r["out_of_order"].items() if n}
     print("  outputs out of stamp order: " + (", ".join(f"{t} {n}" for t, n in late.items()) or "none"))
 

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from hmocap_ros.cli import _bench_arguments
-from hmocap_ros.eval.pipeline_stats import (frame_period_s, header_stamp_ns, latency_ms, latency_summary,
-                                            pose_errors, process_cpu_seconds, process_rss_mb)
+from hmocap_ros.eval.pipeline_stats import (core_ms_per_set, frame_period_s, header_stamp_ns, latency_ms,
+                                            latency_summary, pose_errors, process_cpu_seconds, process_rss_mb,
+                                            replay_timing)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,6 +56,19 @@ def test_cpu_and_memory_of_a_process_and_of_one_that_is_gone():
     assert process_cpu_seconds(proc.pid) is None and process_rss_mb(proc.pid) is None
 
 
+def test_cpu_per_frame_set_and_the_replay_timing_line():
+    per = core_ms_per_set({"seg": 2.0, "kp": 1.5, "idle": 0.3}, {"seg": 100, "kp": 50, "idle": 0}, 200)
+    assert per["seg"] == {"core_ms_per_set": pytest.approx(20.0), "core_ms_per_input_set": pytest.approx(10.0)}
+    assert per["kp"]["core_ms_per_set"] == pytest.approx(30.0)
+    assert np.isnan(per["idle"]["core_ms_per_set"])  # answered nothing
+    out = "replaying x.mcap: 5 topics at rate 1\nreplay timing: bag_s=20.000 wall_s=20.250 " \
+          "behind_max_s=0.310 behind_p95_s=0.020 cpu_s=2.5\n  /cam_1/image_raw: 500 messages published\n"
+    assert replay_timing(out) == {"replay_bag_seconds": 20.0, "replay_seconds": 20.25,
+                                  "replay_behind_max_s": 0.31, "replay_behind_p95_s": 0.02,
+                                  "replay_cpu_seconds": 2.5}
+    assert all(np.isnan(v) for v in replay_timing("no such line").values())
+
+
 def test_bench_arguments_after_the_benchmark_names_go_to_the_scripts():
     assert _bench_arguments(["bench", "pipeline", "x.mcap", "--json", "o.json"]) == (
         ["bench", "pipeline"], ["x.mcap", "--json", "o.json"])
@@ -89,3 +103,7 @@ def test_the_pipeline_benchmark_runs_the_nodes_on_the_shipped_bags(tmp_path, fre
     assert r["gestures"]["depth_frames_in"] == 72 and r["gestures"]["frames_answered"] >= 60
     assert set(r["cpu_cores"]) == {"foreground_segmentation", "extremity_detection", "body_tracker",
                                    "gesture_detection"}
+    assert set(r["core_ms_per_set"]) == set(r["cpu_cores"])
+    assert all(v > 0 for v in r["core_ms_per_set"].values()), r["core_ms_per_set"]
+    # the replay's own timing: the shipped bag's span at a tenth of real time
+    assert r["replay_bag_seconds"] > 10 and r["replay_seconds"] > 10 and r["replay_behind_max_s"] >= 0

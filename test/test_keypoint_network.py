@@ -1,10 +1,14 @@
-"""The landmark network (hmocap_ros.detection.keypoint_network) and the whole keypoint detector.
+"""The landmark network (hmocap_ros.detection.keypoint_network), the pose detector
+(pose_detector) and the whole keypoint detector.
 
-The model file: shipped, checked against its documented sha256, a missing or corrupt file
-raises ModelFileError naming it. The landmarks: on a simulated room rendered here (4 cameras,
-640x480, a subject with one arm raised sideways and the other elbow bent), the network's
-joints land near the projected truth, and KeypointDetector puts the 3D keypoints near the
-body model's joints and end-effectors with the sides right.
+The model files: shipped, checked against their documented sha256, a missing, corrupt or wrong
+file raises ModelFileError naming it. The network on LiteRT gives the outputs of an independent
+TFLite implementation (OpenCV dnn, where it reads TFLite) on the same input. On a simulated room
+rendered here (4 cameras, 640x480, a subject with one arm raised sideways and the other elbow
+bent): the detector finds the person with the crop upright and around the body, and turned
+with the image; the network's joints land near the projected truth; KeypointDetector puts the
+3D keypoints near the body model's joints and end-effectors with the sides right, and its
+views' crops follow their own landmarks after the first frame set.
 """
 from __future__ import annotations
 
@@ -17,9 +21,10 @@ import pytest
 
 from hmocap_ros.camera_model import project_points
 from hmocap_ros.detection import (DEFAULT_MODEL, KeypointDetector, KeypointParams, ModelFileError,
-                                  PoseLandmarkNetwork, roi_box)
-from hmocap_ros.detection.keypoint_network import (LANDMARK_NAMES, crop_transform,
-                                                   refine_from_heatmap)
+                                  PoseDetector, PoseLandmarkNetwork, Roi, box_roi, foreground_box)
+from hmocap_ros.detection.keypoint_network import LANDMARK_NAMES, refine_from_heatmap
+from hmocap_ros.detection.keypoint_roi import alignment_roi, crop_transform
+from hmocap_ros.detection.pose_detector import DEFAULT_DETECTOR_MODEL
 
 # landmark -> the body model's joint of the same place
 JOINTS = {"left_shoulder": "l_shoulder", "right_shoulder": "r_shoulder", "left_elbow": "l_elbow",
@@ -58,38 +63,75 @@ def scene():
     return rig, list(frame.images), list(frame.silhouettes), truth
 
 
-def test_the_shipped_model_is_the_documented_file():
+def test_the_shipped_models_are_the_documented_files():
     sources = (DEFAULT_MODEL.parent / "SOURCES.md").read_text()
-    documented = re.search(r"\*\*sha256\*\*: `([0-9a-f]{64})`", sources).group(1)
-    assert hashlib.sha256(DEFAULT_MODEL.read_bytes()).hexdigest() == documented
+    for model in (DEFAULT_MODEL, DEFAULT_DETECTOR_MODEL):
+        section = sources[sources.index(f"## {model.name}"):]
+        documented = re.search(r"\*\*sha256\*\*: `([0-9a-f]{64})`", section).group(1)
+        assert hashlib.sha256(model.read_bytes()).hexdigest() == documented, model.name
 
 
-def test_missing_or_corrupt_model_file_names_the_file(tmp_path):
+def test_missing_corrupt_or_wrong_model_file_names_the_file(tmp_path):
     missing = tmp_path / "nowhere" / "pose_landmark_full.tflite"
     with pytest.raises(ModelFileError, match=re.escape(str(missing))) as err:
         PoseLandmarkNetwork(missing)
     assert "not found" in str(err.value) and "SOURCES.md" in str(err.value)
+    assert "\n" not in str(err.value)
     junk = tmp_path / "junk.tflite"
     junk.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())
     truncated = tmp_path / "truncated.tflite"
     truncated.write_bytes(DEFAULT_MODEL.read_bytes()[:200_000])
-    for bad in (junk, truncated):
-        with pytest.raises(ModelFileError, match=re.escape(str(bad))):
-            PoseLandmarkNetwork(bad)
+    for bad in (junk, truncated, tmp_path):
+        for model in (PoseLandmarkNetwork, PoseDetector):
+            with pytest.raises(ModelFileError, match=re.escape(str(bad))) as err:
+                model(bad)
+            assert "\n" not in str(err.value)
+    with pytest.raises(ModelFileError, match="another model"):  # each the other's file
+        PoseLandmarkNetwork(DEFAULT_DETECTOR_MODEL)
+    with pytest.raises(ModelFileError, match="another model"):
+        PoseDetector(DEFAULT_MODEL)
     with pytest.raises(ModelFileError, match=re.escape(str(missing))):
         KeypointDetector([], model_path=missing)
+    with pytest.raises(ModelFileError, match=re.escape(str(junk))):
+        KeypointDetector([], detector_path=junk)
+
+
+def _pattern() -> np.ndarray:
+    y, x, c = np.mgrid[0:256, 0:256, 0:3]
+    return ((x * 3 + y * 5 + c * 70) % 256).astype(np.uint8)
 
 
 def test_network_matches_tflite_on_the_same_input(network):
-    """Pose presence and visibilities of a fixed 256x256 pattern, as TFLite (LiteRT) computes
-    them from the same pixels as float32 RGB in [0, 1] (the model's input range)."""
-    y, x, c = np.mgrid[0:256, 0:256, 0:3]
-    crop = ((x * 3 + y * 5 + c * 70) % 256).astype(np.uint8)
-    _, visibility, _, score = network.infer(crop)
+    """Pose presence and visibilities of a fixed 256x256 pattern, as TFLite computes them from
+    the same pixels as float32 RGB in [0, 1] (the model's input range)."""
+    _, visibility, _, score = network.infer(_pattern())
     tflite = [0.1395, 0.2286, 0.2698, 0.2965, 0.2088, 0.2280, 0.2356, 0.2754, 0.3313, 0.3470,
               0.3341, 0.9283]
     assert score == pytest.approx(0.13359, abs=2e-3)
     np.testing.assert_allclose(visibility[:12], tflite, atol=2e-3)
+
+
+def test_network_equals_an_independent_tflite_implementation(network, scene):
+    """OpenCV dnn's own TFLite reader on the same crop of a rendered person: the raw landmarks
+    agree to float32 precision over a deep network (1e-2 input pixels), the heatmaps' logits
+    to 1e-2, and the refined landmarks in image pixels to 0.05 px."""
+    cv2 = pytest.importorskip("cv2")
+    reader = getattr(cv2.dnn, "readNetFromTFLite", None)
+    if reader is None:
+        pytest.skip(f"OpenCV {cv2.__version__} reads no TFLite")
+    engine = getattr(cv2.dnn, "ENGINE_CLASSIC", None)
+    net = reader(str(DEFAULT_MODEL)) if engine is None else reader(str(DEFAULT_MODEL), engine=engine)
+    rig, images, silhouettes, _ = scene
+    roi = box_roi(foreground_box(rig[0], silhouettes[0], KeypointParams()), 1.25)
+    crop = cv2.warpAffine(images[0], crop_transform(roi, 256), (256, 256), flags=cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_REPLICATE)
+    net.setInput(cv2.dnn.blobFromImage(crop, scalefactor=1.0 / 255.0))
+    raw, flag, heat = net.forward(["Identity", "Identity_1", "Identity_3"])
+    ours = network._model.run(crop[None].astype(np.float32) / 255.0)
+    np.testing.assert_allclose(ours[0].reshape(-1), raw.reshape(-1), atol=1e-2)
+    assert float(ours[1].reshape(-1)[0]) == pytest.approx(float(flag.reshape(-1)[0]), abs=1e-3)
+    np.testing.assert_allclose(ours[2].reshape(64, 64, 39).transpose(2, 0, 1),
+                               heat.reshape(39, 64, 64), atol=1e-2)
 
 
 def test_heatmap_refinement_moves_a_confident_landmark_to_the_peak():
@@ -102,18 +144,68 @@ def test_heatmap_refinement_moves_a_confident_landmark_to_the_peak():
     np.testing.assert_array_equal(refined[1], start[1])  # below the confidence: kept
 
 
-def test_crop_transform_is_the_square_about_the_box():
-    matrix, scale = crop_transform((100.0, 50.0, 200.0, 250.0))  # 100 x 200: side 200
-    assert scale == pytest.approx(256 / 200)
+def test_crop_transform_maps_the_turned_square_onto_the_input():
+    matrix = crop_transform(Roi(150.0, 150.0, 200.0), 256)
     corners = np.array([[50.0, 50.0, 1.0], [250.0, 250.0, 1.0]]) @ matrix.T
     np.testing.assert_allclose(corners, [[0.0, 0.0], [256.0, 256.0]], atol=1e-9)
-    turned, _ = crop_transform((100.0, 50.0, 200.0, 250.0), rotation=np.pi / 2)
-    # turned a quarter counter-clockwise: the image's right (+u) becomes the crop's up (-v)
+    turned = Roi(150.0, 150.0, 200.0, rotation=np.pi / 2)
+    # the square's up axis along the image's right (+u): the image's right becomes the crop's up
     centre = np.array([150.0, 150.0, 1.0])
-    np.testing.assert_allclose(turned @ centre, [128.0, 128.0], atol=1e-9)
-    np.testing.assert_allclose(turned @ (centre + (100.0, 0.0, 0.0)), [128.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(crop_transform(turned, 256) @ centre, [128.0, 128.0], atol=1e-9)
+    np.testing.assert_allclose(crop_transform(turned, 256) @ (centre + (100.0, 0.0, 0.0)),
+                               [128.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(np.c_[turned.corners(), np.ones(4)] @ crop_transform(turned, 256).T,
+                               [[0, 0], [256, 0], [256, 256], [0, 256]], atol=1e-9)
+    # MediaPipe's alignment: centre at the first point, side 2 x 1.25 x the distance, the
+    # second point straight up in the crop
+    roi = alignment_roi((100.0, 200.0), (100.0 + 30.0, 200.0 - 40.0))
+    assert (roi.cx, roi.cy, roi.side) == pytest.approx((100.0, 200.0, 125.0))
+    assert roi.rotation == pytest.approx(np.arctan2(30.0, 40.0))
+    up = crop_transform(roi, 256) @ np.array([130.0, 160.0, 1.0])
+    np.testing.assert_allclose(up, [128.0, 128.0 - 256 * 50.0 / 125.0], atol=1e-9)
+    assert alignment_roi((5.0, 5.0), (5.0, 5.0)) is None
     with pytest.raises(ValueError):
-        crop_transform((10.0, 10.0, 10.0, 10.0))
+        Roi(10.0, 10.0, 0.5)
+
+
+def test_pose_detector_finds_the_person_upright_and_turned(scene):
+    """On each rendered view the best detection's hips' centre lies on the projected hips'
+    midpoint (within a tenth of the person's height), its box (BlazePose's detector boxes the
+    head) holds the projected head, and its crop is upright (within 15 degrees) and holds every
+    projected joint. The view turned a quarter clockwise (np.rot90 k=-1: the head points to
+    the image's right) gives the crop turned by 90 degrees, and the landmarks of that crop land
+    on the turned joints."""
+    rig, images, silhouettes, truth = scene
+    detector = PoseDetector()
+    network = PoseLandmarkNetwork()
+    joints = np.array([truth[j] for j in JOINTS.values()])
+    hips = 0.5 * (truth["l_hip"] + truth["r_hip"])
+    index = [LANDMARK_NAMES.index(n) for n in JOINTS]
+    for v, camera in enumerate(rig):
+        pix = project_points([camera], np.vstack([joints, hips, truth["head"]])).pixels[0]
+        height = np.ptp(pix[:, 1])
+        found = detector.detect(images[v])
+        assert found and found[0].score > 0.8
+        best = found[0]
+        x0, y0, x1, y1 = best.box
+        assert x0 < pix[-1, 0] < x1 and y0 < pix[-1, 1] < y1, (best.box, pix[-1])
+        assert np.linalg.norm(best.keypoints[0] - pix[-2]) < 0.1 * height
+        roi = best.roi()
+        assert abs(roi.rotation) < np.radians(15) and height < roi.side < 3 * height
+        corners = roi.corners()
+        assert np.all(corners.min(axis=0) < pix.min(axis=0))
+        assert np.all(corners.max(axis=0) > pix.max(axis=0))
+        # a quarter turn clockwise: pixel (u, v) moves to (H - 1 - v, u)
+        turned = np.ascontiguousarray(np.rot90(images[v], k=-1))
+        found = detector.detect(turned)
+        assert found and found[0].score > 0.8
+        roi = found[0].roi()
+        assert abs(roi.rotation - np.pi / 2) < np.radians(15), np.degrees(roi.rotation)
+        moved = np.c_[camera.height - 1 - pix[:, 1], pix[:, 0]]
+        landmarks = network.run(turned, roi)
+        errors = np.linalg.norm(landmarks.xy[index] - moved[:-2], axis=1)
+        assert landmarks.score > 0.9 and np.median(errors) < 8.0, np.round(errors)
+    assert detector.detect(np.zeros((480, 640, 3), np.uint8)) == []
 
 
 def test_landmarks_land_on_the_rendered_body(network, scene):
@@ -122,16 +214,15 @@ def test_landmarks_land_on_the_rendered_body(network, scene):
     expected = project_points(list(rig), np.array([truth[j] for j in JOINTS.values()])).pixels
     errors = []
     for v, camera in enumerate(rig):
-        box = roi_box(camera, silhouettes[v], None, KeypointParams())
-        view = network.run(images[v], box)
+        roi = box_roi(foreground_box(camera, silhouettes[v], KeypointParams()), 1.15)
+        view = network.run(images[v], roi)
         assert view.xy.shape == (39, 2) and view.score > 0.9
         assert np.all((view.visibility >= 0) & (view.visibility <= 1))
         errors.append(np.linalg.norm(view.xy[index] - expected[v], axis=1))
         # another crop of the same person: the landmarks stay in image pixels
-        x0, y0, x1, y1 = box
-        shifted = network.run(images[v], (x0 + 12.0, y0 - 8.0, x1 + 30.0, y1 + 10.0))
+        shifted = network.run(images[v], Roi(roi.cx + 20.0, roi.cy - 8.0, roi.side * 1.1))
         assert np.median(np.linalg.norm(shifted.xy[:33] - view.xy[:33], axis=1)) < 4.0
-        turned = network.run(images[v], box, rotation=0.3)
+        turned = network.run(images[v], Roi(roi.cx, roi.cy, roi.side, rotation=0.3))
         assert np.median(np.linalg.norm(turned.xy[:33] - view.xy[:33], axis=1)) < 5.0
     errors = np.array(errors)  # (views, joints) pixels
     assert np.median(errors) < 6.0, np.round(errors)
@@ -156,6 +247,11 @@ def test_detector_finds_the_labelled_keypoints_in_3d(scene, caplog):
         assert np.all(result.scores > 0.5) and np.all(result.views_used >= 3)
         assert set(detector.last_timings) >= {"roi", "network", "triangulation", "total"}
         assert sum(k.startswith("network/") for k in detector.last_timings) == 4
+        assert detector.last_sources == ["detector"] * 4  # the first crops: the pose detector
+        again = detector.detect(images, silhouettes)
+        assert detector.last_sources == ["track"] * 4  # then each view's own landmarks
+        moved = {k: np.linalg.norm(again.as_dict()[k] - p) for k, p in found.items()}
+        assert max(moved.values()) < 0.03, moved
         # a missing view, an image of the wrong size and an empty mask are skipped, once logged
         caplog.set_level(logging.WARNING, logger="hmocap_ros.detection.keypoint_detector")
         views = [None, images[1][:240], images[2], images[3]]
@@ -164,7 +260,41 @@ def test_detector_finds_the_labelled_keypoints_in_3d(scene, caplog):
             partial = detector.detect(views, masks, previous=found)
         assert len([r for r in caplog.records if "skips camera" in r.message]) == 3
         assert partial.labels == ()  # one view left
+        assert detector.last_sources[0] is None and detector.last_sources[3] is None
+        detector.reset()
         with_previous = detector.detect(images, [None] * 4, previous=found)
+        assert detector.last_sources == ["skeleton"] * 4  # no track: the previous skeleton
         assert np.linalg.norm(with_previous.as_dict()["left_hand"] - targets["left_hand"]) < 0.08
+        detector.reset()
+        without_masks = detector.detect(images, [None] * 4)
+        assert detector.last_sources == ["detector"] * 4
+        assert np.linalg.norm(without_masks.as_dict()["left_hand"] - targets["left_hand"]) < 0.08
     finally:
         detector.close()
+
+
+def test_ssd_anchors_decoding_and_weighted_nms_follow_mediapipe():
+    from hmocap_ros.detection.pose_detector import decode_detections, ssd_anchors, weighted_nms
+
+    anchors = ssd_anchors()
+    # strides 8, 16 (2 anchors a cell) and three layers of 32 merged (6 a cell): 2254 anchors
+    assert anchors.shape == (28 * 28 * 2 + 14 * 14 * 2 + 7 * 7 * 6, 2) == (2254, 2)
+    np.testing.assert_allclose(anchors[:2], [[0.5 / 28, 0.5 / 28]] * 2)
+    np.testing.assert_allclose(anchors[1568], [0.5 / 14, 0.5 / 14])
+    np.testing.assert_allclose(anchors[-1], [6.5 / 7, 6.5 / 7])
+    raw = np.zeros((3, 12))
+    raw[0, :4] = [22.4, -11.2, 44.8, 89.6]  # centre offset (0.1, -0.05) of the input, size 0.2 x 0.4
+    raw[0, 4:6] = [0.0, 22.4]  # keypoint 0: 0.1 below the anchor
+    logits = np.array([3.0, -3.0, 200.0])  # sigmoid 0.95, 0.05 (dropped), clipped to 100 -> 1
+    scores, boxes, keypoints = decode_detections(raw, logits, np.array([[0.5, 0.5]] * 3))
+    assert scores == pytest.approx([1 / (1 + np.exp(-3.0)), 1.0])
+    np.testing.assert_allclose(boxes[0], np.array([0.5, 0.25, 0.7, 0.65]) * 224, atol=1e-9)
+    np.testing.assert_allclose(keypoints[0, 0], [0.5 * 224, 0.6 * 224], atol=1e-9)
+    # two overlapping boxes merge into their score-weighted mean; a distant one stays apart
+    boxes = np.array([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60]], float)
+    points = np.array([np.full((4, 2), 0.0), np.full((4, 2), 3.0), np.full((4, 2), 55.0)])
+    merged = weighted_nms(np.array([0.6, 0.9, 0.7]), boxes, points)
+    assert [m[0] for m in merged] == [0.9, 0.7]
+    np.testing.assert_allclose(merged[0][1], (0.9 * boxes[1] + 0.6 * boxes[0]) / 1.5)
+    np.testing.assert_allclose(merged[0][2], np.full((4, 2), 0.9 * 3.0 / 1.5))
+    np.testing.assert_allclose(merged[1][2], points[2])

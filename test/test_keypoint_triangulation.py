@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from hmocap_ros.camera_model import look_at, project_points
-from hmocap_ros.detection.keypoint_detector import KeypointParams, roi_box, roi_rotation
+from hmocap_ros.detection.keypoint_detector import KeypointParams, foreground_box, previous_pixels
+from hmocap_ros.detection.keypoint_roi import box_roi, skeleton_roi
 from hmocap_ros.detection.keypoint_network import LANDMARK_NAMES, NUM_LANDMARKS, ViewLandmarks
 from hmocap_ros.detection.keypoint_triangulation import (HEAD_OFFSET, HIP_WIDENING,
                                                          KEYPOINT_LABELS, Keypoints3D,
@@ -184,37 +185,39 @@ def test_a_landmark_off_the_silhouette_is_not_used():
     assert dict(zip(full.labels, full.views_used))["left_hand"] == 4
 
 
-def test_roi_from_the_foreground_and_from_the_previous_skeleton():
+def test_crops_from_the_foreground_and_from_the_previous_skeleton():
     camera = _cameras()[0]
     params = KeypointParams()
     mask = np.zeros((240, 320), np.uint8)  # half resolution
     mask[50:150, 100:140] = 255  # the person
     mask[60:70, 141:160] = 255  # an arm the segmentation cut off, touching the body's box
     mask[200:210, 10:20] = 255  # something else
-    x0, y0, x1, y1 = roi_box(camera, mask, None, params)
-    assert x1 - x0 == pytest.approx(y1 - y0)
-    assert x1 - x0 == pytest.approx(params.box_margin * 200.0)  # the person's height in pixels
-    assert 0.5 * (x0 + x1) == pytest.approx(2 * 130.0 - 0.5)  # full-image pixels
-    assert 0.5 * (y0 + y1) == pytest.approx(199.5)
-    assert roi_box(camera, np.zeros_like(mask), None, params) is None
-    assert roi_box(camera, None, None, params) is None
+    x0, y0, x1, y1 = foreground_box(camera, mask, params)
+    assert (x1 - x0, y1 - y0) == pytest.approx((120.0, 200.0))  # full-image pixels
+    roi = box_roi((x0, y0, x1, y1), params.box_margin)
+    assert roi.side == pytest.approx(params.box_margin * 200.0) and roi.rotation == 0.0
+    assert (roi.cx, roi.cy) == pytest.approx((2 * 130.0 - 0.5, 199.5))
+    assert foreground_box(camera, np.zeros_like(mask), params) is None
     previous = _expected(_landmarks_3d())
-    pixels = project_points([camera], np.array(list(previous.values()))).pixels[0]
-    box = roi_box(camera, None, previous, params)
-    assert box[0] < pixels[:, 0].min() and box[2] > pixels[:, 0].max()
-    assert box[1] < pixels[:, 1].min() and box[3] > pixels[:, 1].max()
-    assert abs(roi_rotation(camera, previous)) < 0.15  # standing: the crop stays upright
-    assert roi_rotation(camera, None) == 0.0
+    pixels = previous_pixels(camera, previous)
+    crop = skeleton_roi(pixels, params.previous_box_pad)
+    corners = crop.corners()
+    points = np.array(list(pixels.values()))
+    assert corners[:, 0].min() < points[:, 0].min() and corners[:, 0].max() > points[:, 0].max()
+    assert corners[:, 1].min() < points[:, 1].min() and corners[:, 1].max() > points[:, 1].max()
+    assert abs(crop.rotation) < 0.15  # standing: the crop stays upright
     leaning = dict(previous)
     for side in ("left", "right"):  # the trunk along the image's right direction
         leaning[f"{side}_shoulder"] = previous[f"{side}_hip"] + 0.5 * camera.R[0]
-    assert roi_rotation(camera, leaning) == pytest.approx(np.pi / 3)  # at most 60 degrees
+    turned = skeleton_roi(previous_pixels(camera, leaning), params.previous_box_pad)
+    assert turned.rotation == pytest.approx(np.pi / 2, abs=0.1)
     leaning = dict(previous)
     leaning.update(left_shoulder=previous["left_shoulder"] - 0.3 * camera.R[0],
                    right_shoulder=previous["right_shoulder"] - 0.3 * camera.R[0])
-    assert -np.pi / 3 < roi_rotation(camera, leaning) < -0.3  # leaning to the image's left
+    assert -np.pi / 2 < skeleton_roi(previous_pixels(camera, leaning), 0.2).rotation < -0.3
     del leaning["left_hip"]
-    assert roi_rotation(camera, leaning) == 0.0
+    assert skeleton_roi(previous_pixels(camera, leaning), 0.2) is None  # no hips: no crop
+    assert previous_pixels(camera, None) == {}
     with pytest.raises(ValueError, match="min_views"):
         KeypointParams(min_views=1)
 

@@ -152,6 +152,48 @@ def test_replay_rate_and_latched_topic(tmp_path):
     assert 0.5 < np.median(gaps) < 1.5, gaps
 
 
+def test_replay_publishes_the_stored_bytes_unchanged_and_reports_its_timing(tmp_path):
+    """Full-size rgb8 frames (640x480, random pixels) and a latched topic replayed into the
+    recorder: every message arrives, byte for byte the bag's serialized message (the replay
+    decodes nothing), and the replay prints its timing line with the bag's span."""
+    from hmocap_ros.eval.pipeline_stats import replay_timing
+
+    factory = RosbagsFactory()
+    rng = np.random.default_rng(7)
+    src = tmp_path / "src.mcap"
+    n, period_ns = 12, 40_000_000
+    with BagWriter(src) as bag:
+        bag.add_topic("/latched_text", "std_msgs/msg/String", LATCHED)
+        bag.write("/latched_text", factory.make("std_msgs/msg/String", data="calibration"), 0)
+        for i in range(n):
+            msg = factory.make("sensor_msgs/msg/Image", header=make_header(factory, i * period_ns, "cam_1"),
+                               height=480, width=640, encoding="rgb8", is_bigendian=0, step=1920,
+                               data=rng.integers(0, 256, 480 * 1920, dtype=np.uint8))
+            bag.write("/cam_1/image_raw", msg, i * period_ns)
+    env = loopback_dds_env()
+    out = tmp_path / "out.mcap"
+    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(out), "--progress", "0.1",
+                                                      "/cam_1/image_raw", "/latched_text"], env, tmp_path) as rec:
+        assert rec.wait_for_output("recording to", 30)
+        with NodeProcess.module("play", "hmocap_ros.cli", ["replay", str(src), "--wait-subscribers", "1"],
+                                env, tmp_path) as play:
+            assert play.wait(60) == 0, play.output()
+            timing = replay_timing(play.output())
+        assert rec.wait_for_output(f"/cam_1/image_raw {n}", 30), rec.output()
+    with BagReader(src) as reader:
+        sent = {m.topic: [] for m in reader.messages(raw=True)}
+        for m in reader.messages(raw=True):
+            sent[m.topic].append(bytes(m.msg))
+    with BagReader(out) as reader:
+        got = {t: [bytes(m.msg) for m in reader.messages([t], raw=True)] for t in sent}
+    assert got["/cam_1/image_raw"] == sent["/cam_1/image_raw"]  # all n, in order, unchanged
+    assert got["/latched_text"] == sent["/latched_text"]
+    assert timing["replay_bag_seconds"] == pytest.approx((n - 1) * period_ns * 1e-9, abs=1e-3)
+    # first to last publication: the span, give or take how late a message went out
+    assert abs(timing["replay_seconds"] - timing["replay_bag_seconds"]) <= timing["replay_behind_max_s"] + 1e-3
+    assert timing["replay_behind_max_s"] >= timing["replay_behind_p95_s"] >= -1e-3
+
+
 def _console_scripts() -> list[str]:
     import re
 

@@ -34,11 +34,13 @@ MODULE_KEYS = {
     "rosbags": "python3-rosbags-pip",     # pip: rosbags
     "mcap": "mcap-ros2-support",          # pip: mcap, no key of its own; comes with mcap-ros2-support
     "mcap_ros2": "mcap-ros2-support",     # pip: mcap-ros2-support
+    "ai_edge_litert": "python3-ai-edge-litert-pip",  # pip: ai-edge-litert
 }
 #: ROS packages of Python code whose module and rosdep key are the package name.
 ROS_PYTHON = {"rclpy", "launch", "launch_ros", "ament_index_python"}
 #: The keys that install with pip (rosdep pip rules) and their pip names.
-PIP_KEYS = {"python3-rosbags-pip": "rosbags", "mcap-ros2-support": "mcap-ros2-support"}
+PIP_KEYS = {"python3-rosbags-pip": "rosbags", "mcap-ros2-support": "mcap-ros2-support",
+            "python3-ai-edge-litert-pip": "ai-edge-litert"}
 
 _TYPE_NAME = re.compile(r"^([a-z][a-z0-9_]*)/(msg|srv|action)/[A-Z]\w*$")
 

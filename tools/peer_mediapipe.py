@@ -10,6 +10,16 @@ tracker's error on the same joints from the table's JSON reports::
     .venv/bin/python tools/mocap_table.py        # first: the bags and the tracker's reports
     .venv/bin/python tools/peer_mediapipe.py     # then: the peer on the same bags
 
+With ``--bags BAG ...`` it measures the peer on any bags with ground truth instead and prints
+its error per joint (mean over the frames where the joint was triangulated) and the share of
+frames triangulated, the figures ``hmocap eval extremities`` gives for the package's own
+keypoints (``--json OUT`` writes them)::
+
+    .venv/bin/python tools/peer_mediapipe.py --bags held_out_1.mcap held_out_2.mcap --json peer.json
+
+``--extremities REPORT.json ...`` (one ``hmocap eval extremities --json`` report per bag, same
+order) prints the package's keypoints beside the peer, joint by joint.
+
 MediaPipe is not a dependency of hmocap_ros (its last wheel with the pose model inside,
 0.10.14, needs numpy < 2): the first run creates a separate venv, ``.venv-peer``, with
 ``pip install mediapipe==0.10.14 "numpy<2"`` and runs ``peer_mediapipe_worker.py`` in it.
@@ -85,6 +95,66 @@ def read_bag(bag: Path, stack_path: Path):
     return rig, np.stack([truth[s] for s in stamps]), names
 
 
+def peer_on_bag(bag: Path, python: Path, max_reprojection_px: float):
+    """The peer on one bag: (errors (F, 12) mm, NaN where not triangulated, ms per image)."""
+    joints = list(LANDMARKS)
+    with tempfile.TemporaryDirectory() as tmp:
+        stack, marks = Path(tmp) / "images.npy", Path(tmp) / "landmarks.npy"
+        rig, truth, names = read_bag(bag, stack)
+        done = subprocess.run([str(python), str(ROOT / "tools" / "peer_mediapipe_worker.py"),
+                               str(stack), str(marks)], check=True, capture_output=True, text=True)
+        landmarks = np.load(marks)  # (F, V, 33, 3)
+    lm = landmarks[:, :, [LANDMARKS[j] for j in joints]]
+    gt = truth[:, [names.index(j) for j in joints]]
+    pix = lm[..., :2].transpose(1, 0, 2, 3).reshape(len(rig), -1, 2)
+    valid = lm[..., 2].transpose(1, 0, 2).reshape(len(rig), -1) > 0.5
+    if max_reprojection_px > 0:
+        est, _ = triangulate_robust(list(rig), pix, valid, max_reprojection_px)
+    else:
+        est = triangulate(list(rig), pix, valid)
+    errors = 1000 * np.linalg.norm(est.reshape(gt.shape) - gt, axis=-1)
+    return errors, float(done.stdout.split()[0])
+
+
+def per_joint_report(bags: list[str], python: Path, max_reprojection_px: float) -> dict:
+    """``--bags``: the peer's error per joint on each bag, printed and returned."""
+    joints = list(LANDMARKS)
+    out = {}
+    for bag in bags:
+        errors, ms = peer_on_bag(Path(bag), python, max_reprojection_px)
+        found = np.isfinite(errors)
+        within = (errors <= 100.0) & found
+        out[bag] = {"ms_per_image": ms, "frames": int(len(errors)), "joints": {
+            j: {"mean_error_mm": float(np.nanmean(errors[:, k])) if found[:, k].any() else None,
+                "triangulated": float(found[:, k].mean()),
+                "recall_100mm": float(within[:, k].mean())}
+            for k, j in enumerate(joints)}}
+        print(f"{Path(bag).name}: peer, {len(errors)} frames, {ms:.1f} ms per image; "
+              f"12 joints {np.nanmean(errors):.1f} mm")
+        for j, s in out[bag]["joints"].items():
+            print(f"  {j:11s} {s['mean_error_mm'] or float('nan'):7.1f} mm  triangulated "
+                  f"{s['triangulated']:.2f}  within 10 cm {s['recall_100mm']:.2f}", flush=True)
+    return out
+
+
+#: our joint -> the label of the extremity detector's report
+_EXTREMITY_LABEL = {j: ("left_" if j[0] == "l" else "right_") + j[2:] for j in LANDMARKS}
+
+
+def side_by_side(peer: dict, ours: dict) -> list[str]:
+    """Lines: per joint the peer's and the keypoints' mean error (mm) and share of frames
+    within 10 cm, and the difference."""
+    lines = [f"{'joint':11s} {'peer mm':>8s} {'ours mm':>8s} {'diff':>6s}  {'peer<10cm':>9s} "
+             f"{'ours<10cm':>9s}"]
+    for j, s in peer["joints"].items():
+        o = ours["labels"].get(_EXTREMITY_LABEL[j], {})
+        mine = o.get("mean_error_mm", float("nan"))
+        theirs = s["mean_error_mm"] if s["mean_error_mm"] is not None else float("nan")
+        lines.append(f"{j:11s} {theirs:8.1f} {mine:8.1f} {mine - theirs:+6.1f}  "
+                     f"{s['recall_100mm']:9.2f} {o.get('recall', float('nan')):9.2f}")
+    return lines
+
+
 def _label(method: str, detector: str) -> str:
     """The table label of a method; DD-HPF+ names its detector."""
     label = METHODS[method].label
@@ -104,8 +174,24 @@ def main(argv=None) -> int:
                    help="the table's reports made with this extremity detector")
     p.add_argument("--methods", nargs="*", default=["hpf-apo", "dd-hpf"],
                    help="tracker methods of the table's reports to compare (those present)")
+    p.add_argument("--bags", nargs="+", default=None,
+                   help="measure the peer per joint on these bags (with ground truth) instead")
+    p.add_argument("--json", default=None, help="with --bags: write the figures here")
+    p.add_argument("--extremities", nargs="+", default=None, metavar="REPORT",
+                   help="with --bags: hmocap eval extremities --json reports, one per bag, "
+                        "printed beside the peer")
     ns = p.parse_args(argv)
     python = peer_python(Path(ns.peer_venv))
+    if ns.bags:
+        if ns.extremities and len(ns.extremities) != len(ns.bags):
+            p.error("--extremities needs one report per bag")
+        report = per_joint_report(ns.bags, python, ns.max_reprojection_px)
+        if ns.json:
+            Path(ns.json).write_text(json.dumps(report, indent=1))
+        for bag, ours in zip(ns.bags, ns.extremities or ()):
+            print(f"\n{Path(bag).name}: the peer and the package's keypoints ({ours})")
+            print("\n".join(side_by_side(report[bag], json.loads(Path(ours).read_text()))))
+        return 0
     work = Path(ns.workdir)
     joints = list(LANDMARKS)
     rows, per_joint_all = [], []

@@ -11,9 +11,11 @@ detectors, registered in :data:`DETECTORS` and chosen by ``detector``:
     last skeleton when one is given, else ``unknown`` (the tracker assigns them to its own
     predicted pose anyway).
 ``keypoints``
-    a 2D landmark network per view on the view's foreground region, triangulated robustly over
+    a 2D landmark network per view on the crop MediaPipe's pipeline gives it (from the view's
+    previous landmarks, the previous skeleton or a pose detector), triangulated robustly over
     the views (:mod:`.keypoint_detector`): labelled head, hands, feet and the limb joints with
-    confidences (beyond the thesis, whose sec. 2.5 admits any part detector).
+    confidences (beyond the thesis, whose sec. 2.5 admits any part detector). Each view keeps
+    a track from frame set to frame set: :meth:`ExtremityPipeline.reset` drops them.
 
 ``previous``: the last skeleton, label -> (3,) room position (``head``, ``left_wrist``, ...;
 :func:`skeleton_labels` makes it from the body model's joints), optional for both.
@@ -89,8 +91,8 @@ def _skin_targets(previous: dict) -> np.ndarray | None:
 
 class ExtremityPipeline:
     """One rig's extremity detection (module docstring). ``model_path``: the keypoint
-    network's file (default: the shipped one); a missing or corrupt file raises
-    :class:`~.keypoint_network.ModelFileError` here, not on the first frame."""
+    network's file (default: the shipped one); a missing or corrupt file (or pose detector
+    file) raises :class:`~.tflite_model.ModelFileError` here, not on the first frame."""
 
     def __init__(self, cameras: Sequence, params: ExtremityDetectionParams | None = None,
                  model_path=None):
@@ -100,6 +102,16 @@ class ExtremityPipeline:
         self.keypoints = (KeypointDetector(self.cameras, p.keypoints, model_path)
                           if p.detector == "keypoints" else None)
         self.last_seconds = 0.0
+
+    def reset(self) -> None:
+        """Forget the views' tracks (a recording that starts over)."""
+        if self.keypoints is not None:
+            self.keypoints.reset()
+
+    def close(self) -> None:
+        """Stop the keypoint detector's worker threads."""
+        if self.keypoints is not None:
+            self.keypoints.close()
 
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
                previous: dict | None = None) -> Detections:

@@ -1,18 +1,15 @@
 """The 2D body-landmark network of one view: BlazePose GHUM 3D ("Pose landmark full", MediaPipe),
-run with OpenCV's dnn module on a square crop of the person.
+run with LiteRT (XNNPACK) on a square crop of the person.
 
-Method: the pre- and post-processing of MediaPipe's ``PoseLandmarkByRoiCpu`` graph. Checked
-against ``mediapipe==0.10.14``: on identical inputs the raw outputs equal TFLite's to 1e-3 px;
-on simulated 640x480 frames the landmarks in image pixels lie within 1.2-1.9 px (median) of
-those of ``mp.solutions.pose``, whose crops are its own.
+Method: the pre- and post-processing of MediaPipe's ``PoseLandmarkByRoiCpu`` graph
+(``mediapipe==0.10.14``):
 
-1. **Crop**: the caller's box (full-image pixels) is made square about its centre with side
-   ``max(width, height)``, optionally turned about it, and mapped onto the 256 x 256 network
-   input by one affine warp (bilinear, replicated border where the square leaves the image,
-   as MediaPipe's ``ImageToTensorCalculator``): without rotation, input pixel
-   ``u' = (u - x0) * 256 / side``.
+1. **Crop**: the caller's :class:`~.keypoint_roi.Roi` (a square in image pixels, turned about
+   its centre) mapped onto the 256 x 256 network input by one affine warp (bilinear,
+   replicated border where the square leaves the image, as MediaPipe's
+   ``ImageToTensorCalculator``): :func:`~.keypoint_roi.crop_transform`.
 2. **Input**: RGB as float32 in [0, 1] (the model's training range, MediaPipe's
-   ``output_tensor_float_range {min: 0, max: 1}``), NCHW 1 x 3 x 256 x 256.
+   ``output_tensor_float_range {min: 0, max: 1}``), NHWC 1 x 256 x 256 x 3.
 3. **Outputs**: ``Identity`` (39 x [x, y, z, visibility, presence], x and y in input pixels,
    visibility and presence as logits: a sigmoid gives [0, 1]), ``Identity_1`` (the pose
    presence score, already in [0, 1]) and ``Identity_3`` (39 heatmaps of 64 x 64, logits).
@@ -23,11 +20,12 @@ those of ``mp.solutions.pose``, whose crops are its own.
 
 The first 33 landmarks are BlazePose's (:data:`LANDMARK_NAMES`); 33 and 34 are the auxiliary
 points MediaPipe aligns its next crop with (hip centre, and a point whose distance from it is
-half the side of the body's square box).
+half the side of the body's square box: :func:`~.keypoint_roi.landmarks_roi`).
 
-The crop's rotation is the caller's (:class:`~.keypoint_detector.KeypointDetector` turns it
-to the previous skeleton's trunk): MediaPipe turns its crop to the axis of its own auxiliary
-points, which needs a network pass first.
+Runtime: LiteRT (``ai-edge-litert``) with XNNPACK, ``threads`` threads per network
+(:mod:`.tflite_model`). On this package's 2-core machine it ran the model 2.5-3 times faster
+than OpenCV's dnn module per inference (``benchmarks/bench_keypoints.py``), and it does not
+depend on OpenCV's version.
 """
 from __future__ import annotations
 
@@ -37,12 +35,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from hmocap_ros.detection.keypoint_roi import Roi, crop_transform
+from hmocap_ros.detection.tflite_model import MODEL_DIR, ModelFileError, load_model
+
 __all__ = ["ModelFileError", "DEFAULT_MODEL", "INPUT_SIZE", "NUM_LANDMARKS", "LANDMARK_NAMES",
-           "PoseLandmarkNetwork", "ViewLandmarks", "crop_transform", "refine_from_heatmap"]
+           "PoseLandmarkNetwork", "ViewLandmarks", "refine_from_heatmap"]
 
 #: The shipped model (see ``hmocap_ros/data/models/SOURCES.md``).
-DEFAULT_MODEL = (Path(__file__).resolve().parents[1] / "data" / "models"
-                 / "pose_landmark_full.tflite")
+DEFAULT_MODEL = MODEL_DIR / "pose_landmark_full.tflite"
 #: Side of the square network input, pixels.
 INPUT_SIZE = 256
 #: Landmarks the network outputs (33 BlazePose landmarks and 6 auxiliary points).
@@ -56,17 +56,14 @@ LANDMARK_NAMES = (
     "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle", "left_heel",
     "right_heel", "left_foot_index", "right_foot_index",
 )
-_OUTPUTS = ("Identity", "Identity_1", "Identity_3")
+#: the outputs used, with their shapes (NHWC heatmaps)
+_OUTPUTS = {"Identity": (1, NUM_LANDMARKS * 5), "Identity_1": (1, 1),
+            "Identity_3": (1, 64, 64, NUM_LANDMARKS)}
 _HEATMAP_KERNEL = 7
 _HEATMAP_MIN_CONFIDENCE = 0.5
 _GET_MODEL = ("it ships with hmocap_ros as hmocap_ros/data/models/pose_landmark_full.tflite "
               "(see SOURCES.md there: mediapipe==0.10.14 wheel, "
               "mediapipe/modules/pose_landmark/pose_landmark_full.tflite)")
-
-
-class ModelFileError(RuntimeError):
-    """The landmark model file is missing or unreadable; the message names the file and where
-    to get it."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,25 +83,6 @@ class ViewLandmarks:
 
 def _sigmoid(x: np.ndarray) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-np.clip(x, -60.0, 60.0)))
-
-
-def crop_transform(box, rotation: float = 0.0) -> tuple[np.ndarray, float]:
-    """Affine map ``(2, 3)`` from full-image pixels to network-input pixels of the square crop
-    about ``box = (x_min, y_min, x_max, y_max)`` (side ``max(width, height)``), turned by
-    ``rotation`` (radians, positive turns the image counter-clockwise about the box centre:
-    a person leaning to the image's right by that angle stands upright in the crop), and the
-    scale (input pixels per image pixel)."""
-    x_min, y_min, x_max, y_max = (float(v) for v in box)
-    side = max(x_max - x_min, y_max - y_min)
-    if not np.isfinite(side) or side <= 1.0 or not np.all(np.isfinite((x_min, y_min, rotation))):
-        raise ValueError(f"box must be (x_min, y_min, x_max, y_max) with a side > 1 px, "
-                         f"got {box!r}")
-    scale = INPUT_SIZE / side
-    centre = np.array([0.5 * (x_min + x_max), 0.5 * (y_min + y_max)])
-    c, s = np.cos(rotation), np.sin(rotation)
-    linear = scale * np.array([[c, s], [-s, c]])
-    offset = 0.5 * INPUT_SIZE - linear @ centre
-    return np.hstack([linear, offset[:, None]]), scale
 
 
 def refine_from_heatmap(xy: np.ndarray, heatmaps: np.ndarray,
@@ -142,78 +120,39 @@ def refine_from_heatmap(xy: np.ndarray, heatmaps: np.ndarray,
     return out
 
 
-def _load(path: Path):
-    if not path.is_file():
-        raise ModelFileError(f"pose landmark model {path} not found: {_GET_MODEL}")
-    reader = getattr(cv2.dnn, "readNetFromTFLite", None)
-    if reader is None:
-        raise ModelFileError(f"pose landmark model {path} cannot be read: OpenCV "
-                             f"{cv2.__version__} has no TFLite importer (OpenCV 5 has)")
-    # OpenCV 5's default engine returns one of the model's outputs only; its classic engine
-    # (OpenCV 4's only one) returns them all
-    engine = getattr(cv2.dnn, "ENGINE_CLASSIC", None)
-    try:
-        net = reader(str(path)) if engine is None else reader(str(path), engine=engine)
-        outputs = set(net.getUnconnectedOutLayersNames())
-    except cv2.error as error:
-        reason = str(error).strip().splitlines()[-1][:160]
-        raise ModelFileError(f"pose landmark model {path} is corrupt or not a TFLite model "
-                             f"({reason}): {_GET_MODEL}") from None
-    missing = [name for name in _OUTPUTS if name not in outputs]
-    if missing:
-        raise ModelFileError(f"pose landmark model {path} lacks the outputs {', '.join(missing)} "
-                             f"of pose_landmark_full: {_GET_MODEL}")
-    return net
-
-
 class PoseLandmarkNetwork:
-    """BlazePose "Pose landmark full" on OpenCV dnn (see the module docstring).
+    """BlazePose "Pose landmark full" on LiteRT (see the module docstring).
 
-    Not thread-safe: give each thread its own instance. Raises :class:`ModelFileError` when
-    the model file is missing, corrupt or not this model (its outputs are checked with one
-    run on a blank input).
+    Not thread-safe: give each thread its own instance. ``threads``: LiteRT threads of this
+    instance. Raises :class:`ModelFileError` when the model file is missing, corrupt or not
+    this model (its input and output shapes are checked and it runs once on zeros).
     """
 
-    def __init__(self, path: str | Path | None = None):
+    def __init__(self, path: str | Path | None = None, threads: int = 1):
         self.path = Path(DEFAULT_MODEL if path is None else path)
-        self._net = _load(self.path)
-        try:
-            outputs = self._forward(np.zeros((1, 3, INPUT_SIZE, INPUT_SIZE), np.float32))
-        except cv2.error as error:
-            reason = str(error).strip().splitlines()[-1][:160]
-            raise ModelFileError(f"pose landmark model {self.path} does not run ({reason}): "
-                                 f"{_GET_MODEL}") from None
-        shapes = tuple(o.size for o in outputs)
-        if shapes != (NUM_LANDMARKS * 5, 1, NUM_LANDMARKS * 64 * 64):
-            raise ModelFileError(f"pose landmark model {self.path} has output sizes {shapes}, "
-                                 f"not those of pose_landmark_full: {_GET_MODEL}")
-
-    def _forward(self, blob: np.ndarray) -> list[np.ndarray]:
-        self._net.setInput(blob)
-        return list(self._net.forward(list(_OUTPUTS)))
+        self._model = load_model(self.path, "pose landmark model", _OUTPUTS,
+                                 (1, INPUT_SIZE, INPUT_SIZE, 3), _GET_MODEL, threads)
 
     def infer(self, crop_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """The network on a 256 x 256 RGB uint8 crop: landmarks ``(39, 2)`` in input pixels
         (heatmap-refined), visibility ``(39,)``, presence ``(39,)``, pose presence score."""
         if crop_rgb.shape != (INPUT_SIZE, INPUT_SIZE, 3):
             raise ValueError(f"crop must be {INPUT_SIZE}x{INPUT_SIZE}x3, got {crop_rgb.shape}")
-        blob = cv2.dnn.blobFromImage(crop_rgb, scalefactor=1.0 / 255.0)  # NCHW float32, [0, 1]
-        raw, flag, heat = self._forward(blob)
+        blob = crop_rgb[None].astype(np.float32) * np.float32(1.0 / 255.0)  # NHWC, [0, 1]
+        raw, flag, heat = self._model.run(blob)
         raw = raw.reshape(NUM_LANDMARKS, 5).astype(np.float64)
-        xy = refine_from_heatmap(raw[:, :2], heat.reshape(NUM_LANDMARKS, 64, 64))
+        heat = heat.reshape(64, 64, NUM_LANDMARKS).transpose(2, 0, 1)
+        xy = refine_from_heatmap(raw[:, :2], heat)
         return xy, _sigmoid(raw[:, 3]), _sigmoid(raw[:, 4]), float(flag.reshape(-1)[0])
 
-    def run(self, image_rgb: np.ndarray, box: tuple[float, float, float, float],
-            rotation: float = 0.0) -> ViewLandmarks:
-        """Landmarks of the person in ``box = (x_min, y_min, x_max, y_max)`` (full-image pixels;
-        the crop is the square about its centre of side ``max(width, height)``: the caller adds
-        any margin) of an RGB uint8 image ``(H, W, 3)``; ``rotation``: see
-        :func:`crop_transform`."""
+    def run(self, image_rgb: np.ndarray, roi: Roi) -> ViewLandmarks:
+        """Landmarks of the person in ``roi`` (image pixels; the caller's crop) of an RGB uint8
+        image ``(H, W, 3)``."""
         image_rgb = np.asarray(image_rgb)
         if image_rgb.ndim != 3 or image_rgb.shape[2] != 3 or image_rgb.dtype != np.uint8:
             raise ValueError(f"image must be RGB uint8 (H, W, 3), "
                              f"got {image_rgb.dtype} {image_rgb.shape}")
-        matrix, _ = crop_transform(box, rotation)
+        matrix = crop_transform(roi, INPUT_SIZE)
         crop = cv2.warpAffine(image_rgb, matrix, (INPUT_SIZE, INPUT_SIZE), flags=cv2.INTER_LINEAR,
                               borderMode=cv2.BORDER_REPLICATE)
         xy, visibility, presence, score = self.infer(crop)

@@ -11,7 +11,9 @@ Definitions:
 - **output rate**: outputs per second of input stream time while there is something to
   output (the frame sets with a person, for the body tracker).
 - **CPU**: a process's user + system CPU seconds over the run, divided by the run's wall
-  seconds (1.0 is one core kept busy).
+  seconds (1.0 is one core kept busy); per frame set: its CPU milliseconds over the frame
+  sets it answered (:func:`core_ms_per_set`).
+- **replay timing**: what ``hmocap replay`` says of its own pace (:func:`replay_timing`).
 """
 
 from __future__ import annotations
@@ -92,3 +94,27 @@ def process_rss_mb(pid: int) -> float | None:
     except OSError:
         return None
     return None
+
+
+def core_ms_per_set(cpu_s: Mapping[str, float], answered: Mapping[str, int], sets_in: int) -> dict:
+    """Per node of ``cpu_s`` (CPU seconds), CPU ms per frame set it answered (``answered``:
+    outputs per node; NaN for none) and per frame set that came in (``sets_in``)."""
+    return {n: {"core_ms_per_set": 1e3 * c / answered[n] if answered.get(n) else float("nan"),
+                "core_ms_per_input_set": 1e3 * c / sets_in if sets_in else float("nan")}
+            for n, c in cpu_s.items()}
+
+
+def replay_timing(output: str) -> dict:
+    """The figures of ``hmocap replay``'s timing line (``replay timing: bag_s=... wall_s=...
+    behind_max_s=... behind_p95_s=... cpu_s=...``), NaN when it printed none."""
+    keys = {"bag_s": "replay_bag_seconds", "wall_s": "replay_seconds",
+            "behind_max_s": "replay_behind_max_s", "behind_p95_s": "replay_behind_p95_s",
+            "cpu_s": "replay_cpu_seconds"}
+    out = {v: float("nan") for v in keys.values()}
+    for line in output.splitlines():
+        if line.startswith("replay timing:"):
+            for item in line.split(":", 1)[1].split():
+                key, _, value = item.partition("=")
+                if key in keys:
+                    out[keys[key]] = float(value)
+    return out

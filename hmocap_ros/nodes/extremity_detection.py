@@ -2,7 +2,8 @@
 
 Pairs each camera's image with its foreground mask by stamp, synchronises the cameras into frame
 sets and runs :class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline` on each:
-``detector`` ``keypoints`` (a 2D landmark network per view on the view's foreground region,
+``detector`` ``keypoints`` (a 2D landmark network per view on the crop MediaPipe's pipeline
+gives it: from the view's previous landmarks, the previous skeleton or a pose detector;
 triangulated robustly over the views) or ``skin`` (the thesis' skin-colour detector on the
 oriented surface of the carved hull, eq. 2.16-2.18). body_tracker's ``dd-hpf`` consumes the
 detections.
@@ -19,7 +20,8 @@ Publications (with the stamp of the frame set):
   ``extremities/points`` (sensor_msgs/PointCloud2, fields x, y, z, probability): skin, the
   oriented surface points with their extremity probability (eq. 2.16-2.18); keypoints, the
   detections with their scores. For RViz/Foxglove.
-  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): frame sets, detections, views, ms per set.
+  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): frame sets, detections, views, wall ms
+  per set and CPU ms per set (the process's CPU time while it detects: every worker thread).
 Synchronisation: a frame set is complete when every camera's (image, foreground) pair of its
 stamp (within ``slop_ms``) is there, or ``max_wait_ms`` after its newest pair with at least
 ``min_views_to_sync`` views (the others are detected without them). Complete sets wait in a
@@ -49,7 +51,7 @@ from sensor_msgs.msg import Image, PointCloud2
 from hmocap_ros.detection.detections import fill_msg
 from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
                                                      skeleton_labels)
-from hmocap_ros.detection.keypoint_network import ModelFileError
+from hmocap_ros.detection.tflite_model import ModelFileError
 from hmocap_ros.frame_sets import TICK_S, FrameSetQueue
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
@@ -99,6 +101,7 @@ class ExtremityDetectionNode(Node):
         self.frame_id = "room"
         self.frames = 0
         self.seconds = 0.0
+        self.cpu_seconds = 0.0
         self.busy_ns = 0
         self.queue = FrameSetQueue(self.config.latest_only)
         self.skipped = 0
@@ -130,6 +133,8 @@ class ExtremityDetectionNode(Node):
         first = self.rig is None
         self.rig = rig
         self.frame_id = rig.frame_id
+        if self.pipeline is not None:
+            self.pipeline.close()
         self.pipeline = self._make_pipeline(rig)
         self.images = {name: {} for name in rig.names}
         wait = int(self.config.max_wait_ms * 1e6)
@@ -199,6 +204,7 @@ class ExtremityDetectionNode(Node):
                                           f"frame sets start over")
                 self.skeleton = None
                 self.queue = FrameSetQueue(self.config.latest_only)
+                self.pipeline.reset()
             self._enqueue(synced_sets)
 
         return on_mask
@@ -258,13 +264,14 @@ class ExtremityDetectionNode(Node):
             image, mask = items.get(name, (None, None))
             images.append(image)
             masks.append(mask)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             det = self.pipeline.detect(images, masks, self._previous(stamp_ns))
         except Exception as err:  # a detector bug must not take the room's node down
             self.get_logger().error(f"extremity detection failed on frame {stamp_ns}: {err!r}")
             return
         self.seconds += time.perf_counter() - t0
+        self.cpu_seconds += time.process_time() - c0
         self.frames += 1
         self.last_counts = (len(det), sum(m is not None for m in masks))
         msg = Extremities()
@@ -284,6 +291,7 @@ class ExtremityDetectionNode(Node):
         out = DiagnosticArray()
         out.header.stamp = self.get_clock().now().to_msg()
         ms = 1e3 * self.seconds / self.frames if self.frames else 0.0
+        cpu_ms = 1e3 * self.cpu_seconds / self.frames if self.frames else 0.0
         level = DiagnosticStatus.OK if self.rig is not None else DiagnosticStatus.WARN
         out.status.append(DiagnosticStatus(
             level=level, name=f"{NODE_NAME}", hardware_id="rig",
@@ -291,6 +299,7 @@ class ExtremityDetectionNode(Node):
                      else "waiting for the rig"),
             values=[KeyValue(key="frame_sets", value=str(self.frames)),
                     KeyValue(key="ms_per_frame_set", value=f"{ms:.1f}"),
+                    KeyValue(key="cpu_ms_per_frame_set", value=f"{cpu_ms:.1f}"),
                     KeyValue(key="skipped_frame_sets", value=str(self.skipped)),
                     KeyValue(key="detections", value=str(self.last_counts[0])),
                     KeyValue(key="views", value=str(self.last_counts[1]))]))
