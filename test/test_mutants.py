@@ -116,13 +116,27 @@ def detector_terms_ignored(mp: pytest.MonkeyPatch) -> None:
 
 def keypoints_on_the_other_side(mp: pytest.MonkeyPatch) -> None:
     """Labelled keypoints attached to the model's joints of the other side (``left_*`` on
-    ``r_*``)."""
+    ``r_*``), in dd-hpf's joint terms and in kf-hpf's fit."""
     from hmocap_ros.detection.detections import MODEL_JOINT
-    from hmocap_ros.tracking import detector_driven
+    from hmocap_ros.tracking import detector_driven, keypoint_fit
 
     other = {"l": "r", "r": "l"}
     mp.setattr(detector_driven, "MODEL_JOINT",
                {label: other[joint[0]] + joint[1:] for label, joint in MODEL_JOINT.items()})
+
+    def swapped(name):
+        return other[name[0]] + name[1:] if name[:2] in ("l_", "r_") else name
+
+    mp.setattr(keypoint_fit, "MODEL_POINTS",
+               {label: (spec[0], *map(swapped, spec[1:]))
+                for label, spec in keypoint_fit.MODEL_POINTS.items()})
+
+
+def keypoint_check_off(mp: pytest.MonkeyPatch) -> None:
+    """kf-hpf keeps every keypoint, whatever the silhouettes show."""
+    from hmocap_ros.tracking import keypoint_first
+
+    mp.setattr(keypoint_first, "contradicted", lambda *args, **kwargs: [])
 
 
 def landmark_undistortion_skipped(mp: pytest.MonkeyPatch) -> None:
@@ -194,7 +208,10 @@ MUTANTS = {
         "test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are",)),
     "keypoints_on_the_other_side": Mutant(keypoints_on_the_other_side, (
         "test_detector_driven.py::"
-        "test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are",)),
+        "test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are",
+        "test_keypoint_first.py::test_fit_follows_noisy_keypoints_of_a_clip")),
+    "keypoint_check_off": Mutant(keypoint_check_off, (
+        "test_keypoint_first.py::test_the_silhouettes_drop_a_wrist_put_in_empty_space",)),
     "landmark_undistortion_skipped": Mutant(landmark_undistortion_skipped, (
         "test_keypoint_triangulation.py::"
         "test_landmarks_of_wide_angle_lenses_are_undistorted_before_triangulation",)),

@@ -134,6 +134,8 @@ class KeypointFit:
                 self._site_joint[k] = end_parents[e]
                 self._site_end[k] = e
                 self._site_share[k] = 1.0 if spec[0] == "end" else 0.5
+        #: per label, the joint its body point hangs on
+        self.site_joints = self._site_joint
         self.offsets = np.zeros((len(self.labels), 3))
         if offsets is not None:
             for k, label in enumerate(self.labels):
