@@ -271,7 +271,7 @@ def offline_report(bag: Path, ns) -> dict:
         stored = json.loads(path.read_text())
         if stored.get("bag") == str(bag) and stored.get("bench_tracker_params") == tracker:
             return stored
-    report = evaluate(bag, ["dd-hpf"], overrides=tracker_overrides(tracker), out=sys.stderr)
+    report = evaluate(bag, ["kf-hpf"], overrides=tracker_overrides(tracker), out=sys.stderr)
     report["bench_tracker_params"] = tracker
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -345,12 +345,12 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu_s: dict, wal
                            **latency_summary(latency_ms(depth_in, answered))}
     if ns.offline:
         offline = offline_report(bag, ns)
-        per_frame = offline["methods"]["dd-hpf"]["per_frame_mm"]
+        per_frame = offline["methods"]["kf-hpf"]["per_frame_mm"]
         by_stamp = {s: e for s, e in zip(sorted(truth), per_frame) if e is not None}
         same = [by_stamp[s] for s in errors if s in by_stamp]
         out["offline"] = {"mean_error_mm": float(np.mean(list(by_stamp.values()))),
                           "mean_error_mm_on_published_stamps": float(np.mean(same)) if same else float("nan"),
-                          "seconds_per_frame": offline["methods"]["dd-hpf"]["seconds_per_frame"]}
+                          "seconds_per_frame": offline["methods"]["kf-hpf"]["seconds_per_frame"]}
     return out
 
 

@@ -43,7 +43,7 @@ GESTURE_BAG = DATA_DIR / "gestures_depth.mcap"
 #: every frame is queued and tracked (a live room, ``latest_only`` as the node's default,
 #: would rather skip frames than lag).
 #: extremity_detection runs its default detector.
-TRACKER_ARGS = ["-p", "weighting.working_scale:=1.0", "-p", "method:=dd-hpf", "-p",
+TRACKER_ARGS = ["-p", "weighting.working_scale:=1.0", "-p", "method:=kf-hpf", "-p",
                 "queue_depth:=100", "-p", "latest_only:=false"]
 
 

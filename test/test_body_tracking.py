@@ -464,21 +464,24 @@ def test_heading_search_keeps_required_headings(model, rig):
 # ----------------------------------------------------------------------------- methods
 
 
-def test_the_registry_holds_the_four_methods_of_the_thesis():
-    """tracking.methods: the four methods in the thesis' order, and what each is built of."""
-    assert method_names() == ("apf", "hpf", "hpf-apo", "dd-hpf")
+def test_the_registry_holds_the_four_methods_of_the_thesis_and_keypoint_first():
+    """tracking.methods: the thesis' four methods in its order, then keypoint-first (the
+    default), and what each is built of."""
+    assert method_names() == ("apf", "hpf", "hpf-apo", "dd-hpf", "kf-hpf")
     assert tuple(METHODS) == method_names()
-    apf, hpf, apo, dd = (METHODS[m] for m in method_names())
+    apf, hpf, apo, dd, kf = (METHODS[m] for m in method_names())
     assert all(isinstance(m, TrackingMethod) for m in METHODS.values())
     assert not apf.hierarchical and hpf.hierarchical and apo.hierarchical and dd.hierarchical
     assert apo.boxed and dd.boxed and not hpf.boxed and not apf.boxed
     assert dd.uses_detector and not any(m.uses_detector for m in (apf, hpf, apo))
+    assert kf.keypoint_first and kf.uses_detector and kf.boxed and kf.hierarchical
+    assert not any(m.keypoint_first for m in (apf, hpf, apo, dd))
     assert [m.label for m in (apf, hpf, apo, dd)] == ["APF", "HPF", "HPF+APO", "DD-HPF+"]
     assert apf.evaluations == hpf.evaluations == 3500
     assert abs(apo.evaluations - 3500) <= 10 and dd.evaluations == apo.evaluations
     assert get_method("hpf-apo") is apo and get_method(apo) is apo
     assert from_flat(TrackerParams, {"method": "hpf-apo"}).tracking_method is apo
-    assert TrackerParams().tracking_method is dd
+    assert TrackerParams().tracking_method is kf
     with pytest.raises(ValueError, match="method must be one of"):
         get_method("pso")
 
@@ -512,11 +515,12 @@ def test_schedules_spend_about_equal_evaluations(model):
 
 
 def test_schedule_for_reads_the_tracker_settings(model):
-    """schedule_for: the method and filter.* of TrackerParams; by default dd-hpf in two
-    sweeps, 15 x 234 (the node's diagnostics show 15 layers)."""
+    """schedule_for: the method and filter.* of TrackerParams; by default kf-hpf, whose
+    schedule without keypoints is hpf-apo's in two sweeps, 15 x 234 (the node's diagnostics
+    show 15 layers)."""
     skel = model.skeleton
     default = schedule_for(TrackerParams(), skel)
-    assert default.method is METHODS["dd-hpf"]
+    assert default.method is METHODS["kf-hpf"]
     assert default.n_weightings == 15 and default.n_particles == 234
     one = schedule_for(from_flat(TrackerParams, {"method": "hpf", "filter.sweeps": 1}), skel)
     assert one.n_weightings == 7 and one.evaluations_per_frame == 3500
@@ -565,7 +569,8 @@ def test_pose_kernel_respects_joint_limits(model):
 #: names the tracker's settings must not have: what these options chose is fixed behaviour
 DELETED_OPTIONS = ("dd_feet", "dd_reacquire", "start_head_fraction", "render_filtered_parts",
                    "travel_research_every", "travel_heading", "estimator", "facing_cooldown",
-                   "velocity_dofs", "proposal_limbs", "arm_chain", "ignore_other_people")
+                   "velocity_dofs", "proposal_limbs", "arm_chain", "ignore_other_people",
+                   "joint_kappa", "joint_cap", "final_particles")
 
 
 def test_tracker_params_are_described_and_few():
@@ -787,8 +792,10 @@ def test_start_up_hull_travel_seeds_the_pelvis_track(model, rig):
 
 
 #: a small budget for the tracker tests (dotted settings, :func:`hmocap_ros.params.from_flat`)
-SMALL = {"filter.particles": 120, "weighting.working_scale": 0.5, "startup.working_scale": 0.5,
-         "startup.particles": 80, "startup.frames": 2, "startup.min_foreground": 30}
+#: the thesis' silhouette tracking at a small budget (kf-hpf without keypoints runs it too)
+SMALL = {"method": "hpf-apo", "filter.particles": 120, "weighting.working_scale": 0.5,
+         "startup.working_scale": 0.5, "startup.particles": 80, "startup.frames": 2,
+         "startup.min_foreground": 30}
 
 
 def small_tracker(model, rig, shape=None, settings: dict | None = None):

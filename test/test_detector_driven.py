@@ -1,5 +1,5 @@
 """Detector-driven tracking (thesis sec. 2.5): skin maps, 3D extremities, IK particles, dd-hpf
-with skin candidates and with labelled keypoint joints.
+with skin candidates.
 
 Scenes with known ground truth: the tracking body in a chosen pose, exact silhouettes in the
 cameras of ``config/rig_example.yaml`` at 320x240, and a detector map that is 1 exactly where
@@ -284,67 +284,3 @@ def test_dd_hpf_tracks_with_skin_detections_and_runs_without(model, rig, rest):
     # an empty detection set: nothing found, nothing breaks
     res = tracker.update(list(masks), STAMP0 + 11, Detections.empty("skin"))
     assert res.state == "tracking" and not res.extremities.found[:3].any()
-
-
-def test_dd_hpf_follows_labelled_keypoint_joints(model, rig, rest):
-    """Labelled joints drive every layer: with the silhouettes of one pose and the keypoints
-    of a pose whose arms differ, the arms follow the keypoints; wrong keypoints far off cost
-    a bounded amount and the silhouettes win."""
-    params = arms_out(model)
-    masks, _ = scene(model, rig, params)
-    truth = model.pose(params[None])[1][0]
-    ik = IKProposer(model)
-    hands = ik.end_effectors(params[None], rest)[0]
-    names = list(model.joint_names)
-    labels = list(MODEL_JOINT) + ["left_hand", "right_hand", "head"]
-    pos = [truth[names.index(MODEL_JOINT[k])] for k in MODEL_JOINT] + list(hands[:3])
-    good = Detections("keypoints", tuple(labels), np.array(pos), np.full(len(pos), 0.9))
-    tracker = _dd_tracker(model, rig)
-    for f in range(3):
-        res = tracker.update(list(masks), STAMP0 + f, good)
-    err = np.linalg.norm(res.joints - truth, axis=1)
-    wrists = [names.index("l_wrist"), names.index("r_wrist")]
-    assert res.extremities.joints is not None and res.extremities.found[[0, 1, 2]].all()
-    base = _a_pose_baseline(model, params, truth)
-    assert err.mean() < 0.035 and err[wrists].mean() < 0.05, (err.mean(), err[wrists])
-    assert err[wrists].mean() < 0.15 * base[wrists].mean()
-    # the same filter without the joint term (kappa 0) does worse on the wrists
-    plain = BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "dd-hpf", "filter.particles": 100, "weighting.working_scale": 0.5,
-        "startup.min_foreground": 30, "startup.estimate_shape": False,
-        "detector.joint_kappa": 0.0, "detector.refine_kappa": 0.0}), np.random.default_rng(0))
-    empty = Detections.empty("keypoints")
-    for f in range(3):
-        res0 = plain.update(list(masks), STAMP0 + f, empty)
-    err0 = np.linalg.norm(res0.joints - truth, axis=1)
-    assert err[wrists].mean() < err0[wrists].mean(), (err[wrists], err0[wrists])
-
-
-def test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are(model, rig, rest):
-    """The left forearm and hand are missing from every mask (a sleeve the colour of the wall):
-    the silhouettes cannot say where that forearm is, the labelled keypoints can. dd-hpf's
-    joint terms put the wrist within a few centimetres of them; without the terms (hpf-apo
-    with IK particles) the forearm hides against the body. Keypoints attached to the joints
-    of the other side pull the left wrist away from its keypoint."""
-    params = arms_out(model)
-    verts, joints = model.pose(np.atleast_2d(params))
-    uv, _ = project_batch(verts, *rig.arrays())
-    lost = np.isin(model.vertex_part, [model.joint_index("l_elbow"), model.joint_index("l_wrist")])
-    kept = model.faces[~lost[model.faces].any(axis=1)]
-    masks = render_silhouettes(uv, kept, rig[0].height, rig[0].width)[0] * np.uint8(255)
-    truth = joints[0]
-    names = list(model.joint_names)
-    hands = IKProposer(model).end_effectors(params[None], rest)[0]
-    labels = list(MODEL_JOINT) + ["left_hand", "right_hand", "head"]
-    pos = [truth[names.index(MODEL_JOINT[k])] for k in MODEL_JOINT] + list(hands[:3])
-    keypoints = Detections("keypoints", tuple(labels), np.array(pos), np.full(len(pos), 0.9))
-    tracker = _dd_tracker(model, rig)
-    for f in range(3):
-        res = tracker.update(list(masks), STAMP0 + f, keypoints)
-    assert res.state == "tracking"
-    err = np.linalg.norm(res.joints - truth, axis=1)
-    l_wrist, l_elbow = names.index("l_wrist"), names.index("l_elbow")
-    # the A-pose's left wrist lies 40+ cm from this one: 6 cm is the arm followed
-    base = _a_pose_baseline(model, params, truth)
-    assert base[l_wrist] > 0.35
-    assert err[l_wrist] < 0.06 and err[l_elbow] < 0.05, (err[l_wrist], err[l_elbow])

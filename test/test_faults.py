@@ -56,7 +56,7 @@ PIPELINE = {
                                 "segmenting", "/cam_1/foreground"),
     "extremity_detection": ("hmocap_ros.nodes.extremity_detection", ["-p", "queue_depth:=25"],
                             "waiting for the rig", "/extremities"),
-    "body_tracker": ("hmocap_ros.nodes.body_tracker", ["-p", "method:=dd-hpf", *FAST],
+    "body_tracker": ("hmocap_ros.nodes.body_tracker", ["-p", "method:=kf-hpf", *FAST],
                      "waiting for the rig", "/humans/bodies/tracked"),
     "gesture_detection": ("hmocap_ros.nodes.gesture_detection", ["-p", "publish_probability:=false"],
                           "detecting gestures", "/gestures"),

@@ -72,23 +72,23 @@ def run_eval(args: list[str]) -> int:
 def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path):
     out = tmp_path / "report.json"
     png = tmp_path / "errors.png"
-    rc = run_eval([str(DEMO_BAG), "--method", "dd-hpf", "--method", "hpf", "--frames", "3",
+    rc = run_eval([str(DEMO_BAG), "--method", "kf-hpf", "--method", "hpf", "--frames", "3",
                    "--seed", "1", "--json", str(out), "--plot", str(png), *SMALL_BUDGET])
     assert rc == 0
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "fg" and report["silhouettes_fallback"] == ""
     assert report["frames_with_truth"] == 3 and report["cameras"] == ["cam_1", "cam_2", "cam_3",
                                                                      "cam_4"]
-    assert set(report["methods"]) == {"dd-hpf", "hpf"}
+    assert set(report["methods"]) == {"kf-hpf", "hpf"}
     assert report["detection_seconds_per_frame"] > 0 and report["detector"] == "keypoints"
-    res = report["methods"]["dd-hpf"]
+    res = report["methods"]["kf-hpf"]
     for key in ("mean_mm", "std_mm", "per_joint", "per_frame_mm", "frames_with_pose", "fps",
                 "seconds_per_frame", "fps_with_segmentation", "evaluations_per_frame",
                 "stage_seconds_per_frame", "states", "anthropometry", "params"):
         assert key in res, key
     assert len(res["per_frame_mm"]) == 3 and len(res["per_joint"]) == 19
     # the settings of the run, by dotted name
-    assert res["params"]["method"] == "dd-hpf" and res["params"]["filter.particles"] == 40
+    assert res["params"]["method"] == "kf-hpf" and res["params"]["filter.particles"] == 40
     assert res["params"]["startup.frames"] == 1 and res["params"]["filter.sweeps"] == 2
     assert report["methods"]["hpf"]["params"]["method"] == "hpf"
     assert res["frames_with_pose"] == 3 and np.isfinite(res["mean_mm"])
@@ -104,19 +104,19 @@ def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path):
     assert set(anthro) >= {"estimated_m", "true_m", "error_mm", "mean_abs_error_mm",
                            "neutral_mean_abs_error_mm"}
     assert png.stat().st_size > 1000
-    # the same seed repeats the same numbers (dd-hpf is the default method)
+    # the same seed repeats the same numbers (kf-hpf is the default method)
     out2 = tmp_path / "again.json"
     assert run_eval([str(DEMO_BAG), "--frames", "3", "--seed", "1", "--json", str(out2),
                      *SMALL_BUDGET]) == 0
-    again = json.loads(out2.read_text())["methods"]["dd-hpf"]
+    again = json.loads(out2.read_text())["methods"]["kf-hpf"]
     assert again["per_frame_mm"] == res["per_frame_mm"]
     # a second tracker slot finds nobody else in this bag: the subject's track is unchanged
     out3 = tmp_path / "two.json"
     assert run_eval([str(DEMO_BAG), "--frames", "3", "--seed", "1", "--max-people", "2",
                      "--json", str(out3), *SMALL_BUDGET]) == 0
     two = json.loads(out3.read_text())
-    assert two["max_people"] == 2 and two["methods"]["dd-hpf"]["track_switches"] == 0
-    assert two["methods"]["dd-hpf"]["per_frame_mm"] == res["per_frame_mm"]
+    assert two["max_people"] == 2 and two["methods"]["kf-hpf"]["track_switches"] == 0
+    assert two["methods"]["kf-hpf"]["per_frame_mm"] == res["per_frame_mm"]
 
 
 def test_the_subject_is_scored_on_the_nearest_track():
@@ -192,7 +192,7 @@ def test_eval_falls_back_to_gt_silhouettes_without_empty_frames(tmp_path, capsys
     assert report["silhouettes"] == "gt" and "ground-truth silhouettes" in \
         report["silhouettes_fallback"]
     assert "ground-truth silhouettes" in capsys.readouterr().err
-    res = report["methods"]["dd-hpf"]  # the default method
+    res = report["methods"]["kf-hpf"]  # the default method
     assert res["frames"] == 3 and res["frames_with_pose"] == 3
 
 
@@ -203,7 +203,7 @@ def test_eval_segments_a_bag_with_empty_frames_and_rejects_bad_bags(tmp_path):
     assert run_eval([str(bag), "--json", str(out), *SMALL_BUDGET]) == 0
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "fg" and report["frame_sets"] == 5
-    assert report["methods"]["dd-hpf"]["frames"] == 2
+    assert report["methods"]["kf-hpf"]["frames"] == 2
     missing = tmp_path / "missing.mcap"
     assert run_eval([str(missing)]) == 2
     empty = tmp_path / "empty.mcap"

@@ -107,22 +107,23 @@ def shadow_suppression_off(mp: pytest.MonkeyPatch) -> None:
 
 
 def detector_terms_ignored(mp: pytest.MonkeyPatch) -> None:
-    """dd-hpf without its detection terms: no joint term in any layer, no refinement layer
-    (eq. 2.20-2.21); it runs as hpf-apo with IK particles."""
+    """The detection terms of the layers ignored: kf-hpf's keypoint term and dd-hpf's
+    refinement layer (eq. 2.20-2.21); kf-hpf filters its uncertain blocks on the silhouettes
+    alone."""
     from hmocap_ros.tracking.detector_driven import DetectorDriven
+    from hmocap_ros.tracking.keypoint_first import KeypointFirst
 
     mp.setattr(DetectorDriven, "layer_terms", lambda self, assigned, rest: None)
+    mp.setattr(KeypointFirst, "terms",
+               lambda self, schedule, *args: [None] * len(schedule.layer_blocks))
 
 
 def keypoints_on_the_other_side(mp: pytest.MonkeyPatch) -> None:
-    """Labelled keypoints attached to the model's joints of the other side (``left_*`` on
-    ``r_*``), in dd-hpf's joint terms and in kf-hpf's fit."""
-    from hmocap_ros.detection.detections import MODEL_JOINT
-    from hmocap_ros.tracking import detector_driven, keypoint_fit
+    """Labelled keypoints attached to the model's points of the other side (``left_*`` on
+    ``r_*``) in kf-hpf's fit and keypoint terms."""
+    from hmocap_ros.tracking import keypoint_fit
 
     other = {"l": "r", "r": "l"}
-    mp.setattr(detector_driven, "MODEL_JOINT",
-               {label: other[joint[0]] + joint[1:] for label, joint in MODEL_JOINT.items()})
 
     def swapped(name):
         return other[name[0]] + name[1:] if name[:2] in ("l_", "r_") else name
@@ -204,12 +205,10 @@ MUTANTS = {
     "forest_votes_shuffled": Mutant(forest_votes_shuffled, (
         "test_gesture_cli.py::test_shipped_forest_detects_gestures_on_the_demo_bag",)),
     "detector_terms_ignored": Mutant(detector_terms_ignored, (
-        "test_detector_driven.py::"
-        "test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are",)),
+        "test_keypoint_first.py::test_the_keypoints_place_a_forearm_the_silhouettes_lost",)),
     "keypoints_on_the_other_side": Mutant(keypoints_on_the_other_side, (
-        "test_detector_driven.py::"
-        "test_dd_hpf_puts_a_forearm_the_silhouettes_lost_where_its_keypoints_are",
-        "test_keypoint_first.py::test_fit_follows_noisy_keypoints_of_a_clip")),
+        "test_keypoint_first.py::test_fit_follows_noisy_keypoints_of_a_clip",
+        "test_keypoint_first.py::test_the_keypoints_place_a_forearm_the_silhouettes_lost")),
     "keypoint_check_off": Mutant(keypoint_check_off, (
         "test_keypoint_first.py::test_the_silhouettes_drop_a_wrist_put_in_empty_space",)),
     "landmark_undistortion_skipped": Mutant(landmark_undistortion_skipped, (

@@ -1,6 +1,6 @@
 """``hmocap eval mocap``: replay a multi-view bag through the body tracker and score it.
 
-    hmocap eval mocap BAG [--method apf|hpf|hpf-apo|dd-hpf ...] [--compare] [--particles N]
+    hmocap eval mocap BAG [--method kf-hpf|apf|hpf|hpf-apo|dd-hpf ...] [--compare] [--particles N]
         [--layers L] [--frames N] [--seed S] [--silhouettes fg|gt] [--max-people N]
         [--json OUT] [--plot OUT.png]
 
@@ -205,7 +205,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
         params=params_record(params))
 
 
-def evaluate(bag: str | Path, methods=("dd-hpf",), *, silhouettes: str = "fg",
+def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
              max_frames: int | None = None, seed: int = 0, particles: int = 0, layers: int = 0,
              overrides: dict | None = None, given_shape: bool = False,
              fg_params: dict | None = None, max_people: int = 1, detector: str = "keypoints",
@@ -321,7 +321,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="people followed at once (one tracker each); the subject is scored "
                              "on the track nearest it (default 1)")
     parser.add_argument("--detector", choices=("keypoints", "skin"), default=None,
-                        help="extremity detector of dd-hpf (default: extremity_detection's)")
+                        help="extremity detector of kf-hpf and dd-hpf (default: extremity_detection's)")
     parser.add_argument("--rig", metavar="RIG.yaml", default=None,
                         help="track with this rig (e.g. from hmocap calibrate) instead of the "
                              "bag's /camera_rig; the truth stays the bag's")

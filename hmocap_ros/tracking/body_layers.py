@@ -324,7 +324,7 @@ def schedule_for(params, skel: Skeleton, room_lo: np.ndarray | None = None,
     f = params.filter
     return make_schedule(params.tracking_method, skel, n_particles=f.particles or None,
                          n_layers=f.layers or None, sigma_scale=f.sigma_scale,
-                         survival_rate=f.survival_rate, apf_alpha=f.apf_alpha,
+                         survival_rate=f.survival_rate,
                          refine_nu=f.refine_nu, jump_fraction=f.jump_fraction,
                          jump_scale=f.jump_scale, reseed_fraction=f.reseed_fraction,
                          room_lo=room_lo, room_hi=room_hi, sweeps=f.sweeps)

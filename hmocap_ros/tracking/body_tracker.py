@@ -139,7 +139,7 @@ class BodyTracker:
             kernel = pose_kernel(self.skel, lo, hi, f.jump_fraction, f.jump_scale,
                                  f.reseed_fraction)
             landmarks = load_keypoint_model()
-            self.keypoint_first = KeypointFirst(model, p.keypoints, p.detector,
+            self.keypoint_first = KeypointFirst(model, p.keypoints,
                                                 self.schedule.n_particles, f.survival_rate,
                                                 kernel, (lo, hi), landmarks["offsets"])
             self._size_corrections = size_corrections(landmarks["size_corrections"])
@@ -325,16 +325,15 @@ class BodyTracker:
         """One keypoint-first frame (:mod:`.keypoint_first`): fit, check, the filter on what
         stays uncertain. Without keypoints, the silhouette filter."""
         kf = self.keypoint_first
+        if detections is None or not len(kf.fitter.targets(detections)[0]):
+            self._fall_back("no keypoints in the frame set")
+            return self._track(None, obs, stamp_ns, t_start, timings)
         t0 = time.perf_counter()
         reference = self._predict()
         periods = min(self._elapsed[1], MAX_ELAPSED_PERIODS)
         rest = self.fitness.rest(self.shape)
-        fit, dropped = (kf.fit(detections, rest, obs, reference, periods)
-                        if detections is not None and len(detections) else (None, []))
+        fit, dropped = kf.fit(detections, rest, obs, reference, periods)
         timings["fit"] = time.perf_counter() - t0
-        if fit is None:
-            self._fall_back("no keypoints in the frame set")
-            return self._track(None, obs, stamp_ns, t_start, timings)
         if self._measure_shape(detections, dropped):
             rest = self.fitness.rest(self.shape)
         if self.fallback_reason:

@@ -10,28 +10,29 @@ Per frame set (:class:`KeypointFirst`, called by
 2. **The silhouettes check the keypoints** (:func:`contradicted`): each keypoint's segment
    (from its parent keypoint to it: upper arm to the elbow, forearm to the wrist, wrist to
    the hand, thigh, shin, foot; the shoulders' midpoint to the head; hips and shoulders by
-   themselves) is sampled at ``check_samples`` points over its half towards the keypoint
+   themselves) is sampled at :data:`CHECK_SAMPLES` points over its half towards the keypoint
    (the other half is the parent's) and projected into every view. A view
    contradicts the keypoint when it sees at least two of the samples and fewer than
-   ``check_support`` of those fall on its foreground (dilated by ``check_dilate_px`` at the
+   :data:`CHECK_SUPPORT` of those fall on its foreground (dilated by :data:`CHECK_DILATE_PX` at the
    working resolution, the segmentation's own inaccuracy). A keypoint that
    ``check_views`` or more views contradict is dropped, and the body fitted again without
    it: a wrist the network puts in empty space, where every view shows the forearm
    elsewhere, does not drag the arm.
 3. **Budget** (:meth:`KeypointFirst.uncertain_blocks`): a body block of the hierarchical
    schedule (torso, legs, shoulders, elbows) is *explained* when every keypoint it moves
-   (``BLOCK_KEYPOINTS``) was fitted with a score of at least ``confident_score`` and a
-   residual under ``max_residual``; else it is *uncertain*: a keypoint missing, dropped by
+   (``BLOCK_KEYPOINTS``) was fitted with a score of at least :data:`CONFIDENT_SCORE` and a
+   residual under :data:`MAX_RESIDUAL`; else it is *uncertain*: a keypoint missing, dropped by
    the silhouettes, unsure, or at odds with the body's bone lengths.
 4. **Filter** (:meth:`KeypointFirst.frame_filter`): the particles start at the fitted pose.
-   Explained blocks are only jittered by ``explained_std`` motion stds; each uncertain block
+   Explained blocks are only jittered by :data:`EXPLAINED_STD` motion stds; each uncertain block
    gets a layer of ``filter.particles`` (eq. 2.15 in its boxes, half of its particles
    carried over from the last frame's filter, so that the silhouettes can hold a limb the
-   keypoints lost or got wrong); a final whole-body layer of ``final_particles`` weighs
+   keypoints lost or got wrong); a final whole-body layer of as many weighs
    eq. 2.8 plus the keypoint term over all kept keypoints (eq. 2.21 with the keypoints as
-   ``C_t``). Every layer's cost adds ``detector.joint_kappa`` times the score-weighted mean
-   distance (capped at ``detector.joint_cap``) of its block's kept keypoints to their body
-   points. With every block explained and ``final_particles`` 0, the fit is the estimate.
+   ``C_t``). Every layer's cost adds :data:`KAPPA` times the score-weighted mean distance
+   (each capped at :data:`CAP`) of the kept keypoints of its block and the blocks it moves
+   (a shoulder layer samples the elbow too) to their body points. With every block
+   explained, the fit is the estimate.
    Live, under a time budget (the node's frame period), the layers share the weight
    evaluations that the budget pays at the measured cost of one evaluation; when it pays
    fewer than :data:`MIN_PARTICLES` per layer, the fit is the frame's estimate and the
@@ -48,10 +49,10 @@ import cv2
 import numpy as np
 
 from hmocap_ros.lpf.layered_filter import Layer, LayeredFilter
-from hmocap_ros.params import group, param
+from hmocap_ros.params import param
 from hmocap_ros.render import project_batch
 from hmocap_ros.tracking.body_layers import BODY_BLOCKS, BodySchedule, block_dims, body_sigma0
-from hmocap_ros.tracking.keypoint_fit import KeypointFit, KeypointFitParams
+from hmocap_ros.tracking.keypoint_fit import KeypointFit
 from hmocap_ros.tracking.methods import get_method
 from hmocap_ros.tracking.observation_boxes import layer_vertex_indices
 
@@ -66,6 +67,10 @@ BLOCK_KEYPOINTS = {
     "l_shoulder": ("left_elbow",), "r_shoulder": ("right_elbow",),
     "l_elbow": ("left_wrist", "left_hand"), "r_elbow": ("right_wrist", "right_hand"),
 }
+#: per block's layer, the keypoints its DoFs move (a shoulder layer samples the elbow too)
+LAYER_KEYPOINTS = {**BLOCK_KEYPOINTS,
+                   "l_shoulder": BLOCK_KEYPOINTS["l_shoulder"] + BLOCK_KEYPOINTS["l_elbow"],
+                   "r_shoulder": BLOCK_KEYPOINTS["r_shoulder"] + BLOCK_KEYPOINTS["r_elbow"]}
 #: fewest particles per layer worth a filter run within a time budget
 MIN_PARTICLES = 16
 #: a keypoint's segment starts at this keypoint (None: the keypoint alone; "shoulders": the
@@ -79,28 +84,34 @@ SEGMENT_FROM = {
 }
 
 
+#: points sampled along each keypoint's segment to test it against the foreground
+CHECK_SAMPLES = 4
+#: a view contradicts a keypoint when fewer than this share of the samples it sees lie on its
+#: foreground
+CHECK_SUPPORT = 0.5
+#: dilation (working-resolution pixels) of the foreground the samples are tested on: the
+#: segmentation's own inaccuracy at 160x120
+CHECK_DILATE_PX = 1
+#: smallest keypoint score for a block to be explained by its keypoints
+CONFIDENT_SCORE = 0.5
+#: largest distance (m) of a keypoint from its fitted body point for its block to be explained:
+#: twice the landmarks' spread about their offsets
+MAX_RESIDUAL = 0.08
+#: jitter of the explained blocks' DoFs, in motion stds
+EXPLAINED_STD = 0.5
+#: weight (per metre) of the keypoint term of every layer, and the largest distance (m) one
+#: keypoint adds to it: a keypoint the check kept wrongly costs a bounded amount (the values
+#: of the thesis' refinement layer, eq. 2.21, ``detector.refine_kappa``)
+KAPPA, CAP = 2.0, 0.25
+
+
 @dataclass(frozen=True)
 class KeypointFirstParams:
     """Keypoint-first tracking (``kf-hpf``, :mod:`.keypoint_first`)."""
 
-    fit: KeypointFitParams = group(KeypointFitParams, "the body fitted to the keypoints")
-    check_samples: int = param(4, "Points (>= 1) sampled along each keypoint's segment to "
-                                  "test it against the foreground.")
-    check_support: float = param(0.5, "A view contradicts a keypoint when fewer than this "
-                                      "share (in (0, 1]) of the segment's samples it sees "
-                                      "lie on its foreground.")
-    check_dilate_px: int = param(1, "Dilation (working-resolution pixels, >= 0) of the "
-                                    "foreground the samples are tested on.")
-    check_views: int = param(2, "Views (>= 1) that must contradict a keypoint for it to be "
-                                "dropped.")
-    confident_score: float = param(0.5, "Smallest keypoint score (in [0, 1]) for a block "
-                                         "to be explained by its keypoints.")
-    max_residual: float = param(0.08, "Largest distance (m, > 0) of a keypoint from its "
-                                      "fitted body point for its block to be explained.")
-    explained_std: float = param(0.5, "Jitter of the explained blocks' DoFs, in motion "
-                                      "stds (>= 0).")
-    final_particles: int = param(0, "Particles (>= 0) of the final whole-body layer when "
-                                    "every block is explained; 0: the fit is the estimate.")
+    min_score: float = param(0.3, "Keypoints with a lower score are not fitted (in [0, 1]).")
+    check_views: int = param(2, "Views (>= 1) whose foreground must contradict a keypoint for "
+                                "it to be dropped.")
     shape_frames: int = param(50, "Frame sets (>= 0) of a new track whose keypoints measure "
                                    "the body's shape (keypoint_anthropometry); the shape is "
                                    "solved again whenever their count doubles, then kept. 0: "
@@ -111,14 +122,8 @@ class KeypointFirstParams:
 
     def __post_init__(self):
         bad = [name for name, ok in (
-            ("check_samples", self.check_samples >= 1),
-            ("check_support", 0.0 < self.check_support <= 1.0),
-            ("check_dilate_px", self.check_dilate_px >= 0),
+            ("min_score", 0.0 <= self.min_score <= 1.0),
             ("check_views", self.check_views >= 1),
-            ("confident_score", 0.0 <= self.confident_score <= 1.0),
-            ("max_residual", self.max_residual > 0.0),
-            ("explained_std", self.explained_std >= 0.0),
-            ("final_particles", self.final_particles >= 0),
             ("min_start_keypoints", self.min_start_keypoints >= 1),
             ("shape_frames", self.shape_frames >= 0)) if not ok]
         if bad:
@@ -148,10 +153,9 @@ def contradicted(named: dict, obs, params: KeypointFirstParams, dilated=None) ->
     already dilated (M, h, w), else dilated here."""
     if not named or obs.n_views == 0:
         return []
-    p = params
     if dilated is None:
-        dilated = dilate_masks(obs.masks, p.check_dilate_px)
-    labels, pts = _segments(named, p.check_samples)
+        dilated = dilate_masks(obs.masks, CHECK_DILATE_PX)
+    labels, pts = _segments(named, CHECK_SAMPLES)
     uv, z = project_batch(pts.reshape(1, -1, 3), obs.K, obs.R, obs.t, obs.D)
     uv, z = uv[0], z[0]  # (M, K*S, 2), (M, K*S)
     col = np.rint(uv[..., 0]).astype(np.int64)
@@ -162,8 +166,8 @@ def contradicted(named: dict, obs, params: KeypointFirstParams, dilated=None) ->
     on = seen & (dilated[views, np.clip(row, 0, h - 1), np.clip(col, 0, w - 1)] > 0)
     seen = seen.reshape(len(dilated), len(labels), -1).sum(axis=2)
     on = on.reshape(len(dilated), len(labels), -1).sum(axis=2)
-    against = (seen >= 2) & (on < p.check_support * seen)
-    return [label for label, n in zip(labels, against.sum(axis=0)) if n >= p.check_views]
+    against = (seen >= 2) & (on < CHECK_SUPPORT * seen)
+    return [label for label, n in zip(labels, against.sum(axis=0)) if n >= params.check_views]
 
 
 def dilate_masks(masks: np.ndarray, radius: int) -> np.ndarray:
@@ -177,22 +181,20 @@ def dilate_masks(masks: np.ndarray, radius: int) -> np.ndarray:
 class KeypointFirst:
     """One tracker's keypoint fit, keypoint check and per-frame filter (module docstring).
 
-    model: the tracking body; params: the tracker's ``keypoints`` group; detector: its
-    ``detector`` group (the keypoint term's kappa and cap); n_particles: an uncertain
-    block's layer size; survival_rate, kernel: the schedule's; room: the room box;
+    model: the tracking body; params: the tracker's ``keypoints`` group; n_particles: an
+    uncertain block's layer size; survival_rate, kernel: the schedule's; room: the room box;
     offsets: the landmark offsets of :func:`~.keypoint_fit.load_keypoint_model`.
     """
 
-    def __init__(self, model, params: KeypointFirstParams, detector, n_particles: int,
+    def __init__(self, model, params: KeypointFirstParams, n_particles: int,
                  survival_rate: float, kernel, room=None, offsets: dict | None = None):
         self.model = model
         self.skel = model.skeleton
         self.params = params
-        self.detector = detector
         self.n_particles = int(n_particles)
         self.survival_rate = survival_rate
         self.kernel = kernel
-        self.fitter = KeypointFit(model, params.fit, room, offsets)
+        self.fitter = KeypointFit(model, params.min_score, room, offsets)
         self.sigma0 = body_sigma0(self.skel)
         self.block_dims = dict(zip(BODY_BLOCKS, block_dims(self.skel)))
         self.own_dims = {b: self.skel.group_dofs(b) for b in BODY_BLOCKS}
@@ -216,12 +218,11 @@ class KeypointFirst:
 
     def uncertain_blocks(self, fit, detections) -> list[str]:
         """Step 3: the blocks whose keypoints do not explain them, in schedule order."""
-        p = self.params
         ok = {}
         for label, resid in zip(fit.labels, fit.residuals):
             score = max(float(s) for lab, s in zip(detections.labels, detections.scores)
                         if lab == label)
-            ok[label] = score >= p.confident_score and resid <= p.max_residual
+            ok[label] = score >= CONFIDENT_SCORE and resid <= MAX_RESIDUAL
         return [b for b in BODY_BLOCKS if not all(ok.get(k, False) for k in BLOCK_KEYPOINTS[b])]
 
     # ------------------------------------------------------------------ filter
@@ -236,7 +237,7 @@ class KeypointFirst:
         explained = np.ones(self.skel.n_dofs, bool)
         for b in uncertain:
             explained[self.own_dims[b]] = False
-        std = self.params.explained_std * periods * self.sigma0 * explained
+        std = EXPLAINED_STD * periods * self.sigma0 * explained
         out += rng.standard_normal(out.shape) * std
         if previous is not None and len(previous) and uncertain:
             rows = rng.integers(0, len(previous), n // 2)
@@ -250,10 +251,9 @@ class KeypointFirst:
         ``n_particles``); 0 when the budget cannot pay ``MIN_PARTICLES`` per layer."""
         if budget is None:
             return self.n_particles
-        layers = len(uncertain) + 1 if uncertain else (1 if self.params.final_particles else 0)
-        if layers == 0:
+        if not uncertain:
             return 0
-        n = int(min(self.n_particles, budget // layers))
+        n = int(min(self.n_particles, budget // (len(uncertain) + 1)))
         return n if n >= MIN_PARTICLES else 0
 
     def frame_filter(self, uncertain: list[str], periods: float,
@@ -261,11 +261,9 @@ class KeypointFirst:
         """Step 4's schedule: a boxed layer per uncertain block, then the final layer, with
         ``n_particles`` per layer (None: ``n_particles`` of the tracker); None when there is
         nothing to filter or no particle to filter with."""
-        p = self.params
         d = self.skel.n_dofs
         n = self.n_particles if n_particles is None else int(n_particles)
-        final_n = n if uncertain else min(p.final_particles, n)
-        if final_n == 0:
+        if not uncertain or n == 0:
             return None
         layers = []
         for k, b in enumerate(uncertain):
@@ -275,7 +273,7 @@ class KeypointFirst:
                 std[self.block_dims[nxt]] = periods * self.sigma0[self.block_dims[nxt]]
             layers.append(Layer(dims=self.block_dims[b], survival_rate=self.survival_rate,
                                 n_particles=n, std=std, kernel=self.kernel))
-        final = Layer(survival_rate=self.survival_rate, n_particles=final_n,
+        final = Layer(survival_rate=self.survival_rate, n_particles=n,
                       std=np.zeros(d), kernel=self.kernel)
         lpf = LayeredFilter(layers=tuple(layers), sigma0=self.sigma0, final=final)
         return BodySchedule(self.method, lpf, tuple((b,) for b in uncertain) + ((),),
@@ -299,7 +297,7 @@ class KeypointFirst:
 
     def terms(self, schedule: BodySchedule, fit, detections, rest) -> list:
         """Per weighting, the keypoint term (module docstring) or None."""
-        kappa, cap = self.detector.joint_kappa, self.detector.joint_cap
+        kappa, cap = KAPPA, CAP
         if kappa <= 0 or fit is None:
             return [None] * len(schedule.layer_blocks)
         labels = list(self.fitter.labels)
@@ -307,7 +305,8 @@ class KeypointFirst:
                            if l2 == lab) for lab in fit.labels}
         out = []
         for blocks in schedule.layer_blocks:
-            wanted = [k for b in blocks for k in BLOCK_KEYPOINTS[b]] if blocks else list(fit.labels)
+            wanted = ([k for b in blocks for k in LAYER_KEYPOINTS[b]] if blocks
+                      else list(fit.labels))
             keep = [k for k in wanted if k in scores]
             if not keep:
                 out.append(None)

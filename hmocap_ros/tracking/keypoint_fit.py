@@ -20,10 +20,11 @@ The fit minimises over the 30 pose DoFs, within the joint limits,
     E(theta) = sum_k w_k rho(|P_k(theta) - p_k| / s) + sum_d ((theta_d - prior_d) / sigma_d)^2
 
 with ``p_k`` the keypoints, ``P_k`` the model points on the body's estimated shape, ``w_k``
-the keypoint's score, ``s`` = ``keypoint_std`` and ``rho`` Huber's loss at ``robust_scale``
+the keypoint's score, ``s`` = :data:`KEYPOINT_STD` and ``rho`` Huber's loss at
+:data:`ROBUST_SCALE` stds
 (a keypoint far from where the others put the body costs linearly, so one wrong keypoint
 pulls its limb less than its square would). The prior is the predicted pose, with
-``sigma_d`` the DoF's motion std over the elapsed frames times ``prior_scale``: it holds the
+``sigma_d`` the DoF's motion std over the elapsed frames times :data:`PRIOR_SCALE`: it holds the
 DoFs no keypoint sees (the neck's twist, an ankle whose foot is not detected) and breaks
 the ties the keypoints leave. Levenberg-Marquardt with a forward-difference Jacobian (one
 batch of D + 1 poses through :class:`~hmocap_ros.body.pose_points.PosePoints` per
@@ -43,11 +44,10 @@ import numpy as np
 
 from hmocap_ros.body.pose_points import PosePoints
 from hmocap_ros.detection.detections import Detections
-from hmocap_ros.params import param
 from hmocap_ros.tracking.body_layers import body_sigma0, clip_body_pose
 
-__all__ = ["KEYPOINT_MODEL_FILE", "MODEL_POINTS", "KeypointFitParams", "KeypointFit",
-           "FitResult", "load_keypoint_model"]
+__all__ = ["KEYPOINT_MODEL_FILE", "MODEL_POINTS", "KeypointFit", "FitResult",
+           "load_keypoint_model"]
 
 #: the landmark offsets and size corrections of the shipped body model
 KEYPOINT_MODEL_FILE = Path(__file__).resolve().parents[1] / "data" / "keypoint_model.json"
@@ -74,26 +74,17 @@ MODEL_POINTS = {
 _STEP = 1e-5
 
 
-@dataclass(frozen=True)
-class KeypointFitParams:
-    """The body fitted to the keypoints (:mod:`.keypoint_fit`)."""
-
-    keypoint_std: float = param(0.03, "Std (m, > 0) of a keypoint of score 1 about its body "
-                                      "point: the scale of the keypoint residuals.")
-    robust_scale: float = param(2.0, "Huber threshold in keypoint stds (> 0): residuals "
-                                     "beyond it cost linearly.")
-    prior_scale: float = param(3.0, "Std of the prior on each DoF about the predicted pose, "
-                                    "in motion stds over the elapsed frames (> 0).")
-    iterations: int = param(10, "Levenberg-Marquardt iterations per fit (>= 1).")
-    min_score: float = param(0.3, "Keypoints with a lower score are not fitted (in [0, 1]).")
-
-    def __post_init__(self):
-        bad = [name for name, ok in (
-            ("keypoint_std", self.keypoint_std > 0), ("robust_scale", self.robust_scale > 0),
-            ("prior_scale", self.prior_scale > 0), ("iterations", self.iterations >= 1),
-            ("min_score", 0.0 <= self.min_score <= 1.0)) if not ok]
-        if bad:
-            raise ValueError("keypoint fit: out of range: " + ", ".join(bad))
+#: std (m) of a keypoint of score 1 about its body point: the scale of the residuals (the
+#: landmarks' spread about their median offset on the tuning clips is 2-4 cm)
+KEYPOINT_STD = 0.03
+#: Huber threshold in keypoint stds: residuals beyond it cost linearly
+ROBUST_SCALE = 2.0
+#: std of the prior on each DoF about the predicted pose, in motion stds (``body_sigma0``) over
+#: the elapsed frames: 6 followed the tuning clips best of 1.5, 3, 6, 10, 20, 50 (a tighter
+#: prior lags fast limbs, a looser one lets the keypoints' noise through)
+PRIOR_SCALE = 6.0
+#: Levenberg-Marquardt iterations per fit (it stops earlier when converged)
+ITERATIONS = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,11 +101,10 @@ class FitResult:
 class KeypointFit:
     """Fits ``model`` (the tracking body) to labelled keypoints (module docstring)."""
 
-    def __init__(self, model, params: KeypointFitParams | None = None, room=None,
-                 offsets: dict | None = None):
+    def __init__(self, model, min_score: float = 0.3, room=None, offsets: dict | None = None):
         self.model = model
         self.skel = model.skeleton
-        self.params = params or KeypointFitParams()
+        self.min_score = float(min_score)
         self.room = room
         joints = list(map(str, model.joint_names))
         ends = list(map(str, model.end_site_names))
@@ -175,8 +165,8 @@ class KeypointFit:
 
     def targets(self, detections: Detections | None, drop=()) -> tuple:
         """``(rows, positions (K, 3), scores (K,))`` of the keypoints to fit: the best-scored
-        detection per label of :data:`MODEL_POINTS` with a score of at least ``min_score``,
-        except the labels in ``drop``."""
+        detection per label of :data:`MODEL_POINTS` with a score of at least ``min_score``
+        (the constructor's), except the labels in ``drop``."""
         rows, pos, score = [], [], []
         if detections is not None:
             for k, label in enumerate(self.labels):
@@ -187,7 +177,7 @@ class KeypointFit:
                     continue
                 s = max(float(detections.scores[i]) for i, lab in enumerate(detections.labels)
                         if lab == label)
-                if s >= self.params.min_score:
+                if s >= self.min_score:
                     rows.append(k)
                     pos.append(p)
                     score.append(s)
@@ -230,7 +220,6 @@ class KeypointFit:
         rows, positions, scores = self.targets(detections, drop)
         if len(rows) == 0:
             return None
-        p = self.params
         if prior is None:
             start = self.initial_pose(rows, positions, rest)
             if start is None:
@@ -240,10 +229,10 @@ class KeypointFit:
             centre = start
         else:
             start = centre = np.asarray(prior, float)
-            prior_w = 1.0 / (p.prior_scale * max(periods, 1.0) * self._sigma0)
+            prior_w = 1.0 / (PRIOR_SCALE * max(periods, 1.0) * self._sigma0)
         x = start.copy()
 
-        sqrt_w = np.sqrt(scores) / p.keypoint_std
+        sqrt_w = np.sqrt(scores) / KEYPOINT_STD
         kernel = self.kernel(rest)
         n = self.skel.n_dofs
         probe = np.vstack([np.zeros(n), _STEP * np.eye(n)])
@@ -254,17 +243,17 @@ class KeypointFit:
 
         def energy(x, pts):
             d = np.linalg.norm(pts - positions, axis=1) * sqrt_w
-            return float(np.sum(_huber(d, p.robust_scale)) + np.sum(((x - centre) * prior_w) ** 2))
+            return float(np.sum(_huber(d, ROBUST_SCALE)) + np.sum(((x - centre) * prior_w) ** 2))
 
         pts = points_of(x[None])[0]
         e = energy(x, pts)
-        for _ in range(p.iterations):
+        for _ in range(ITERATIONS):
             batch = points_of(x[None] + probe)
             pts = batch[0]
             jac = (batch[1:] - pts[None]).transpose(1, 2, 0).reshape(-1, n) / _STEP  # (3K, D)
             resid = pts - positions
             dist = np.linalg.norm(resid, axis=1) * sqrt_w
-            irls = sqrt_w * np.sqrt(_huber_weight(dist, p.robust_scale))  # (K,)
+            irls = sqrt_w * np.sqrt(_huber_weight(dist, ROBUST_SCALE))  # (K,)
             w3 = np.repeat(irls, 3)
             a = jac * w3[:, None]
             r = resid.reshape(-1) * w3

@@ -43,7 +43,6 @@ class FilterParams:
                            "(hpf-apo: 15 x 234); 1: one layer per block as in the thesis.")
     survival_rate: float = param(0.3, "Particle survival rate in (0, 1] that sets each layer's "
                                       "annealing exponent beta (eq. 2.9).")
-    apf_alpha: float = param(0.7, "APF: variance decay rate per layer in (0, 1] (eq. 2.10).")
     refine_nu: float = param(0.25, "Hierarchical methods: decay in [0, 1) of the re-diffusion "
                                    "of the blocks already filtered (alg. 3); 0: none.")
     sigma_scale: float = param(1.0, "Factor (> 0) on the per-DoF inter-frame motion std sigma0 "
@@ -71,7 +70,6 @@ class FilterParams:
                                                        "be >= 0"),
             (self.sweeps >= 1, "filter.sweeps must be >= 1"),
             (0.0 < self.survival_rate <= 1.0, "filter.survival_rate must lie in (0, 1]"),
-            (0.0 < self.apf_alpha <= 1.0, "filter.apf_alpha must lie in (0, 1]"),
             (0.0 <= self.refine_nu < 1.0, "filter.refine_nu must lie in [0, 1)"),
             (self.sigma_scale > 0.0, "filter.sigma_scale must be > 0"),
             (0.0 <= self.jump_fraction <= 1.0 and self.jump_scale >= 1.0,
@@ -118,16 +116,8 @@ class DetectorParams:
 
     refine_kappa: float = param(2.0, "Weight kappa (per metre, >= 0) of the detection cost of "
                                      "eq. 2.20 in the refinement layer (eq. 2.21).")
-    joint_kappa: float = param(2.0, "Weight (per metre, >= 0) of the distance of the joints a "
-                                    "layer moves to their labelled detections (keypoints), "
-                                    "added to the layer's silhouette cost.")
-    joint_cap: float = param(0.25, "Largest distance (m, > 0) one joint detection adds to a "
-                                   "layer's cost: a wrong detection costs a bounded amount.")
-
     def __post_init__(self):
-        _check([(self.refine_kappa >= 0.0, "detector.refine_kappa must be >= 0"),
-                (self.joint_kappa >= 0.0, "detector.joint_kappa must be >= 0"),
-                (self.joint_cap > 0.0, "detector.joint_cap must be > 0")])
+        _check([(self.refine_kappa >= 0.0, "detector.refine_kappa must be >= 0")])
 
 
 @dataclass(frozen=True)
@@ -156,7 +146,6 @@ class StartupParams:
     working_scale: float = param(0.5, "Image scale in (0, 1] of the start-up weighting.")
     rejection_tau: float = param(0.7, "Acceptance ratio tau in (0, 1] of the "
                                       "rejection-sampling shape kernel (eq. 2.13).")
-    rejection_trials: int = param(8, "Trials of the rejection-sampling kernel per layer.")
     height_margin: float = param(0.03, "During the start-up frames: when the followed visual "
                                        "hull's top stands more than this (m) above the top of "
                                        "a start-up hypothesis' body (both read in the column "
@@ -262,12 +251,15 @@ class TrackerParams:
     """Settings of :class:`~hmocap_ros.tracking.body_tracker.BodyTracker`: the method and the
     groups, each handed whole to the part that uses it."""
 
-    method: str = param("dd-hpf", "Layered filter (tracking.methods): 'apf' (annealing, "
-                                  "14 x 250), 'hpf' (hierarchical, 14 x 250 in two sweeps), "
-                                  "'hpf-apo' (hierarchical with approximate partitioning of "
-                                  "observations, 15 x 234 in two sweeps) or 'dd-hpf' (hpf-apo "
-                                  "driven by hand detections: IK particles and the refinement "
-                                  "layer, sec. 2.5; takes the extremity detections).")
+    method: str = param("kf-hpf", "Layered filter (tracking.methods): 'kf-hpf' (keypoint-first: "
+                                  "the body fitted to the extremity node's labelled keypoints, "
+                                  "the filter only on the blocks they leave uncertain), or the "
+                                  "thesis' 'apf' (annealing, 14 x 250), 'hpf' (hierarchical, "
+                                  "14 x 250 in two sweeps), 'hpf-apo' (hierarchical with "
+                                  "approximate partitioning of observations, 15 x 234 in two "
+                                  "sweeps), 'dd-hpf' (hpf-apo driven by hand detections: IK "
+                                  "particles and the refinement layer, sec. 2.5). kf-hpf and "
+                                  "dd-hpf take the extremity detections.")
     filter: FilterParams = group(FilterParams, "layered particle filter and kernels")
     weighting: WeightingParams = group(WeightingParams, "silhouette weighting and boxes")
     detector: DetectorParams = group(DetectorParams, "detector-driven tracking")

@@ -96,7 +96,7 @@ class StartUp:
             n_particles=s.particles,
             frames=s.frames if (s.estimate_shape and shape is None) else 1,
             estimate_shape=s.estimate_shape, rejection_tau=s.rejection_tau,
-            rejection_trials=s.rejection_trials, survival_rate=f.survival_rate,
+            survival_rate=f.survival_rate,
             proposal_fraction=f.proposal_fraction)
         self.estimator = AnthropometryEstimator(fitness, est_params, rng, room=room,
                                                 fixed_shape=shape,
