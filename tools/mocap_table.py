@@ -51,6 +51,8 @@ SEQUENCES = (
     ("Laugh (14_19)", "14_19_first1201.bvh", 2.0, 4.0),
     ("Walk (02_01)", "002_01.bvh", 0.0, 2.8),
     ("Run (09_01)", "09_01.bvh", 0.0, 1.2),
+    ("Crouch, throw (02_06)", "002_06_first511.bvh", 4.0, 4.0),
+    ("Walk (07_01)", "007_01.bvh", 0.0, 2.5),
 )
 
 
@@ -115,12 +117,46 @@ def _result_args(args: list[str]) -> list[str]:
     return out
 
 
+#: the 12 joints the body model and BlazePose both define (the peer's table)
+LIMB_JOINTS = ("l_shoulder", "r_shoulder", "l_elbow", "r_elbow", "l_wrist", "r_wrist",
+               "l_hip", "r_hip", "l_knee", "r_knee", "l_ankle", "r_ankle")
+
+
+def _limbs(per_joint: dict, joints=LIMB_JOINTS) -> float:
+    values = [per_joint[j]["mean_mm"] for j in joints
+              if j in per_joint and per_joint[j]["mean_mm"] is not None]
+    return float(np.mean(values)) if len(values) == len(joints) else float("nan")
+
+
+def limb_table(rows, methods) -> list[str]:
+    """The 12 limb joints and the wrists of each method beside the keypoints alone (the
+    extremity detector's own triangulated joints), per row."""
+    lines = ["", "The 12 limb joints both skeletons define (shoulders, elbows, wrists, hips, "
+             "knees, ankles): mean 3D error (mm) of each method and of the keypoints alone "
+             "(the extremity detector's triangulated joints, frames where it found them); "
+             "wrists in brackets.", "",
+             "| sequence | scene | keypoints alone | " + " | ".join(
+                 METHODS[m].label for m in methods) + " |",
+             "|---|---|---|" + "---|" * len(methods)]
+    wrists = ("l_wrist", "r_wrist")
+    for label, seconds, distractors, report in rows:
+        kp = report.get("keypoints") or {}
+        cells = [f"{_limbs(kp):.1f} ({_limbs(kp, wrists):.0f})" if kp else "-"]
+        for m in methods:
+            pj = report["methods"][m]["per_joint"]
+            cells.append(f"{_limbs(pj):.1f} ({_limbs(pj, wrists):.0f})")
+        lines.append(f"| {label} ({seconds:g} s) | {'distractors' if distractors else 'clean'} "
+                     "| " + " | ".join(cells) + " |")
+    return lines
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--workdir", default="/tmp/hmocap_mocap_table")
     p.add_argument("--clips", nargs="*", default=None,
-                   help="subset of clip stems (13_26 14_19_first1201 002_01 09_01)")
+                   help="subset of clip stems (13_26 14_19_first1201 002_01 09_01 "
+                        "002_06_first511 007_01)")
     p.add_argument("--seconds", type=float, default=None, help="cap every sequence's length")
     p.add_argument("--methods", nargs="*", default=list(method_names()), choices=method_names())
     p.add_argument("--seed", type=int, default=0, help="tracker seed")
@@ -132,7 +168,7 @@ def main(argv=None) -> int:
                         "the same seed, max-people, methods and tracker settings (the current "
                         "defaults with --param), instead of tracking it again")
     p.add_argument("--detector", choices=("keypoints", "skin"), default="keypoints",
-                   help="extremity detector of DD-HPF+ (default keypoints)")
+                   help="extremity detector of KF-HPF and DD-HPF+ (default keypoints)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", default=[],
                    help="override a tracker setting by its dotted name for every method, e.g. "
                         "filter.sweeps=1 (repeatable), as in hmocap eval mocap")
@@ -211,6 +247,21 @@ def main(argv=None) -> int:
             lines.append(f"| {n} | {est:.0f} | {neutral:.0f} |")
         lines.append(f"| **mean** | **{np.mean([a['mean_abs_error_mm'] for a in anth]):.0f}** | "
                      f"**{np.mean([a['neutral_mean_abs_error_mm'] for a in anth]):.0f}** |")
+        if all("stature_m" in a for a in anth):
+            lines.insert(lines.index("| entity | estimated | unadapted model |"),
+                         "The last column scales the model's proportions to the subject's true "
+                         "height (a fit of the stature alone).\n")
+            start = lines.index("| entity | estimated | unadapted model |")
+            lines[start] = "| entity | estimated | unadapted model | stature alone |"
+            lines[start + 1] = "|---|---|---|---|"
+            for i, n in enumerate(names + ["mean"]):
+                if n == "mean":
+                    value = np.mean([a["stature_mean_abs_error_mm"] for a in anth])
+                    lines[start + 2 + i] += f" **{value:.0f}** |"
+                else:
+                    value = np.mean([1000.0 * abs(a["true_m"][n] - a["stature_m"][n]) for a in anth])
+                    lines[start + 2 + i] += f" {value:.0f} |"
+    lines += limb_table(rows, ns.methods)
     table = "\n".join(lines)
     out = Path(ns.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -90,10 +90,18 @@ def _anthropometry(model, estimate, truth, truth_model=None) -> dict | None:
     out = {"estimated_m": dict(zip(ENTITY_NAMES, map(float, est))),
            "global_scale": float(estimate.global_scale)}
     if truth is not None:
+        from hmocap_ros.body import BodyShape
+
         true = entity_sizes(truth_model, truth)
         neutral = entity_sizes(model, None)
+        # a fit of the stature alone: the model's proportions scaled to the true height
+        ratio = float(truth.height(truth_model) / BodyShape.neutral().height(model))
+        stature = entity_sizes(model, BodyShape(np.ones(len(ENTITY_NAMES)),
+                                                np.ones(len(ENTITY_NAMES)), ratio))
         out["true_m"] = dict(zip(ENTITY_NAMES, map(float, true)))
         out["neutral_m"] = dict(zip(ENTITY_NAMES, map(float, neutral)))
+        out["stature_m"] = dict(zip(ENTITY_NAMES, map(float, stature)))
+        out["stature_mean_abs_error_mm"] = 1000.0 * float(np.abs(stature - true).mean())
         out["error_mm"] = {n: 1000.0 * float(a - b) for n, a, b in zip(ENTITY_NAMES, est, true)}
         out["mean_abs_error_mm"] = 1000.0 * float(np.abs(est - true).mean())
         out["neutral_mean_abs_error_mm"] = 1000.0 * float(np.abs(neutral - true).mean())
@@ -139,6 +147,33 @@ def settings_diff(stored: dict, wanted: dict) -> list[str]:
     """``"key stored -> wanted"`` for each setting a stored report's ``params`` differ in from
     those a run would use now (:func:`stored_params`)."""
     return [f"{k} {stored.get(k)!r} -> {v!r}" for k, v in wanted.items() if stored.get(k) != v]
+
+
+def keypoint_errors(frames: BagFrames) -> dict | None:
+    """The extremity detector's labelled joints alone against the truth: per body-model joint
+    (:data:`~hmocap_ros.detection.detections.MODEL_JOINT`) the mean 3D error (mm) over the
+    frames where it was detected, and its recall (the share of frames with truth where it was);
+    None without detections."""
+    from hmocap_ros.detection.detections import MODEL_JOINT
+
+    if frames.detections is None:
+        return None
+    names = list(frames.joint_names)
+    out = {}
+    truth_frames = np.flatnonzero(frames.has_truth)
+    for label, joint in MODEL_JOINT.items():
+        if joint not in names:
+            continue
+        j = names.index(joint)
+        errors = []
+        for k in truth_frames:
+            det = frames.detections[k]
+            pos = det.position(label) if det is not None else None
+            if pos is not None:
+                errors.append(1000.0 * float(np.linalg.norm(pos - frames.truth[k, j])))
+        out[joint] = {"mean_mm": float(np.mean(errors)) if errors else None,
+                      "recall": len(errors) / max(len(truth_frames), 1)}
+    return out
 
 
 def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int = 0,
@@ -236,6 +271,7 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
         "seed": seed,
         "given_shape": bool(given_shape),
         "max_people": int(max_people),
+        "keypoints": keypoint_errors(frames),
         "methods": {},
     }
     for method in methods:

@@ -30,8 +30,9 @@ class BagFrames:
     (NaN where the frame has no skeleton); joint_names: names of ``truth``'s joints;
     body_shape: the subject's BodyShape or None; silhouettes / fallback: what was used and why.
     segmentation_s: seconds of foreground segmentation per frame set.
-    detections: per frame the extremity detection's Detections, when loaded for ``dd-hpf``,
-    else None; detector_s: seconds of extremity detection per frame set.
+    detections: per frame the extremity detection's Detections, when loaded for a method that
+    takes them (``kf-hpf``, ``dd-hpf``), else None; detector_s: seconds of extremity detection
+    per frame set.
     """
 
     rig: object
