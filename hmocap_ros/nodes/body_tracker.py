@@ -81,6 +81,13 @@ tracks (:mod:`hmocap_ros.tracking.body_tracker`). With ``latest_only:=false`` ev
 tracked, in stamp order: for bag replays that must answer every frame (also raise
 ``queue_depth`` so the subscriptions keep every mask).
 
+Live with ``kf-hpf`` (the default method): the extremity node also takes the newest frame set
+when it falls behind, so some sets never get detections; while detections keep coming (within
+a second), such a set is skipped (and counted) rather than tracked on the silhouettes alone,
+so the poses come at the keypoints' rate, each within ``budget_ms`` (the keypoint fit at once,
+the filter on the uncertain blocks with the particles the budget pays; docs/tracking.md sec.
+2.5).
+
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``,
 ``queue_depth``, ``latest_only``, ``publish_tf``, ``seed``, ``body_id``, ``max_people`` and
 every setting of :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
@@ -131,6 +138,10 @@ from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 NODE_NAME = "body_tracker"
 #: the synchroniser's key (and topic) of the extremity detections
 DETECTIONS = "extremities"
+#: live kf-hpf skips a frame set without detections while detections came this recently (the
+#: extremity node takes the newest set when it falls behind); longer without any, the frame
+#: sets are tracked on the silhouettes
+KEYPOINTS_ALIVE_NS = 1_000_000_000
 #: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, keep last 100)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -187,6 +198,7 @@ class BodyTrackerNode(Node):
         self.busy_ns = 0  # time spent in _process: not waiting time for the synchroniser
         self.queue = FrameSetQueue(self.config.latest_only)
         self.last_input_ns = 0   # steady time of the last mask or detections received
+        self.last_detections_ns = -KEYPOINTS_ALIVE_NS  # ... of the last detections received
         self.idle_since_ns = 0   # steady time the last frame set was done
         self.skipped_total = 0
         self.skipped_unreported = 0  # skipped since the last diagnostics message
@@ -225,6 +237,7 @@ class BodyTrackerNode(Node):
         self.messages = TrackerMessages(self.model, self.ids, rig.frame_id, self.factory,
                                         publish_tf=self.pub_tf is not None)
         self.use_detections = self.params.tracking_method.uses_detector
+        self.keypoint_first = self.params.tracking_method.keypoint_first
         self.sync = StampSynchronizer(
             list(rig.names) + ([DETECTIONS] if self.use_detections else []), slop_ns=int(self.config.slop_ms * 1e6),
             queue_size=max(10, self.config.queue_depth), allow_partial=True,
@@ -270,7 +283,7 @@ class BodyTrackerNode(Node):
         except ValueError as err:
             self.get_logger().error(f"extremities: {err}", throttle_duration_sec=5.0)
             return
-        self.last_input_ns = time.monotonic_ns()
+        self.last_input_ns = self.last_detections_ns = time.monotonic_ns()
         self._enqueue(self.sync.add(DETECTIONS, stamp_to_ns(msg.header.stamp), detections,
                                     now_ns=self._idle_clock_ns()))
 
@@ -352,6 +365,13 @@ class BodyTrackerNode(Node):
                 mask = None
             masks.append(mask)
         detections = items.get(DETECTIONS)
+        if (detections is None and self.config.latest_only and self.keypoint_first
+                and time.monotonic_ns() - self.last_detections_ns < KEYPOINTS_ALIVE_NS):
+            # live, the extremity node took a newer set than this one: track the sets it
+            # answers, at its rate, rather than this one on the silhouettes alone
+            self.skipped_total += 1
+            self.skipped_unreported += 1
+            return
         t0 = time.perf_counter()
         try:
             budget = (self.config.budget_ms / 1000.0
