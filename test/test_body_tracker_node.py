@@ -169,7 +169,7 @@ def test_every_frame_answered_with_a_camera_absent(tmp_path):
 TRACKED_LISTENER = r"""
 import json, rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from hmocap_interfaces.msg import IdsList
+from hri_msgs.msg import IdsList
 rclpy.init()
 node = rclpy.create_node("tracked_listener")
 def on_ids(msg):

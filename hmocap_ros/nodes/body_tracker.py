@@ -20,7 +20,7 @@ Publications (all with the stamp of the frame set), following REP-155 (Human-Rob
 Interaction: ``humans/bodies/...`` topics and body frames), built by
 :class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages` (``hmocap track`` writes the
 same messages to a bag):
-  ``humans/bodies/tracked`` (hmocap_interfaces/IdsList, REP-155's hri_msgs/IdsList): the ids
+  ``humans/bodies/tracked`` (hri_msgs/IdsList, REP-155's type): the ids
   of the bodies with a pose in this frame set, for every frame set processed (empty: nobody).
   ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState), per body with a pose: the
   pose parameters (root translation in metres, angles in radians) by DoF name.
@@ -105,7 +105,8 @@ from dataclasses import dataclass
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
-from hmocap_interfaces.msg import Extremities, IdsList, Skeleton
+from hmocap_interfaces.msg import Extremities, Skeleton
+from hri_msgs.msg import IdsList
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy

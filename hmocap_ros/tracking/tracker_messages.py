@@ -8,8 +8,8 @@ same topics, types, stamps and contents. Messages are built through a message fa
 Topics (relative names, as the node publishes them; REP-155 for the ``humans/bodies`` ones;
 every message stamped with the frame set's stamp, in the rig's room frame):
 
-- ``humans/bodies/tracked`` (hmocap_interfaces/IdsList): the ids of the bodies with a pose,
-  one message per frame set (empty: nobody);
+- ``humans/bodies/tracked`` (hri_msgs/IdsList, REP-155's type): the ids of the bodies with a
+  pose, one message per frame set (empty: nobody);
 - ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState) per body with a pose: the pose
   parameters by DoF name;
 - ``skeleton`` (hmocap_interfaces/Skeleton) per body with a pose: 3D joints, parents,
@@ -38,6 +38,8 @@ __all__ = ["BODY_SHAPE_TOPIC", "MARKERS_TOPIC", "SKELETON_TOPIC", "TRACKED_TOPIC
 
 #: REP-155's list of the bodies tracked now
 TRACKED_TOPIC = "humans/bodies/tracked"
+#: its type (ROS4HRI's, so REP-155 tools read it)
+IDS_LIST_TYPE = "hri_msgs/msg/IdsList"
 SKELETON_TOPIC = "skeleton"
 MARKERS_TOPIC = "skeleton_markers"
 #: the first body's shape, besides its per-body topic
@@ -55,7 +57,7 @@ def per_body_topic(body_id: str, name: str) -> str:
 
 def tracker_topics(ids: Sequence[str], publish_tf: bool = True) -> dict[str, str]:
     """Every topic the tracker publishes for bodies ``ids`` -> its message type."""
-    out = {TRACKED_TOPIC: "hmocap_interfaces/msg/IdsList",
+    out = {TRACKED_TOPIC: IDS_LIST_TYPE,
            SKELETON_TOPIC: "hmocap_interfaces/msg/Skeleton",
            MARKERS_TOPIC: "visualization_msgs/msg/MarkerArray",
            BODY_SHAPE_TOPIC: "hmocap_interfaces/msg/BodyShape"}
@@ -106,7 +108,7 @@ class TrackerMessages:
                 out.messages += self.pose(k, stamp_ns, result, shape_models[k])
         tracked = [body for body, result in zip(self.ids, results) if result.has_pose]
         out.messages.append((TRACKED_TOPIC, self.factory.make(
-            "hmocap_interfaces/msg/IdsList", header=self._header(stamp_ns), ids=tracked)))
+            IDS_LIST_TYPE, header=self._header(stamp_ns), ids=tracked)))
         if self.publish_tf:
             tf, out.errors = self.transforms(stamp_ns, results)
             if tf is not None:
