@@ -3,7 +3,7 @@
 1. Body: the shipped 4-camera bag (``data/demo/mocap_4cam.mcap``: empty room, then a person
    waving) is replayed into ``foreground_segmentation`` -> ``extremity_detection`` ->
    ``body_tracker``; foregrounds, extremities, skeletons, the body's joint states
-   (``/humans/bodies/body_0/joint_states``), the body frames (``/tf``), body shape and
+   (``/humans/bodies/b0/joint_states``), the body frames (``/tf``), body shape and
    diagnostics are recorded to ``<out>/body.mcap``.
 2. Gestures: the shipped depth bag (``data/demo/gestures_depth.mcap``) is replayed into
    ``gesture_detection``; its gestures are recorded to ``<out>/gestures.mcap``.
@@ -73,7 +73,7 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
     out_bag = out / "body.mcap"
     fg_topics = [topics.camera_foreground(c) for c in cameras]
     record = [*fg_topics, "/extremities", "/skeleton", "/skeleton_markers",
-              "/humans/bodies/body_0/joint_states", "/tf", "/body_shape", "/diagnostics"]
+              "/humans/bodies/b0/joint_states", "/tf", "/body_shape", "/diagnostics"]
     print(f"body: {DEMO_BAG.name}, {len(cameras)} cameras -> foreground_segmentation -> "
           f"extremity_detection -> body_tracker (replay at {rate:g}x real time)")
     t0 = time.monotonic()

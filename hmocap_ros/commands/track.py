@@ -161,7 +161,7 @@ def _extremities_msg(det, stamp_ns: int, frame_id: str, factory):
 
 def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = None,
                  silhouettes: str = "auto", learn_frames: int | None = None, max_people: int = 1,
-                 seed: int = 0, overrides: dict | None = None, body_id: str = "body_0",
+                 seed: int = 0, overrides: dict | None = None, body_id: str = "b0",
                  publish_tf: bool = True, rig_file: str | None = None, max_frames: int | None = None,
                  progress=None) -> dict:
     """Track every frame set of ``bag`` and write body_tracker's messages to the new bag ``out``
@@ -302,8 +302,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="frames the background model learns from with fg (default: the frames "
                              "before the ground truth's first skeleton, else the node's learn_frames)")
     parser.add_argument("--max-people", type=int, default=1, help="people followed at once (default 1)")
-    parser.add_argument("--body-id", default="body_0",
-                        help="id of the first body (default body_0; the others are numbered on)")
+    parser.add_argument("--body-id", default="b0",
+                        help="REP-155 id of the first body (default b0, body_tracker's; the others are "
+                             "numbered on: b1, b2...)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the tracker (default 0)")
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
                         help="a tracker setting by its dotted name, e.g. filter.particles=500 "

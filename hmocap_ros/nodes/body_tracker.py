@@ -124,7 +124,7 @@ from hmocap_ros.rig import Rig
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
 from hmocap_ros.tracking.params import TrackerParams
-from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
+from hmocap_ros.tracking.people_tracker import DEFAULT_BODY_ID, PeopleTracker, body_ids
 from hmocap_ros.tracking.tracker_messages import TRACKED_TOPIC, TrackerMessages, per_body_topic
 from hmocap_ros.detection.detections import detections_from_msg
 from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
@@ -156,8 +156,9 @@ class BodyTrackerNodeConfig:
     publish_tf: bool = param(True, "Publish each tracked body's frames on /tf: room -> body_<id> (the "
                                    "pelvis) and <joint>_<id> along the skeleton (REP-155 names).")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
-    body_id: str = param("body_0", "Body id of the first tracked body in the published messages "
-                                   "(REP-155 style); further bodies are numbered on (body_1, ...).")
+    body_id: str = param(DEFAULT_BODY_ID, "REP-155 body id of the first tracked body (topics humans/bodies/"
+                                          "<id>/..., frames body_<id> and <joint>_<id>; it must start with "
+                                          "a letter); further bodies are numbered on (b1, b2, ...).")
     max_people: int = param(1, "People followed at once, one tracker each: a bystander the cameras "
                                "see better does not take the user's track, and each person gets "
                                "a body id; every followed person costs a filter run per frame.")
