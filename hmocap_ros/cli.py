@@ -133,6 +133,16 @@ COMMAND_GROUPS = {
             "gestures": ("hmocap_ros.commands.detect_gestures", "gesture_detection's gestures on a depth bag"),
         },
     ),
+    "render": (
+        "draw what the nodes saw: the skeleton over the cameras, gestures over depth",
+        "Draw a bag's frames with the tracked skeletons or detected gestures over the images, as a "
+        "video or PNG frames.",
+        {
+            "overlay": ("hmocap_ros.commands.render_overlay", "the skeleton projected onto every camera, tiled "
+                                                             "(per-joint error colours with ground truth); "
+                                                             "gesture boxes and scores on depth"),
+        },
+    ),
     "train": (
         "train models offline",
         "Train models from bags with ground truth.",
