@@ -121,7 +121,7 @@ def test_render_overlay_draws_gestures_on_depth(tmp_path):
     ("no_images", "no camera images (/cam_1/image_raw"),
     ("no_outputs", "no tracked skeletons (/skeleton"),
     ("depth_no_gestures", "no gesture detections (/gestures"),
-    ("missing", "no such bag"),
+    ("missing", "does not exist"),
     ("not_a_bag", "not a readable bag"),
 ])
 def test_render_overlay_names_what_is_missing(tmp_path, capsys, case, expected):

@@ -31,11 +31,36 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -m venv "$VENV" || die "could not create a venv (on Debian: apt-get install python3-venv)."
 fi
 
-deps=$(hash_of requirements.txt requirements-lock.txt)
+# HMOCAP_PINS=FILE (make test-jazzy: requirements-jazzy.txt) replaces the pins of the packages it
+# names, in requirements.txt and in the lock, by its own.
+REQUIREMENTS=requirements.txt
+LOCK=requirements-lock.txt
+if [ -n "${HMOCAP_PINS:-}" ]; then
+  [ -f "$HMOCAP_PINS" ] || die "HMOCAP_PINS names $HMOCAP_PINS, which does not exist."
+  mkdir -p "$STAMPS"
+  pinned() {  # $1 without the packages HMOCAP_PINS names or replaces ("# replaces NAME"), then HMOCAP_PINS
+    "$PY" - "$1" "$HMOCAP_PINS" <<'PYEOF'
+import re, sys
+source, pins = sys.argv[1], open(sys.argv[2]).read().splitlines()
+def name(line):
+    m = re.match(r"\s*([A-Za-z0-9_.-]+)", line)
+    return m.group(1).lower().replace("_", "-") if m and not line.lstrip().startswith("#") else None
+names = {name(l) for l in pins} | {m.lower() for l in pins for m in re.findall(r"#\s*replaces\s+(\S+)", l)}
+kept = [l for l in open(source).read().splitlines() if name(l) not in names]
+print("\n".join(kept + pins))
+PYEOF
+  }
+  pinned requirements.txt > "$STAMPS/requirements.txt"
+  pinned requirements-lock.txt > "$STAMPS/requirements-lock.txt"
+  REQUIREMENTS=$STAMPS/requirements.txt
+  LOCK=$STAMPS/requirements-lock.txt
+fi
+
+deps=$(hash_of "$REQUIREMENTS" "$LOCK")
 if ! fresh deps "$deps"; then
   say "installing pinned dependencies (about 30 s on a fresh machine)"
   "$VENV/bin/python" -m pip install -q --upgrade pip
-  "$VENV/bin/python" -m pip install -q -r requirements.txt -c requirements-lock.txt
+  "$VENV/bin/python" -m pip install -q -r "$REQUIREMENTS" -c "$LOCK"
   mark deps "$deps"
 fi
 

@@ -40,8 +40,6 @@ def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, o
                                             write_pictures)
 
     bag = Path(bag)
-    if not bag.exists():
-        raise OverlayError(f"{bag}: no such bag")
     kind = bag_kind(bag)
     with tempfile.TemporaryDirectory(prefix="hmocap_overlay_") as tmp:
         if track:
@@ -62,7 +60,7 @@ def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, o
         truth = Path(truth) if truth is not None else None
         for path in (outputs, truth):
             if path is not None and not path.exists():
-                raise OverlayError(f"{path}: no such bag")
+                raise OverlayError(f"{path}: does not exist")
         if kind == "multiview":
             pictures = multiview_pictures(bag, outputs, truth, tile_width=width or 480, max_frames=max_frames)
         else:
