@@ -171,6 +171,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     from hmocap_ros.body import load_body_model
     from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
                                                          skeleton_labels)
+    from hmocap_ros.detection.keypoint_network import ModelFileError
     from hmocap_ros.eval.mocap_eval import method_params
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
@@ -217,7 +218,10 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
         pipeline = None
         if params.tracking_method.uses_detector:
             if any(t in available for t in image_topics):
-                pipeline = ExtremityPipeline(rig.cameras, detection_params)
+                try:
+                    pipeline = ExtremityPipeline(rig.cameras, detection_params)
+                except ModelFileError as err:
+                    raise TrackError(str(err)) from err
             else:
                 counts["notes"].append(f"no images in the bag: {params.method} runs without detections")
         models = None

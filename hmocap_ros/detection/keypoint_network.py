@@ -142,13 +142,19 @@ def refine_from_heatmap(xy: np.ndarray, heatmaps: np.ndarray,
     return out
 
 
+def tflite_available() -> bool:
+    """Whether this OpenCV reads TFLite models (4.8 and later; Ubuntu 24.04's 4.6 does not)."""
+    return getattr(cv2.dnn, "readNetFromTFLite", None) is not None
+
+
 def _load(path: Path):
     if not path.is_file():
         raise ModelFileError(f"pose landmark model {path} not found: {_GET_MODEL}")
     reader = getattr(cv2.dnn, "readNetFromTFLite", None)
     if reader is None:
         raise ModelFileError(f"pose landmark model {path} cannot be read: OpenCV "
-                             f"{cv2.__version__} has no TFLite importer (OpenCV 5 has)")
+                             f"{cv2.__version__} has no TFLite importer (4.8 and later have); the "
+                             f"keypoint detector is unavailable, the skin detector works (detector skin)")
     # OpenCV 5's default engine returns one of the model's outputs only; its classic engine
     # (OpenCV 4's only one) returns them all
     engine = getattr(cv2.dnn, "ENGINE_CLASSIC", None)
