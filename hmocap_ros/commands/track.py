@@ -191,8 +191,14 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     if learn_frames is not None and learn_frames < 1:
         raise TrackError(f"--learn-frames must be >= 1, got {learn_frames}")
     params = method_params(method or TrackerParams().method, overrides=overrides)
-    detection_params = ExtremityDetectionParams(detector=detector) if detector else ExtremityDetectionParams()
     counts = {"frame_sets": 0, "with_pose": 0, "notes": [], "warnings": {}, "topics": {}}
+    if not detector and params.tracking_method.uses_detector:
+        from hmocap_ros.detection.keypoint_network import default_detector
+
+        detector, note = default_detector(ExtremityDetectionParams().detector)
+        if note:
+            counts["notes"].append(note)
+    detection_params = ExtremityDetectionParams(detector=detector) if detector else ExtremityDetectionParams()
 
     def warn(text: str) -> None:
         counts["warnings"][text] = counts["warnings"].get(text, 0) + 1

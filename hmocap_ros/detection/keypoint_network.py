@@ -147,6 +147,16 @@ def tflite_available() -> bool:
     return getattr(cv2.dnn, "readNetFromTFLite", None) is not None
 
 
+def default_detector(default: str) -> tuple[str, str]:
+    """The extremity detector a run takes when none is asked for: ``default``, or ``skin`` with
+    the reason when ``default`` is ``keypoints`` and this OpenCV cannot run the network (as
+    extremity_detection falls back); ``(detector, note)``, the note empty when nothing changed."""
+    if default != "keypoints" or tflite_available():
+        return default, ""
+    return "skin", (f"the keypoint detector needs OpenCV's TFLite reader (4.8 and later, this is "
+                    f"{cv2.__version__}): detecting with the skin detector, as extremity_detection does")
+
+
 def _load(path: Path):
     if not path.is_file():
         raise ModelFileError(f"pose landmark model {path} not found: {_GET_MODEL}")

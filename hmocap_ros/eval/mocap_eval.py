@@ -399,11 +399,17 @@ def main_from_args(ns: argparse.Namespace) -> int:
             from hmocap_ros.rig import load_rig
 
             rig = load_rig(Path(ns.rig))
+        detector = ns.detector
+        if detector is None:
+            from hmocap_ros.detection.keypoint_network import default_detector
+
+            detector, note = default_detector(ExtremityDetectionParams().detector)
+            if note and any(get_method(m).uses_detector for m in methods):
+                print(f"hmocap eval mocap: {note}", file=sys.stderr)
         report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
                           seed=ns.seed, particles=ns.particles, layers=ns.layers,
                           overrides=overrides, given_shape=ns.given_shape,
-                          max_people=ns.max_people, rig=rig,
-                          detector=ns.detector or ExtremityDetectionParams().detector)
+                          max_people=ns.max_people, rig=rig, detector=detector)
         if ns.rig:
             report["rig"] = str(ns.rig)
     except (ValueError, OSError, RuntimeError) as err:

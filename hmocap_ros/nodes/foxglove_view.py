@@ -109,6 +109,10 @@ def view(host: str, port: int, topics: list[str], period_s: float, ros_args: lis
     """Serve until Ctrl-C/SIGTERM; 2 with one line when the server cannot start."""
     try:
         bridge = FoxgloveBridge(host, port)
+    except ImportError:
+        print("hmocap view: needs the foxglove-sdk package (pip install foxglove-sdk; make setup installs it); "
+              "in a ROS install foxglove_bridge serves the same", file=sys.stderr)
+        return 2
     except OSError as err:
         print(f"hmocap view: {err}", file=sys.stderr)
         return 2
