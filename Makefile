@@ -12,12 +12,13 @@ export PYTHONUNBUFFERED = 1
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test test-fresh test-slow test-mutants test-faults test-multihost bench clean help
+.PHONY: setup demo test test-fresh test-jazzy test-slow test-mutants test-faults test-multihost bench clean help
 help:
 	@echo "make demo       set up if needed, run the demo on the shipped data"
 	@echo "make test       set up if needed, run the test suite"
 	@echo "make test-fresh what CI runs: a clean clone of HEAD, set up from nothing, then make test"
 	@echo "                (HMOCAP_FRESH_LOAD=1: one core busy; HMOCAP_FRESH_OTHER_CPU=1: an AVX2 CPU's rounding)"
+	@echo "make test-jazzy the test suite with ROS 2 Jazzy's numpy 1.26, OpenCV 4.6, SciPy 1.11 (.venv-jazzy)"
 	@echo "make test-slow  long evaluations (marked slow)"
 	@echo "make test-mutants  deliberate breakages the accuracy tests must catch"
 	@echo "make test-faults   nodes killed, a camera gone, stamps back, memory soak (HMOCAP_SOAK_MINUTES, default 30)"
@@ -37,6 +38,13 @@ test: setup
 test-fresh:
 	@bash tools/test_fresh.sh
 
+# The quick suite in a second venv holding the versions a ROS 2 Jazzy install on Ubuntu 24.04
+# has (requirements-jazzy.txt in place of the lock's pins).
+JAZZY_VENV ?= .venv-jazzy
+test-jazzy:
+	@HMOCAP_VENV=$(JAZZY_VENV) HMOCAP_PINS=requirements-jazzy.txt bash tools/setup_env.sh
+	$(JAZZY_VENV)/bin/python -m pytest -q -p no:cacheprovider
+
 test-slow: setup
 	$(PY) -m pytest -q -m slow
 
@@ -53,4 +61,4 @@ bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 clean:
-	rm -rf out msg_defs/build msg_defs_tf2/build build *.egg-info
+	rm -rf out msg_defs/build msg_defs_tf2/build msg_defs_hri/build build *.egg-info

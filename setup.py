@@ -25,7 +25,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/fastdds_*.xml")),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/fastdds_*.xml") + glob("config/*.rviz")
+         + glob("config/*_foxglove.json")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools"],

@@ -1,4 +1,4 @@
-"""The ``hmocap`` command: demo, bag record/replay and info, sim, eval, train and bench.
+"""The ``hmocap`` command: demo, bag record/replay and info, view, sim, eval, render, train and bench.
 
 ROS arguments go after ``--ros-args`` as usual, e.g. ``hmocap replay run.mcap --ros-args -r __ns:=/room``.
 """
@@ -28,6 +28,12 @@ def _cmd_replay(ns, ros_args):
     from hmocap_ros.nodes import replayer
 
     return replayer.main_from_args(ns, ros_args)
+
+
+def _cmd_view(ns, ros_args):
+    from hmocap_ros.nodes import foxglove_view
+
+    return foxglove_view.main_from_args(ns, ros_args)
 
 
 def _cmd_info(ns, _ros_args):
@@ -133,6 +139,16 @@ COMMAND_GROUPS = {
             "gestures": ("hmocap_ros.commands.detect_gestures", "gesture_detection's gestures on a depth bag"),
         },
     ),
+    "render": (
+        "draw what the nodes saw: the skeleton over the cameras, gestures over depth",
+        "Draw a bag's frames with the tracked skeletons or detected gestures over the images, as a "
+        "video or PNG frames.",
+        {
+            "overlay": ("hmocap_ros.commands.render_overlay", "the skeleton projected onto every camera, tiled "
+                                                             "(per-joint error colours with ground truth); "
+                                                             "gesture boxes and scores on depth"),
+        },
+    ),
     "train": (
         "train models offline",
         "Train models from bags with ground truth.",
@@ -146,7 +162,7 @@ COMMAND_GROUPS = {
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The ``hmocap`` parser. Of the ``sim``/``eval``/``train`` kinds only the one ``argv`` names
     is imported (to add its options): ``hmocap record`` must not depend on the gesture trainer."""
-    from hmocap_ros.nodes import recorder, replayer
+    from hmocap_ros.nodes import foxglove_view, recorder, replayer
 
     argv = list(argv or [])
     parser = argparse.ArgumentParser(
@@ -173,6 +189,13 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                                    "are re-published transient-local.")
     replayer.add_arguments(p)
     p.set_defaults(func=_cmd_replay)
+
+    p = sub.add_parser("view", help="serve the live topics to Foxglove (WebSocket, 127.0.0.1:8765)",
+                       description="Serve the ROS graph's topics to Foxglove over its WebSocket protocol "
+                                   "(foxglove-sdk): open ws://127.0.0.1:8765 in Foxglove and load "
+                                   "config/hmocap_foxglove.json; no ROS install needed on the viewing side.")
+    foxglove_view.add_arguments(p)
+    p.set_defaults(func=_cmd_view)
 
     import importlib
 

@@ -1,12 +1,19 @@
 """``hmocap demo``: the shipped recordings through the real nodes over DDS, recorded and scored.
 
-1. Body: the shipped 4-camera bag (``data/demo/mocap_4cam.mcap``: empty room, then a person
-   waving) is replayed into ``foreground_segmentation`` -> ``extremity_detection`` ->
-   ``body_tracker``; foregrounds, extremities, skeletons, the body's joint states
-   (``/humans/bodies/body_0/joint_states``), the body frames (``/tf``), body shape and
-   diagnostics are recorded to ``<out>/body.mcap``.
+1. Body: the shipped 4-camera bag's images (``data/demo/mocap_4cam.mcap``: empty room, then a
+   person waving) are replayed into ``foreground_segmentation`` -> ``extremity_detection`` ->
+   ``body_tracker``, with ``camera_rig_publisher`` serving the bag's rig
+   (``data/demo/mocap_4cam_rig.yaml``) as in a room: ``camera_rig``, each image's
+   ``camera_info`` and ``/tf_static`` (``world`` -> ``room`` -> cameras). Recorded to
+   ``<out>/body.mcap``: the images and their camera_info, the rig, ``/tf_static``, the
+   foregrounds, extremities, skeletons and markers, ``humans/bodies/tracked``, the body's joint
+   states (``/humans/bodies/b0/joint_states``), frames (``/tf``), shape and diagnostics, so the
+   bag opens in Foxglove (``config/hmocap_foxglove.json``) or RViz (``config/hmocap.rviz``)
+   with everything drawn. ``<out>/body_overlay.mp4`` shows the skeleton over the cameras,
+   coloured by its error against the bag's ground truth (``hmocap render overlay``).
 2. Gestures: the shipped depth bag (``data/demo/gestures_depth.mcap``) is replayed into
-   ``gesture_detection``; its gestures are recorded to ``<out>/gestures.mcap``.
+   ``gesture_detection``; the depth images, camera_info, gestures and probability images are
+   recorded to ``<out>/gestures.mcap``, and drawn in ``<out>/gestures_overlay.mp4``.
 
 Every node is its own process over DDS on loopback, with the one-host Fast DDS profile
 (``config/fastdds_local.xml``, :func:`hmocap_ros.processes.loopback_dds_env`). The demo then
@@ -66,27 +73,39 @@ def _joints(msg) -> tuple[list[str], np.ndarray]:
     return list(msg.joint_names), np.array([[p.x, p.y, p.z] for p in msg.positions])
 
 
+def body_topics(cameras: list[str]) -> list[str]:
+    """What the body demo records: the inputs and the rig as a room has them, and every output
+    of the nodes (what the viewers' layouts show, ``config/hmocap.rviz`` and
+    ``config/hmocap_foxglove.json``)."""
+    return [*(topics.camera_image(c) for c in cameras), *(f"/{c}/camera_info" for c in cameras),
+            topics.CAMERA_RIG, "/tf_static", *(topics.camera_foreground(c) for c in cameras), "/extremities",
+            "/skeleton", "/skeleton_markers", "/humans/bodies/tracked", "/humans/bodies/b0/joint_states", "/tf",
+            "/body_shape", "/diagnostics"]
+
+
 def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
     cameras = _cameras(DEMO_BAG)
     with BagReader(DEMO_BAG) as reader:
         n_person = reader.topics()[topics.GT_SKELETON].count
     out_bag = out / "body.mcap"
     fg_topics = [topics.camera_foreground(c) for c in cameras]
-    record = [*fg_topics, "/extremities", "/skeleton", "/skeleton_markers",
-              "/humans/bodies/body_0/joint_states", "/tf", "/body_shape", "/diagnostics"]
+    image_topics = [topics.camera_image(c) for c in cameras]
+    record = body_topics(cameras)
     print(f"body: {DEMO_BAG.name}, {len(cameras)} cameras -> foreground_segmentation -> "
           f"extremity_detection -> body_tracker (replay at {rate:g}x real time)")
     t0 = time.monotonic()
     replay_through_nodes(
         DEMO_BAG,
-        [("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
+        [("camera_rig_publisher", "hmocap_ros.nodes.camera_rig_publisher",
+          ["--ros-args", "-p", f"rig_file:={DEMO_RIG}"], "serving rig"),
+         ("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
           ["--ros-args", "-p", f"cameras:=[{','.join(cameras)}]", "-p", "learn_frames:=8",
            "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
          ("extremity_detection", "hmocap_ros.nodes.extremity_detection",
           ["--ros-args", "-p", "queue_depth:=100", "-p", "latest_only:=false"], "waiting for the rig"),
          ("body_tracker", "hmocap_ros.nodes.body_tracker", ["--ros-args", *TRACKER_ARGS], "waiting for the rig")],
         record, out_bag, env, out / "logs",
-        replay_topics=[topics.CAMERA_RIG, *(topics.camera_image(c) for c in cameras)],
+        replay_topics=image_topics,
         replay_rate=rate, settle=3.0, expect={"/skeleton": n_person})
     elapsed = time.monotonic() - t0
 
@@ -127,6 +146,20 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
     return bool(errors) and len(got[fg_topics[0]]) == n_images
 
 
+def render(bag: Path, out: Path, truth: Path) -> Path | None:
+    """``hmocap render overlay BAG --truth TRUTH --out OUT``; the video, or None (said why)."""
+    from hmocap_ros.commands.render_overlay import render_overlay
+    from hmocap_ros.viz.overlay_bag import OverlayError
+
+    try:
+        count, path = render_overlay(bag, out, truth=truth)
+    except (OverlayError, OSError) as err:
+        print(f"  no overlay: {err}")
+        return None
+    print(f"  overlay: {count} pictures -> {path}")
+    return path
+
+
 def run_gesture_demo(out: Path, env: dict, rate: float = 1.0) -> bool:
     """Replay the shipped depth bag into ``gesture_detection`` over DDS, record ``/gestures`` and
     print the detections against the bag's ground truth (class right and within 10 px at 640x480,
@@ -137,7 +170,8 @@ def run_gesture_demo(out: Path, env: dict, rate: float = 1.0) -> bool:
     procs = replay_through_nodes(
         GESTURE_BAG,
         [("gesture_detection", "hmocap_ros.nodes.gesture_detection", [], "detecting gestures")],
-        ["/gestures"], out_bag, env, out / "logs",
+        ["/gestures", "/gestures/probability", topics.DEPTH_IMAGE, topics.DEPTH_INFO], out_bag, env,
+        out / "logs",
         replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], replay_rate=rate, settle=2.0)
     elapsed = time.monotonic() - t0
     for line in procs["gesture_detection"].output().splitlines():  # what the node loaded and saw
@@ -190,7 +224,20 @@ def run_demo(out: str | Path = "out/demo", domain_id: int | None = None) -> int:
     print(f"demo: DDS domain {env.get('ROS_DOMAIN_ID', '0')}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
           f"profile {env.get(DDS_PROFILE_VARIABLES[0], 'none')}; outputs and logs in {out}")
     ok_body = run_body_demo(out, env)
+    body_video = render(out / "body.mcap", out / "body_overlay.mp4", DEMO_BAG)
     ok_gestures = run_gesture_demo(out, env)
-    print(f"demo: {'OK' if ok_body and ok_gestures else 'FAILED'}. To look at the result, open "
-          f"{out / 'body.mcap'} in Foxglove (3D panel: /skeleton_markers; Image panels: /cam_k/foreground).")
-    return 0 if ok_body and ok_gestures else 1
+    gesture_video = render(out / "gestures.mcap", out / "gestures_overlay.mp4", GESTURE_BAG)
+    ok = ok_body and ok_gestures and body_video is not None and gesture_video is not None
+    print(f"demo: {'OK' if ok else 'FAILED'}.")
+    print(f"  videos: {body_video or '-'}  {gesture_video or '-'}")
+    print(f"  bags:   {out / 'body.mcap'}  {out / 'gestures.mcap'}")
+    print(f"  look at the body bag in Foxglove with the layout {_config('hmocap_foxglove.json')}, or in RViz "
+          f"with {_config('hmocap.rviz')} (docs/viewing.md); live: hmocap view")
+    return 0 if ok else 1
+
+
+def _config(name: str) -> str:
+    from hmocap_ros.config_files import find_config_file
+
+    path = find_config_file(name)
+    return str(path) if path is not None else f"config/{name}"

@@ -53,7 +53,8 @@ def quaternion_to_matrix(quaternion_xyzw) -> np.ndarray:
 
 def matrix_to_quaternion(rotation) -> np.ndarray:
     """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, with ``w >= 0`` (canonical sign)."""
-    return Rotation.from_matrix(np.asarray(rotation, dtype=np.float64)).as_quat(canonical=True)
+    # a writable copy: SciPy 1.11 (Ubuntu 24.04's) refuses a read-only array (a camera's R)
+    return Rotation.from_matrix(np.array(rotation, dtype=np.float64)).as_quat(canonical=True)
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:

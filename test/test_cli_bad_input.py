@@ -58,6 +58,7 @@ IN_PROCESS_COMMANDS = {
     "train_gestures": (["train", "gestures"], ["--out", "OUT/forest.npz", "--quiet"]),
     "detect_gestures": (["detect", "gestures"], ["--out", "OUT/gestures.mcap", "--quiet"]),
     "track": (["track"], ["--out", "OUT/tracked.mcap", "--quiet"]),
+    "render_overlay": (["render", "overlay"], ["--out", "OUT/overlay.mp4"]),
 }
 
 

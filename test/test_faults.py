@@ -43,7 +43,7 @@ CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
 FAST = ["-p", "filter.particles:=120", "-p", "filter.layers:=0", "-p", "startup.particles:=60",
         "-p", "startup.frames:=2", "-p", "weighting.working_scale:=1.0", "-p", "startup.working_scale:=1.0"]
 EVERY_FRAME = ["-p", "latest_only:=false", "-p", "queue_depth:=100"]
-BODY_0 = "/humans/bodies/body_0"
+BODY_0 = "/humans/bodies/b0"
 #: the recorder flushes at least once a second; a loaded machine adds scheduling delay
 LOSS_BOUND_S = 1.5
 START_S = 120.0

@@ -57,6 +57,28 @@ def test_summarize_errors_skips_frames_without_pose():
     assert s["per_frame_mm"] == [20.0, None, 30.0]
 
 
+def strict_loads(text: str):
+    """json.loads that refuses NaN and Infinity, as a strict JSON parser does."""
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_eval_without_any_pose_exits_non_zero_with_strict_json(tmp_path, capsys):
+    """Nobody found (a foreground threshold no person reaches): the report is written with
+    null figures, never NaN, and the exit status says that no frame was evaluated."""
+    out = tmp_path / "none.json"
+    rc = run_eval([str(DEMO_BAG), "--method", "hpf", "--frames", "2", "--json", str(out),
+                   "--particles", "40", "--param", "startup.min_foreground=1000000"])
+    assert rc == 1
+    assert "no frame evaluated" in capsys.readouterr().err
+    report = strict_loads(out.read_text())
+    res = report["methods"]["hpf"]
+    assert res["frames_with_pose"] == 0 and res["frames"] == 2
+    assert res["mean_mm"] is None and res["std_mm"] is None
+    assert all(v["mean_mm"] is None for v in res["per_joint"].values())
+
+
 def test_match_joints_by_name():
     a, b = match_joints(["pelvis", "head", "l_toe"], ["head", "spine", "pelvis"])
     assert a.tolist() == [0, 1] and b.tolist() == [2, 0]
@@ -69,12 +91,15 @@ def run_eval(args: list[str]) -> int:
     return cli_main(["eval", "mocap", *args])
 
 
-def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path):
+def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path, capsys):
     out = tmp_path / "report.json"
     png = tmp_path / "errors.png"
     rc = run_eval([str(DEMO_BAG), "--method", "kf-hpf", "--method", "hpf", "--frames", "3",
                    "--seed", "1", "--json", str(out), "--plot", str(png), *SMALL_BUDGET])
     assert rc == 0
+    progress = capsys.readouterr().err
+    assert "reading the bag" in progress and "dd-hpf: frame set" in progress
+    assert "hpf: frame set" in progress
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "fg" and report["silhouettes_fallback"] == ""
     assert report["frames_with_truth"] == 3 and report["cameras"] == ["cam_1", "cam_2", "cam_3",

@@ -34,7 +34,7 @@ def test_body_tracker_markers_and_per_body_shape(tmp_path):
         person = set(_stamps(reader, "/ground_truth/skeleton"))
     out = tmp_path / "out.mcap"
     result = replay_through_nodes(
-        DEMO_BAG, [node], ["/skeleton", "/skeleton_markers", "/humans/bodies/body_0/body_shape"], out,
+        DEMO_BAG, [node], ["/skeleton", "/skeleton_markers", "/humans/bodies/b0/body_shape"], out,
         loopback_dds_env(), tmp_path / "logs", replay_topics=[f"/ground_truth/{c}/silhouette" for c in CAMERAS],
         replay_rate=0.5, expect={"/skeleton_markers": len(person) - 2}, settle=2.0)
     log = result["body_tracker"].output()
@@ -43,14 +43,14 @@ def test_body_tracker_markers_and_per_body_shape(tmp_path):
         skeletons = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
         markers = {stamp_to_ns(m.msg.markers[0].header.stamp): m.msg
                    for m in reader.messages(["/skeleton_markers"])}
-        shapes = [m.msg for m in reader.messages(["/humans/bodies/body_0/body_shape"])]
-        shape_latched = reader.topics()["/humans/bodies/body_0/body_shape"].latched
+        shapes = [m.msg for m in reader.messages(["/humans/bodies/b0/body_shape"])]
+        shape_latched = reader.topics()["/humans/bodies/b0/body_shape"].latched
     assert len(markers) >= len(person) - 2 and set(markers) == set(skeletons)
     for stamp, array in markers.items():
         spheres, bones = array.markers
         sk = skeletons[stamp]
         assert (spheres.type, bones.type) == (spheres.SPHERE_LIST, bones.LINE_LIST)
-        assert spheres.ns == bones.ns == sk.body_id == "body_0"
+        assert spheres.ns == bones.ns == sk.body_id == "b0"
         assert spheres.header.frame_id == bones.header.frame_id == "room"
         assert stamp_to_ns(bones.header.stamp) == stamp
         np.testing.assert_allclose([[p.x, p.y, p.z] for p in spheres.points],
@@ -59,7 +59,7 @@ def test_body_tracker_markers_and_per_body_shape(tmp_path):
         assert len(bones.points) == 2 * bone_count
     assert shape_latched and shapes
     shape = shapes[-1]
-    assert shape.body_id == "body_0" and stamp_to_ns(shape.header.stamp) in skeletons
+    assert shape.body_id == "b0" and stamp_to_ns(shape.header.stamp) in skeletons
     assert len(shape.entity_names) > 0 and len(shape.bone_scale) > 0
     assert 1.0 < shape.height < 2.3 and shape.global_scale > 0
 

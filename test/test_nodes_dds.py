@@ -340,16 +340,3 @@ def test_replay_clock_refuses_a_bad_frequency_and_a_bag_with_clock(tmp_path, cap
     assert cli.main(["replay", str(src), "--clock"]) == 2
     err = capsys.readouterr().err
     assert "holds a /clock topic" in err and len(err.strip().splitlines()) == 1
-
-
-def test_ids_list_is_rep155s_hri_msgs_ids_list():
-    """body_tracker's ``humans/bodies/tracked`` type carries hri_msgs/IdsList's fields (REP-155),
-    built into hmocap_interfaces by ``make setup``."""
-    from hmocap_interfaces.msg import IdsList
-
-    msg_file = Path(__file__).resolve().parents[1] / "msg_defs" / "msg" / "IdsList.msg"
-    fields = [line.split() for line in msg_file.read_text().splitlines()
-              if line.strip() and not line.lstrip().startswith("#")]
-    assert fields == [["std_msgs/Header", "header"], ["string[]", "ids"]]
-    assert IdsList.get_fields_and_field_types() == {"header": "std_msgs/Header", "ids": "sequence<string>"}
-    assert list(IdsList(ids=["body_0", "body_1"]).ids) == ["body_0", "body_1"]

@@ -23,6 +23,7 @@ from hmocap_ros.gestures import load_forest
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.msg_factory import RclpyFactory, RosbagsFactory, stamp_to_ns
 from hmocap_ros.io.tf import from_transform_stamped
+from hmocap_ros.tracking.body_frames import joint_frame
 
 #: a small tracker budget (the figures of the README come from ``hmocap eval mocap``)
 SMALL = ["--param", "filter.particles=60", "--param", "filter.layers=0", "--param", "startup.particles=40",
@@ -105,31 +106,31 @@ def tracked(tmp_path_factory):
 def test_track_writes_the_tracker_topics_with_the_frame_sets_stamps(tracked, tmp_path):
     with BagReader(DEMO_BAG) as reader:
         inputs = sorted(_by_stamp(reader, "/ground_truth/cam_1/silhouette"))[:TRACK_FRAMES]
-    body_0 = "/humans/bodies/body_0"
+    b0 = "/humans/bodies/b0"
     with BagReader(tracked) as reader:
         topics = reader.topics()
         ids = _by_stamp(reader, "/humans/bodies/tracked")
-        joints = _by_stamp(reader, f"{body_0}/joint_states")
+        joints = _by_stamp(reader, f"{b0}/joint_states")
         skeletons = _by_stamp(reader, "/skeleton")
         markers = {stamp_to_ns(m.msg.markers[0].header.stamp) for m in reader.messages(["/skeleton_markers"])}
         tf = {stamp_to_ns(m.msg.transforms[0].header.stamp): m.msg for m in reader.messages(["/tf"])}
-        shapes = [m.msg for m in reader.messages([f"{body_0}/body_shape"])]
-    assert {"/humans/bodies/tracked", f"{body_0}/joint_states", f"{body_0}/body_shape", "/body_shape",
+        shapes = [m.msg for m in reader.messages([f"{b0}/body_shape"])]
+    assert {"/humans/bodies/tracked", f"{b0}/joint_states", f"{b0}/body_shape", "/body_shape",
             "/skeleton", "/skeleton_markers", "/tf"} <= set(topics)
-    assert topics[f"{body_0}/body_shape"].latched and topics["/body_shape"].latched
-    assert "/humans/bodies/body_1/body_shape" in topics  # the second slot's topics exist
+    assert topics[f"{b0}/body_shape"].latched and topics["/body_shape"].latched
+    assert "/humans/bodies/b1/body_shape" in topics  # the second slot's topics exist
     # the list of tracked bodies for every frame set; a pose on the frames with the subject
     assert sorted(ids) == inputs and all(log == stamp for stamp, (log, _) in ids.items())
-    posed = {s for s, (_, msg) in ids.items() if list(msg.ids) == ["body_0"]}
+    posed = {s for s, (_, msg) in ids.items() if list(msg.ids) == ["b0"]}
     assert posed and posed == set(joints) == set(skeletons) == set(tf)
-    assert all(list(msg.ids) in ([], ["body_0"]) for _, msg in ids.values())
+    assert all(list(msg.ids) in ([], ["b0"]) for _, msg in ids.values())
     assert all(len(js.name) == 30 and js.header.frame_id == "room" for _, js in joints.values())
     # the body frames on /tf place every joint where the skeleton has it
     for stamp, (_, sk) in skeletons.items():
         pose = {"room": np.eye(4)}
         for t in tf[stamp].transforms:
             pose[t.child_frame_id] = pose[t.header.frame_id] @ from_transform_stamped(t).matrix
-        names = ["body_body_0"] + [f"{n}_body_0" for n in sk.joint_names[1:]]
+        names = [joint_frame(n, "b0") for n in sk.joint_names]
         np.testing.assert_allclose([pose[n][:3, 3] for n in names],
                                    [[p.x, p.y, p.z] for p in sk.positions], atol=1e-6)
     assert set(markers) == posed and shapes and 1.0 < shapes[-1].height < 2.3
@@ -144,7 +145,7 @@ def test_track_is_repeatable(tracked, tmp_path):
     argv = ["track", str(DEMO_BAG), "--out", str(again), "--method", "hpf-apo", "--silhouettes", "gt",
             "--max-people", "2", "--frames", str(TRACK_FRAMES), "--quiet", *SMALL]
     assert hmocap(argv) == 0
-    topic = "/humans/bodies/body_0/joint_states"
+    topic = "/humans/bodies/b0/joint_states"
     with BagReader(tracked) as a, BagReader(again) as b:
         first = [np.asarray(m.msg.position) for m in a.messages([topic])]
         second = [np.asarray(m.msg.position) for m in b.messages([topic])]
@@ -200,16 +201,19 @@ def test_node_and_offline_builders_give_the_same_messages(model):
     results = [_fake_result(model), _fake_result(model, has_pose=False)]
     built = {}
     for name, factory in (("rclpy", RclpyFactory()), ("rosbags", RosbagsFactory())):
-        messages = TrackerMessages(model, ("body_0", "body_1"), "room", factory)
+        messages = TrackerMessages(model, ("b0", "b1"), "room", factory)
         built[name] = messages.frame_set(1_500_000_000, results, [model, model])
     assert not built["rclpy"].errors and not built["rosbags"].errors
     topics = [t for t, _ in built["rclpy"].messages]
     assert topics == [t for t, _ in built["rosbags"].messages]
-    assert topics == ["humans/bodies/body_0/joint_states", "skeleton", "skeleton_markers",
+    assert topics == ["humans/bodies/b0/joint_states", "skeleton", "skeleton_markers",
                       "humans/bodies/tracked", "/tf"]
-    assert set(topics) <= set(tracker_topics(("body_0", "body_1")))
+    assert set(topics) <= set(tracker_topics(("b0", "b1")))
     for (_, a), (_, b) in zip(built["rclpy"].messages, built["rosbags"].messages):
         assert _fields(a) == _fields(b)
+    markers = dict(built["rclpy"].messages)["skeleton_markers"].markers
+    # kept until replaced: a pose may come seconds after the last
+    assert [(m.ns, m.action, m.lifetime.sec, m.lifetime.nanosec) for m in markers] == [("b0", 0, 0, 0)] * 2
     det = SimpleNamespace(name="wave", class_id=2, score=0.7, volume=0.3, u=40.0, v=30.0, depth_m=1.5)
     for flavour in (RclpyFactory(), RosbagsFactory()):
         msg = gesture_array([det], 7, "depth_optical_frame", None, flavour)
@@ -218,6 +222,28 @@ def test_node_and_offline_builders_give_the_same_messages(model):
         _fields(gesture_array([det], 7, "f", None, RosbagsFactory()))
     image = probability_image(np.full((4, 4), 0.5), 7, "f", RosbagsFactory())
     assert bytes(image.data) == bytes([127]) * 16
+
+
+def test_markers_are_deleted_when_a_body_is_lost(model):
+    """b0 and b1 tracked, then b1 lost: one DELETEALL array first, then b0's markers again;
+    nothing is deleted while every body keeps its pose."""
+    from hmocap_ros.tracking.tracker_messages import DELETEALL, TrackerMessages
+
+    messages = TrackerMessages(model, ("b0", "b1"), "room", RclpyFactory())
+
+    def markers(results):
+        built = messages.frame_set(1_500_000_000, results, [model, model])
+        return [[(m.ns, m.action) for m in msg.markers] for t, msg in built.messages if t == "skeleton_markers"]
+
+    both = [_fake_result(model), _fake_result(model)]
+    assert markers(both) == [[("b0", 0), ("b0", 0)], [("b1", 0), ("b1", 0)]]
+    assert markers(both) == [[("b0", 0), ("b0", 0)], [("b1", 0), ("b1", 0)]]
+    one = [_fake_result(model), _fake_result(model, has_pose=False)]
+    assert markers(one) == [[("", DELETEALL)], [("b0", 0), ("b0", 0)]]
+    assert markers(one) == [[("b0", 0), ("b0", 0)]]
+    none = [_fake_result(model, has_pose=False)] * 2
+    assert markers(none) == [[("", DELETEALL)]]
+    assert markers(none) == []
 
 
 def test_track_subcommand_answers_help(capsys):

@@ -36,6 +36,11 @@ MODULE_KEYS = {
     "mcap_ros2": "mcap-ros2-support",     # pip: mcap-ros2-support
     "ai_edge_litert": "python3-ai-edge-litert-pip",  # pip: ai-edge-litert
 }
+#: Modules that no rosdep key installs, imported only by a command a ROS install has its own
+#: tool for (pip name; the venv installs them from requirements.txt). ``foxglove``: ``hmocap
+#: view``, where a ROS install runs foxglove_bridge (ros-jazzy-foxglove-bridge). Documented in
+#: docs/development.md; each is imported inside the function that needs it.
+PIP_ONLY_MODULES = {"foxglove": "foxglove-sdk"}
 #: ROS packages of Python code whose module and rosdep key are the package name.
 ROS_PYTHON = {"rclpy", "launch", "launch_ros", "ament_index_python"}
 #: The keys that install with pip (rosdep pip rules) and their pip names.
@@ -89,7 +94,7 @@ def required_keys() -> tuple[dict[str, set[str]], dict[str, set[str]]]:
     for path in source_files():
         rel = str(path.relative_to(ROOT))
         for module in imported_modules(path):
-            if module in sys.stdlib_module_names or module in (PACKAGE, "__future__"):
+            if module in sys.stdlib_module_names or module in (PACKAGE, "__future__", *PIP_ONLY_MODULES):
                 continue
             key = rosdep_key(module)
             (needed.setdefault(key, set()) if key else unknown.setdefault(module, set())).add(rel)
@@ -130,6 +135,19 @@ def test_pip_only_keys_are_documented():
         if key in declared:
             assert key in docs and f"pip name: {pip_name}" in xml, key
             assert f"`{pip_name}`" in docs, pip_name
+
+
+def test_pip_only_modules_are_documented_and_imported_lazily():
+    docs = (ROOT / "docs" / "development.md").read_text()
+    requirements = (ROOT / "requirements.txt").read_text()
+    for module, pip_name in PIP_ONLY_MODULES.items():
+        assert f"`{pip_name}`" in docs and f"{pip_name}==" in requirements, pip_name
+        for path in source_files():
+            tree = ast.parse(path.read_text())
+            top = {a.name.split(".")[0] for node in tree.body if isinstance(node, ast.Import) for a in node.names}
+            top |= {node.module.split(".")[0] for node in tree.body
+                    if isinstance(node, ast.ImportFrom) and node.module and node.level == 0}
+            assert module not in top, f"{path.relative_to(ROOT)} imports {module} at the top"
 
 
 def test_package_xml_is_well_formed():

@@ -37,7 +37,8 @@ def _run(tracker, masks, frames):
 
 
 def test_body_ids():
-    assert body_ids("body_0", 3) == ("body_0", "body_1", "body_2")
+    assert body_ids("b0", 3) == ("b0", "b1", "b2")
+    assert body_ids("body_7", 2) == ("body_7", "body_8")
     assert body_ids("alice", 2) == ("alice", "alice_1")
 
 

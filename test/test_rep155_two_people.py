@@ -27,7 +27,7 @@ FRAMES = 5
 SMALL = ["-p", "method:=hpf", "-p", "filter.particles:=120", "-p", "filter.layers:=0",
          "-p", "startup.particles:=60", "-p", "startup.frames:=2", "-p", "weighting.working_scale:=0.5",
          "-p", "startup.working_scale:=0.5"]
-IDS = ("body_0", "body_1")
+IDS = ("b0", "b1")
 
 
 def _two_people_bag(path, model, rig) -> np.ndarray:
@@ -64,7 +64,7 @@ def test_two_people_get_rep155_topics_and_frames_each(tmp_path, model, rig):
     result = replay_through_nodes(
         bag, [node], ["/humans/bodies/tracked", "/skeleton", "/tf", *per_body], out, loopback_dds_env(),
         tmp_path / "logs", replay_rate=0.25, settle=3.0,
-        expect={"/humans/bodies/tracked": FRAMES, "/humans/bodies/body_1/joint_states": 2})
+        expect={"/humans/bodies/tracked": FRAMES, "/humans/bodies/b1/joint_states": 2})
     log = result["body_tracker"].output()
     assert "Traceback" not in log, log
     with BagReader(out) as reader:

@@ -47,7 +47,7 @@ def test_rotation_to_quaternion_refuses_what_is_not_a_rotation(bad):
 
 def test_camera_transforms_put_the_optical_frame_at_the_camera():
     rig = load_rig(RIG)
-    transforms = tf.rig_transforms(rig)
+    transforms = tf.rig_transforms(rig, fixed_frame="")
     assert [(t.parent, t.child) for t in transforms] == [("room", f"{n}_optical_frame") for n in rig.names]
     for t, camera in zip(transforms, rig.cameras):
         np.testing.assert_allclose(t.apply([0.0, 0.0, 0.0]), camera.position, atol=1e-12)
@@ -59,9 +59,10 @@ def test_camera_transforms_put_the_optical_frame_at_the_camera():
         np.testing.assert_allclose(pixel[0], camera.K[:2, :2] @ [0.15, -0.1] + camera.K[:2, 2], atol=1e-6)
 
 
-def test_z_up_frame_puts_the_room_floor_on_xy():
+def test_the_fixed_frame_is_the_z_up_root_with_the_room_floor_on_xy():
     rig = load_rig(RIG)
-    first, *cameras = tf.rig_transforms(rig, z_up_frame="map")
+    assert tf.rig_transforms(rig)[0].parent == tf.DEFAULT_FIXED_FRAME == "world"
+    first, *cameras = tf.rig_transforms(rig, fixed_frame="map")
     assert (first.parent, first.child) == ("map", "room") and len(cameras) == len(rig)
     np.testing.assert_allclose(first.apply([0.0, 1.0, 0.0]), [0.0, 0.0, 1.0], atol=1e-12)  # room up = +Z
     np.testing.assert_allclose(first.apply([1.0, 0.0, 0.0]), [1.0, 0.0, 0.0], atol=1e-12)
@@ -87,7 +88,7 @@ def test_tf_message_fields(flavour):
     rig = load_rig(RIG)
     transforms = tf.rig_transforms(rig)
     msg = tf.tf_message(transforms, 1_700_000_000_123_456_789, factory)
-    assert len(msg.transforms) == len(rig)
+    assert len(msg.transforms) == len(rig) + 1
     for stamped, t in zip(msg.transforms, transforms):
         assert stamp_to_ns(stamped.header.stamp) == 1_700_000_000_123_456_789
         assert tf.from_transform_stamped(stamped) == t
@@ -179,7 +180,7 @@ def test_rig_publisher_publishes_static_transforms(tmp_path):
 
     env = loopback_dds_env()
     node = NodeProcess.module("rig", "hmocap_ros.nodes.camera_rig_publisher",
-                              ["--ros-args", "-p", f"rig_file:={RIG}", "-p", "z_up_frame:=map"], env, tmp_path)
+                              ["--ros-args", "-p", f"rig_file:={RIG}", "-p", "fixed_frame:=map"], env, tmp_path)
     try:
         assert node.wait_for_output("serving rig", 60), node.output()
         # started after the node published: transient local delivers it all the same
@@ -203,12 +204,12 @@ def test_rig_publisher_publishes_static_transforms(tmp_path):
     assert "Traceback" not in log and "room -> cam_2_colour_optical_frame" in log, log
 
 
-def test_rig_publisher_refuses_a_z_up_frame_named_as_the_room(free_domain_id):
+def test_rig_publisher_refuses_a_fixed_frame_named_as_the_room(free_domain_id):
     import subprocess
 
     exe = Path(sys.executable).parent / "camera_rig_publisher"
     assert exe.exists(), f"{exe} is not installed: make setup installs the package's executables"
-    res = subprocess.run([str(exe), "--ros-args", "-p", f"rig_file:={RIG}", "-p", "z_up_frame:=room"],
+    res = subprocess.run([str(exe), "--ros-args", "-p", f"rig_file:={RIG}", "-p", "fixed_frame:=room"],
                          capture_output=True, text=True, timeout=60,
                          env=loopback_dds_env(domain_id=free_domain_id))
     assert res.returncode == 2

@@ -2,8 +2,9 @@
 # Create .venv with everything hmocap_ros needs, idempotently:
 #   1. the pinned Python dependencies (ROS 2 Jazzy wheels, numpy, OpenCV, rosbags, ...);
 #   2. the interface package msg_defs/ (hmocap_interfaces), built with CMake against the wheels;
-#   3. tf2_msgs from msg_defs_tf2/, the same way, only when the environment has no tf2_msgs of
-#      its own (the ROS 2 wheels on PyPI ship none; a ROS install keeps its own);
+#   3. tf2_msgs from msg_defs_tf2/ and hri_msgs from msg_defs_hri/, the same way, each only when
+#      the environment has none of its own (the ROS 2 wheels on PyPI ship neither; a ROS install
+#      keeps its own);
 #   4. hmocap_ros itself in editable mode.
 # Each step is skipped when its inputs have not changed since it last succeeded
 # (stamp files in .venv/.hmocap/ hold a hash of the inputs).
@@ -30,11 +31,36 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -m venv "$VENV" || die "could not create a venv (on Debian: apt-get install python3-venv)."
 fi
 
-deps=$(hash_of requirements.txt requirements-lock.txt)
+# HMOCAP_PINS=FILE (make test-jazzy: requirements-jazzy.txt) replaces the pins of the packages it
+# names, in requirements.txt and in the lock, by its own.
+REQUIREMENTS=requirements.txt
+LOCK=requirements-lock.txt
+if [ -n "${HMOCAP_PINS:-}" ]; then
+  [ -f "$HMOCAP_PINS" ] || die "HMOCAP_PINS names $HMOCAP_PINS, which does not exist."
+  mkdir -p "$STAMPS"
+  pinned() {  # $1 without the packages HMOCAP_PINS names or replaces ("# replaces NAME"), then HMOCAP_PINS
+    "$PY" - "$1" "$HMOCAP_PINS" <<'PYEOF'
+import re, sys
+source, pins = sys.argv[1], open(sys.argv[2]).read().splitlines()
+def name(line):
+    m = re.match(r"\s*([A-Za-z0-9_.-]+)", line)
+    return m.group(1).lower().replace("_", "-") if m and not line.lstrip().startswith("#") else None
+names = {name(l) for l in pins} | {m.lower() for l in pins for m in re.findall(r"#\s*replaces\s+(\S+)", l)}
+kept = [l for l in open(source).read().splitlines() if name(l) not in names]
+print("\n".join(kept + pins))
+PYEOF
+  }
+  pinned requirements.txt > "$STAMPS/requirements.txt"
+  pinned requirements-lock.txt > "$STAMPS/requirements-lock.txt"
+  REQUIREMENTS=$STAMPS/requirements.txt
+  LOCK=$STAMPS/requirements-lock.txt
+fi
+
+deps=$(hash_of "$REQUIREMENTS" "$LOCK")
 if ! fresh deps "$deps"; then
   say "installing pinned dependencies (about 30 s on a fresh machine)"
   "$VENV/bin/python" -m pip install -q --upgrade pip
-  "$VENV/bin/python" -m pip install -q -r requirements.txt -c requirements-lock.txt
+  "$VENV/bin/python" -m pip install -q -r "$REQUIREMENTS" -c "$LOCK"
   mark deps "$deps"
 fi
 
@@ -53,25 +79,30 @@ if ! fresh interfaces "$msgs" || ! "$VENV/bin/python" -c 'import hmocap_interfac
   mark interfaces "$msgs"
 fi
 
-# tf2_msgs: built here unless another one imports (a ROS install's, a wheel's). The stamp marks
-# the one built here, which is rebuilt when its definitions change.
-tf2=$(hash_of msg_defs_tf2/CMakeLists.txt msg_defs_tf2/package.xml msg_defs_tf2/pyproject.toml \
-  msg_defs_tf2/msg/*.msg msg_defs_tf2/srv/*.srv msg_defs_tf2/action/*.action requirements.txt)
-tf2_imports() { "$VENV/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null; }
-if [ ! -f "$STAMPS/tf2_msgs" ] && tf2_imports; then
-  say "using the installed tf2_msgs ($("$VENV/bin/python" -c 'import tf2_msgs; print(list(tf2_msgs.__path__)[0])'))"
-elif ! fresh tf2_msgs "$tf2" || ! tf2_imports; then
-  for tool in cmake g++ make; do
-    command -v $tool >/dev/null || die "'$tool' is needed to build msg_defs_tf2 (tf2_msgs). On Debian: apt-get install cmake g++ make."
-  done
-  say "building tf2_msgs (msg_defs_tf2/, none installed; about 20 s)"
-  rm -rf msg_defs_tf2/build
-  CMAKE_PREFIX_PATH=$VENV AMENT_PREFIX_PATH=$VENV \
-    "$VENV/bin/python" -m pip install -q --no-build-isolation --force-reinstall --no-deps \
-      -C cmake.define.Python3_EXECUTABLE="$VENV/bin/python" ./msg_defs_tf2 \
-    || die "building msg_defs_tf2 failed (see the CMake output above)."
-  mark tf2_msgs "$tf2"
-fi
+# tf2_msgs and hri_msgs: each built here unless another one imports (a ROS install's, a
+# wheel's). The stamp marks one built here, which is rebuilt when its definitions change.
+# fallback_interfaces NAME FOLDER WHAT
+fallback_interfaces() {
+  local name=$1 dir=$2 what=$3 inputs
+  inputs=$(hash_of "$dir/CMakeLists.txt" "$dir/package.xml" "$dir/pyproject.toml" \
+    $(find "$dir/msg" "$dir/srv" "$dir/action" -type f 2>/dev/null | sort) requirements.txt)
+  if [ ! -f "$STAMPS/$name" ] && "$VENV/bin/python" -c "import $name.msg" 2>/dev/null; then
+    say "using the installed $name ($("$VENV/bin/python" -c "import $name; print(list($name.__path__)[0])"))"
+  elif ! fresh "$name" "$inputs" || ! "$VENV/bin/python" -c "import $name.msg" 2>/dev/null; then
+    for tool in cmake g++ make; do
+      command -v $tool >/dev/null || die "'$tool' is needed to build $dir ($name). On Debian: apt-get install cmake g++ make."
+    done
+    say "building $name ($dir/, none installed; $what)"
+    rm -rf "$dir/build"
+    CMAKE_PREFIX_PATH=$VENV AMENT_PREFIX_PATH=$VENV \
+      "$VENV/bin/python" -m pip install -q --no-build-isolation --force-reinstall --no-deps \
+        -C cmake.define.Python3_EXECUTABLE="$VENV/bin/python" "./$dir" \
+      || die "building $dir failed (see the CMake output above)."
+    mark "$name" "$inputs"
+  fi
+}
+fallback_interfaces tf2_msgs msg_defs_tf2 "about 20 s"
+fallback_interfaces hri_msgs msg_defs_hri "about 10 s"
 
 pkg=$(hash_of setup.py setup.cfg package.xml)
 if ! fresh package "$pkg" || ! "$VENV/bin/python" -c 'import hmocap_ros' 2>/dev/null; then
@@ -81,6 +112,6 @@ if ! fresh package "$pkg" || ! "$VENV/bin/python" -c 'import hmocap_ros' 2>/dev/
   mark package "$pkg"
 fi
 
-"$VENV/bin/python" -c 'import rclpy, hmocap_interfaces.msg, tf2_msgs.msg, hmocap_ros' \
-  || die "the environment is incomplete: rclpy, hmocap_interfaces, tf2_msgs or hmocap_ros does not import."
+"$VENV/bin/python" -c 'import rclpy, hmocap_interfaces.msg, tf2_msgs.msg, hri_msgs.msg, hmocap_ros' \
+  || die "the environment is incomplete: rclpy, hmocap_interfaces, tf2_msgs, hri_msgs or hmocap_ros does not import."
 say "ready ($VENV)"

@@ -71,11 +71,15 @@ class BoardSpec:
                 f"{self.marker * 100:g} cm, {self.dictionary}")
 
     def cv_board(self):
-        """The ``cv2.aruco.CharucoBoard``."""
+        """The ``cv2.aruco.CharucoBoard`` (OpenCV >= 4.7), or the board of the older aruco API
+        (``CharucoBoard_create``: OpenCV 4.6 with the contrib modules, Ubuntu 24.04's); both lay
+        the markers out alike."""
         import cv2
 
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
-        return cv2.aruco.CharucoBoard((self.columns, self.rows), self.square, self.marker, dictionary)
+        if hasattr(cv2.aruco, "CharucoDetector"):
+            return cv2.aruco.CharucoBoard((self.columns, self.rows), self.square, self.marker, dictionary)
+        return cv2.aruco.CharucoBoard_create(self.columns, self.rows, self.square, self.marker, dictionary)
 
     def corner_points(self) -> np.ndarray:
         """(n_corners, 3) inner-corner positions in the board frame (metres), by corner id."""
@@ -88,4 +92,6 @@ class BoardSpec:
         """The printed face as a uint8 grey image, ``pixels_per_square`` per square, no margin:
         pixel (col, row) covers board x in [col, col + 1) / pixels_per_square * square."""
         w, h = self.columns * pixels_per_square, self.rows * pixels_per_square
-        return self.cv_board().generateImage((w, h), marginSize=0, borderBits=1)
+        board = self.cv_board()
+        draw = board.generateImage if hasattr(board, "generateImage") else board.draw  # OpenCV 4.6: draw
+        return draw((w, h), marginSize=0, borderBits=1)

@@ -1,8 +1,10 @@
 """ChArUco corners in one image, and whether the detections fit the configured board.
 
-:func:`detect_corners` runs OpenCV's ``cv2.aruco.CharucoDetector`` (markers, then the
+:class:`CornerDetector` runs OpenCV's ``cv2.aruco.CharucoDetector`` (markers, then the
 chessboard corners between them, refined to sub-pixel) and returns the corners with their
-ids. :func:`corner_fit_error` checks a detection against the board's geometry: the corners of a
+ids; with an OpenCV that has no ``CharucoDetector`` (4.6, Ubuntu 24.04's python3-opencv) the
+same two steps through the older functions (``detectMarkers``, ``interpolateCornersCharuco``),
+with the same settings. :func:`corner_fit_error` checks a detection against the board's geometry: the corners of a
 plane seen by a camera are related to their board coordinates by a homography (up to the
 lens distortion, small over a board), so a large residual means the markers were laid out
 differently from the configured board (other square counts or sizes).
@@ -37,23 +39,44 @@ class CornerDetection:
         return len(self.ids)
 
 
+#: Whether this OpenCV has the ChArUco detector class (4.7 and later).
+HAS_CHARUCO_DETECTOR = hasattr(cv2.aruco, "CharucoDetector")
+
+
 class CornerDetector:
-    """One ``cv2.aruco.CharucoDetector`` for the board ``spec``, reused for every image."""
+    """One ChArUco detector for the board ``spec``, reused for every image (module docstring)."""
 
     def __init__(self, spec: BoardSpec):
         self.spec = spec
-        params = cv2.aruco.DetectorParameters()
+        self._board = spec.cv_board()
+        params = cv2.aruco.DetectorParameters() if HAS_CHARUCO_DETECTOR else cv2.aruco.DetectorParameters_create()
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE  # the chessboard corners are refined
         params.minMarkerPerimeterRate = 0.01
-        charuco = cv2.aruco.CharucoParameters()
-        charuco.minMarkers = 1
-        refine = cv2.aruco.RefineParameters()
-        self._detector = cv2.aruco.CharucoDetector(spec.cv_board(), charuco, params, refine)
+        self._params = params
+        self._detector = None
+        if HAS_CHARUCO_DETECTOR:
+            charuco = cv2.aruco.CharucoParameters()
+            charuco.minMarkers = 1
+            refine = cv2.aruco.RefineParameters()
+            self._detector = cv2.aruco.CharucoDetector(self._board, charuco, params, refine)
+
+    def _detect_board(self, grey: np.ndarray):
+        """(corners, corner ids, marker ids) as ``CharucoDetector.detectBoard`` gives them."""
+        if self._detector is not None:
+            corners, ids, _marker_corners, marker_ids = self._detector.detectBoard(grey)
+            return corners, ids, marker_ids
+        marker_corners, marker_ids, _rejected = cv2.aruco.detectMarkers(
+            grey, self._board.dictionary, parameters=self._params)
+        if marker_ids is None or len(marker_ids) == 0:
+            return None, None, None
+        _count, corners, ids = cv2.aruco.interpolateCornersCharuco(
+            marker_corners, marker_ids, grey, self._board, minMarkers=1)
+        return corners, ids, marker_ids
 
     def detect(self, image: np.ndarray) -> CornerDetection:
         """Corners of an (H, W, 3) RGB or (H, W) grey uint8 image (none: ``n == 0``)."""
         grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
-        corners, ids, _marker_corners, marker_ids = self._detector.detectBoard(grey)
+        corners, ids, marker_ids = self._detect_board(grey)
         marker_ids = np.zeros(0, int) if marker_ids is None else marker_ids.ravel().astype(int)
         if ids is None or len(ids) == 0:
             return CornerDetection(np.zeros(0, int), np.zeros((0, 2)), marker_ids)

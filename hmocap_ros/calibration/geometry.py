@@ -27,7 +27,8 @@ def rotation_vectors(R: np.ndarray) -> np.ndarray:
     exact near 180 degrees)."""
     from scipy.spatial.transform import Rotation
 
-    return Rotation.from_matrix(np.asarray(R, np.float64).reshape(-1, 3, 3)).as_rotvec()
+    # a writable copy: SciPy 1.11 (Ubuntu 24.04's) refuses a read-only array
+    return Rotation.from_matrix(np.array(R, np.float64).reshape(-1, 3, 3)).as_rotvec()
 
 
 def invert(R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -161,7 +161,7 @@ def _extremities_msg(det, stamp_ns: int, frame_id: str, factory):
 
 def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = None,
                  silhouettes: str = "auto", learn_frames: int | None = None, max_people: int = 1,
-                 seed: int = 0, overrides: dict | None = None, body_id: str = "body_0",
+                 seed: int = 0, overrides: dict | None = None, body_id: str = "b0",
                  publish_tf: bool = True, rig_file: str | None = None, max_frames: int | None = None,
                  progress=None) -> dict:
     """Track every frame set of ``bag`` and write body_tracker's messages to the new bag ``out``
@@ -171,6 +171,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     from hmocap_ros.body import load_body_model
     from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
                                                          skeleton_labels)
+    from hmocap_ros.detection.keypoint_network import ModelFileError
     from hmocap_ros.eval.mocap_eval import method_params
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
@@ -190,8 +191,8 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     if learn_frames is not None and learn_frames < 1:
         raise TrackError(f"--learn-frames must be >= 1, got {learn_frames}")
     params = method_params(method or TrackerParams().method, overrides=overrides)
-    detection_params = ExtremityDetectionParams(detector=detector) if detector else ExtremityDetectionParams()
     counts = {"frame_sets": 0, "with_pose": 0, "notes": [], "warnings": {}, "topics": {}}
+    detection_params = ExtremityDetectionParams(detector=detector) if detector else ExtremityDetectionParams()
 
     def warn(text: str) -> None:
         counts["warnings"][text] = counts["warnings"].get(text, 0) + 1
@@ -217,7 +218,10 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
         pipeline = None
         if params.tracking_method.uses_detector:
             if any(t in available for t in image_topics):
-                pipeline = ExtremityPipeline(rig.cameras, detection_params)
+                try:
+                    pipeline = ExtremityPipeline(rig.cameras, detection_params)
+                except ModelFileError as err:
+                    raise TrackError(str(err)) from err
             else:
                 counts["notes"].append(f"no images in the bag: {params.method} runs without detections")
         models = None
@@ -302,8 +306,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="frames the background model learns from with fg (default: the frames "
                              "before the ground truth's first skeleton, else the node's learn_frames)")
     parser.add_argument("--max-people", type=int, default=1, help="people followed at once (default 1)")
-    parser.add_argument("--body-id", default="body_0",
-                        help="id of the first body (default body_0; the others are numbered on)")
+    parser.add_argument("--body-id", default="b0",
+                        help="REP-155 id of the first body (default b0, body_tracker's; the others are "
+                             "numbered on: b1, b2...)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the tracker (default 0)")
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
                         help="a tracker setting by its dotted name, e.g. filter.particles=500 "

@@ -55,6 +55,8 @@ __all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames"
 
 log = logging.getLogger(__name__)
 
+#: Longest time (s) between two progress lines of a method's run.
+PROGRESS_SECONDS = 10.0
 
 
 @dataclass
@@ -252,6 +254,9 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
 
     out = sys.stderr if out is None else out
     t0 = time.perf_counter()
+    print(f"{Path(bag).name}: reading the bag, segmenting the images"
+          + (" and detecting extremities" if any(get_method(m).uses_detector for m in methods) else "")
+          + " ...", file=out, flush=True)
     frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,
                          detector=(ExtremityDetectionParams(detector=detector)
                                    if any(get_method(m).uses_detector for m in methods)
@@ -274,9 +279,12 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
         "keypoints": keypoint_errors(frames),
         "methods": {},
     }
+    print(f"{Path(bag).name}: {len(frames.stamps)} frame sets ({int(frames.has_truth.sum())} with "
+          f"ground truth) read in {time.perf_counter() - t0:.0f} s", file=out, flush=True)
     for method in methods:
         res = run_method(frames, method, seed=seed, particles=particles, layers=layers,
-                         overrides=overrides, given_shape=given_shape, max_people=max_people)
+                         overrides=overrides, given_shape=given_shape, max_people=max_people,
+                         progress=ProgressPrinter(method, out))
         s = res.summary
         report["methods"][method] = {
             "mean_mm": s["mean_mm"], "std_mm": s["std_mm"], "median_mm": s["median_mm"],
@@ -296,6 +304,49 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
               + (f", {s['track_switches']} track switches" if max_people > 1 else ""), file=out)
     report["wall_seconds"] = time.perf_counter() - t0
     return report
+
+
+class ProgressPrinter:
+    """``run_method``'s progress callback: one line on ``out`` about every tenth of the frame
+    sets, at least every :data:`PROGRESS_SECONDS`, and at the last one (frame, state, time)."""
+
+    def __init__(self, method: str, out, seconds: float = PROGRESS_SECONDS):
+        self.method, self.out, self.seconds = method, out, seconds
+        self.t0 = self.last = time.perf_counter()
+        self.next_k = 0
+
+    def __call__(self, k: int, n: int, result) -> None:
+        now = time.perf_counter()
+        if k + 1 < n and k < self.next_k and now - self.last < self.seconds:
+            return
+        self.next_k = k + max(1, n // 10)
+        self.last = now
+        print(f"  {self.method}: frame set {k + 1}/{n} ({result.state}), {now - self.t0:.0f} s",
+              file=self.out, flush=True)
+
+
+def strict_json(obj):
+    """``obj`` with every non-finite float (NaN, inf) replaced by None, numpy scalars and
+    arrays by Python values: what ``json.dumps(..., allow_nan=False)`` accepts."""
+    if isinstance(obj, dict):
+        return {str(k): strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [strict_json(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return strict_json(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        value = float(obj)
+        return value if np.isfinite(value) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def unevaluated_methods(report: dict) -> list[str]:
+    """Methods of ``report`` that scored no frame (no pose on any frame with ground truth)."""
+    return [m for m, r in report["methods"].items() if not r["frames_with_pose"]]
 
 
 # ----------------------------------------------------------------------------- plot
@@ -384,11 +435,11 @@ def main_from_args(ns: argparse.Namespace) -> int:
             from hmocap_ros.rig import load_rig
 
             rig = load_rig(Path(ns.rig))
+        detector = ns.detector or ExtremityDetectionParams().detector
         report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
                           seed=ns.seed, particles=ns.particles, layers=ns.layers,
                           overrides=overrides, given_shape=ns.given_shape,
-                          max_people=ns.max_people, rig=rig,
-                          detector=ns.detector or ExtremityDetectionParams().detector)
+                          max_people=ns.max_people, rig=rig, detector=detector)
         if ns.rig:
             report["rig"] = str(ns.rig)
     except (ValueError, OSError, RuntimeError) as err:
@@ -396,9 +447,15 @@ def main_from_args(ns: argparse.Namespace) -> int:
         return 2
     if ns.json:
         Path(ns.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(ns.json).write_text(json.dumps(report, indent=1, default=_json_default))
+        Path(ns.json).write_text(json.dumps(strict_json(report), indent=1, allow_nan=False,
+                                            default=_json_default))
     if ns.plot:
         plot_errors(report, ns.plot)
+    failed = unevaluated_methods(report)
+    if failed:
+        print(f"hmocap eval mocap: no frame evaluated ({', '.join(failed)}: no pose on any of the "
+              f"{report['frames_with_truth']} frames with ground truth)", file=sys.stderr)
+        return 1
     return 0
 
 

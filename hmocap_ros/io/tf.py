@@ -15,12 +15,15 @@ frame's pose in the parent frame: ``translation`` is the child's origin in paren
 coordinates and ``rotation`` the unit quaternion ``(x, y, z, w)`` that rotates vectors given
 in child coordinates into parent coordinates, so ``p_parent = R p_child + t``.
 
-The rig's room frame (``frame_id`` of the rig file, ``room`` by default) is a fixed world frame
-(the role of ``map`` in REP 105) in metres with +Y up and the floor at y = 0. A camera's
-``<name>_optical_frame`` follows the REP 103 optical convention: x right, y down, z forward
-(the viewing direction). For tools that expect +Z up (RViz's grid, a robot's ``map``), the
-rotation :data:`Y_UP_TO_Z_UP` places the room in a +Z-up parent frame: room +Y is the parent's
-+Z, room +X the parent's +X, room +Z the parent's -Y.
+The root of the tree is a fixed frame with +Z up, as REP 103 asks of a world frame
+(:data:`DEFAULT_FIXED_FRAME`, ``world``; the role of ``map`` in REP 105), on the floor: RViz's
+grid and Foxglove's 3D panel lie on the floor with it. The rig's room frame (``frame_id`` of
+the rig file, ``room`` by default) hangs under it at the same origin, in metres with +Y up and
+the floor at y = 0 (the convention of the calibration, the simulator and the tracker); the
+rotation :data:`Y_UP_TO_Z_UP` takes room vectors into the fixed frame: room +Y is its +Z, room
++X its +X, room +Z its -Y. A camera's ``<name>_optical_frame`` hangs under the room and
+follows the REP 103 optical convention: x right, y down, z forward (the viewing direction);
+tracked bodies (``body_<id>``) hang under the room too.
 
 Static transforms go on ``/tf_static`` (:data:`TF_STATIC_TOPIC`) as one ``tf2_msgs/TFMessage``
 holding every transform of the publisher, reliable and transient-local with a history of one,
@@ -34,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
+    "DEFAULT_FIXED_FRAME",
     "FrameTransform",
     "TF_STATIC_TOPIC",
     "TF_TOPIC",
@@ -59,6 +63,9 @@ TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 
 #: Largest deviation of R^T R from I (and of det R from 1) accepted as a rotation.
 ROTATION_TOLERANCE = 1e-6
+
+#: The +Z-up fixed frame at the root of the tree (camera_rig_publisher's ``fixed_frame``).
+DEFAULT_FIXED_FRAME = "world"
 
 #: Quaternion (x, y, z, w) of the rotation that takes room (+Y up) vectors into a +Z-up frame:
 #: +90 degrees about X (room +Y -> +Z, room +Z -> -Y).
@@ -205,12 +212,13 @@ def camera_transform(camera, parent: str) -> FrameTransform:
     return frame_transform(parent, camera.frame_id, camera.R_wc, camera.position)
 
 
-def rig_transforms(rig, z_up_frame: str = "") -> list[FrameTransform]:
-    """Room frame -> optical frame of each camera of ``rig``, in rig order; with ``z_up_frame``,
-    first ``z_up_frame`` -> room (:data:`Y_UP_TO_Z_UP`, same origin)."""
+def rig_transforms(rig, fixed_frame: str = DEFAULT_FIXED_FRAME) -> list[FrameTransform]:
+    """With ``fixed_frame`` (+Z up) first ``fixed_frame`` -> room (:data:`Y_UP_TO_Z_UP`, same
+    origin), then room frame -> optical frame of each camera of ``rig``, in rig order. An empty
+    ``fixed_frame`` leaves the room at the root (for a tree that places it otherwise)."""
     out = []
-    if z_up_frame:
-        out.append(FrameTransform(z_up_frame, rig.frame_id, (0.0, 0.0, 0.0), Y_UP_TO_Z_UP))
+    if fixed_frame:
+        out.append(FrameTransform(fixed_frame, rig.frame_id, (0.0, 0.0, 0.0), Y_UP_TO_Z_UP))
     out += [camera_transform(camera, rig.frame_id) for camera in rig.cameras]
     return out
 

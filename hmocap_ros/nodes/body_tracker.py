@@ -20,7 +20,7 @@ Publications (all with the stamp of the frame set), following REP-155 (Human-Rob
 Interaction: ``humans/bodies/...`` topics and body frames), built by
 :class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages` (``hmocap track`` writes the
 same messages to a bag):
-  ``humans/bodies/tracked`` (hmocap_interfaces/IdsList, REP-155's hri_msgs/IdsList): the ids
+  ``humans/bodies/tracked`` (hri_msgs/IdsList, REP-155's type): the ids
   of the bodies with a pose in this frame set, for every frame set processed (empty: nobody).
   ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState), per body with a pose: the
   pose parameters (root translation in metres, angles in radians) by DoF name.
@@ -112,7 +112,8 @@ from dataclasses import dataclass
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
-from hmocap_interfaces.msg import Extremities, IdsList, Skeleton
+from hmocap_interfaces.msg import Extremities, Skeleton
+from hri_msgs.msg import IdsList
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -130,7 +131,7 @@ from hmocap_ros.rig import Rig
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
 from hmocap_ros.tracking.params import TrackerParams
-from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
+from hmocap_ros.tracking.people_tracker import DEFAULT_BODY_ID, PeopleTracker, body_ids
 from hmocap_ros.tracking.tracker_messages import TRACKED_TOPIC, TrackerMessages, per_body_topic
 from hmocap_ros.detection.detections import detections_from_msg
 from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
@@ -170,8 +171,9 @@ class BodyTrackerNodeConfig:
     publish_tf: bool = param(True, "Publish each tracked body's frames on /tf: room -> body_<id> (the "
                                    "pelvis) and <joint>_<id> along the skeleton (REP-155 names).")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
-    body_id: str = param("body_0", "Body id of the first tracked body in the published messages "
-                                   "(REP-155 style); further bodies are numbered on (body_1, ...).")
+    body_id: str = param(DEFAULT_BODY_ID, "REP-155 body id of the first tracked body (topics humans/bodies/"
+                                          "<id>/..., frames body_<id> and <joint>_<id>; it must start with "
+                                          "a letter); further bodies are numbered on (b1, b2, ...).")
     max_people: int = param(1, "People followed at once, one tracker each: a bystander the cameras "
                                "see better does not take the user's track, and each person gets "
                                "a body id; every followed person costs a filter run per frame.")

@@ -12,9 +12,9 @@ Subscriptions:
 Publications:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the whole rig.
   ``/tf_static`` (tf2_msgs/TFMessage, reliable, transient local, keep last 1, as tf2's static
-  broadcaster): the rig's room frame (``frame_id`` of the rig file) -> ``<camera>_optical_frame``
-  (the camera's ``frame_id``: x right, y down, z forward) for every rig camera, and with
-  ``z_up_frame`` that frame (+Z up) -> the room frame (+Y up); see :mod:`hmocap_ros.io.tf`.
+  broadcaster): ``fixed_frame`` (``world``, +Z up, the root) -> the rig's room frame
+  (``frame_id`` of the rig file, +Y up) -> ``<camera>_optical_frame`` (the camera's
+  ``frame_id``: x right, y down, z forward) for every rig camera; see :mod:`hmocap_ros.io.tf`.
   Only with ``publish_tf``.
   ``<camera>/camera_info`` (sensor_msgs/CameraInfo, reliable, keep last ``queue_depth``):
   intrinsics, stamp and frame of each image.
@@ -37,7 +37,7 @@ from tf2_msgs.msg import TFMessage
 from hmocap_ros.config_files import find_config_file
 from hmocap_ros.io.conversions import dict_to_camera_info
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.io.tf import TF_STATIC_TOPIC, rig_transforms, tf_message
+from hmocap_ros.io.tf import DEFAULT_FIXED_FRAME, TF_STATIC_TOPIC, rig_transforms, tf_message
 from hmocap_ros.nodes.common import (LATCHED_QOS, declare_parameters, image_qos, image_reliability_param, param,
                                      run_node)
 from hmocap_ros.rig import Rig, RigError, load_rig, rig_to_msg
@@ -58,9 +58,10 @@ class CameraRigPublisherConfig:
     image_reliability: str = image_reliability_param()
     publish_tf: bool = param(True, "Publish the room frame -> camera optical frame transforms of every rig "
                                    "camera on /tf_static (latched, as tf2's static broadcaster).")
-    z_up_frame: str = param("", "When set (e.g. 'map'), /tf_static also holds this frame as the parent of "
-                                "the room frame, with +Z up (REP 103) where the room has +Y up: a fixed "
-                                "frame for RViz's floor grid. Empty = the room frame is the root.")
+    fixed_frame: str = param(DEFAULT_FIXED_FRAME, "The +Z-up fixed frame (REP 103) at the root of /tf_static, "
+                                                  "parent of the room frame (+Y up) at the same origin: RViz's "
+                                                  "and Foxglove's floor grid. Empty = the room frame is the root "
+                                                  "(another node places it, e.g. a robot's map -> room).")
 
 
 class CameraRigPublisher(Node):
@@ -97,8 +98,8 @@ class CameraRigPublisher(Node):
     def _serve(self, rig: Rig, path: str, cameras: list[str]) -> None:
         """Publish ``rig`` (latched message and static transforms) and serve the CameraInfo of
         ``cameras`` (empty = all); cameras no longer served lose their subscription.
-        ``ValueError`` (nothing changed) for frames tf2 cannot take (``z_up_frame`` = the room)."""
-        transforms = rig_transforms(rig, self.config.z_up_frame) if self.tf_pub is not None else []
+        ``ValueError`` (nothing changed) for frames tf2 cannot take (``fixed_frame`` = the room)."""
+        transforms = rig_transforms(rig, self.config.fixed_frame) if self.tf_pub is not None else []
         names = list(cameras) or list(rig.names)
         unknown = [n for n in names if n not in rig.names]
         if unknown:
@@ -130,7 +131,7 @@ class CameraRigPublisher(Node):
     def _on_set_parameters(self, params) -> SetParametersResult:
         changed = {p.name: p.value for p in params}
         fixed = sorted(set(changed) & {"check_image_size", "queue_depth", "image_reliability", "publish_tf",
-                                        "z_up_frame"})
+                                        "fixed_frame"})
         if fixed:
             return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: read at start, restart the node")
         if not {"rig_file", "cameras"} & set(changed):

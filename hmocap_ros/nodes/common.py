@@ -72,6 +72,30 @@ def image_qos(reliability: str, depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
+def image_output_qos(depth: int) -> QoSProfile:
+    """QoS of an image a node publishes (masks, probability and feedback images), by REP-2003:
+    sensor data is published reliable and subscribed best effort, so every subscriber matches
+    (RViz's Image display and a default rclpy subscription are reliable; a best-effort one
+    matches a reliable publisher too). Volatile, keeping the last ``depth`` images: a reliable
+    writer with a bounded history replaces its oldest sample rather than wait, so a slow
+    subscriber, or a viewer that connects and vanishes, never stalls the node."""
+    if depth < 1:
+        raise ValueError(f"queue depth must be >= 1, got {depth}")
+    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def create_image_publisher(node: Node, topic: str, depth: int):
+    """A ``sensor_msgs/Image`` publisher of ``topic`` with :func:`image_output_qos`, whose
+    reliability, history and depth a user may change with rclpy's standard parameters
+    (``qos_overrides./<namespace>/<topic>.publisher.reliability`` ..., read at start)."""
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+    from sensor_msgs.msg import Image
+
+    return node.create_publisher(Image, topic, image_output_qos(depth),
+                                 qos_overriding_options=QoSOverridingOptions.with_default_policies())
+
+
 def sensor_qos(depth: int) -> QoSProfile:
     """Best-effort :func:`image_qos` keeping the last ``depth`` messages."""
     return image_qos("best_effort", depth)

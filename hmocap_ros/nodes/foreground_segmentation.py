@@ -11,7 +11,8 @@ Subscriptions:
   stall (CPU starvation, a publisher catching up) loses no frame as long as the node keeps up
   on average (:func:`~hmocap_ros.nodes.common.image_qos`).
 Publications:
-  ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id).
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id;
+  reliable, keep last ``queue_depth``: :func:`~hmocap_ros.nodes.common.image_output_qos`).
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames,
   milliseconds per frame and state (learning or segmenting) per camera.
 Services:
@@ -42,8 +43,8 @@ from std_srvs.srv import Trigger
 
 from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to_rgb, numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, image_qos, image_reliability_param,
-                                     param, run_node)
+from hmocap_ros.nodes.common import (RESULT_QOS, create_image_publisher, declare_parameters, image_qos,
+                                     image_reliability_param, param, run_node)
 from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
 
 NODE_NAME = "foreground_segmentation"
@@ -93,7 +94,7 @@ class ForegroundSegmentation(Node):
         self.mask_pubs = {}
         images_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         for name in self.cameras:
-            self.mask_pubs[name] = self.create_publisher(Image, f"{name}/foreground", SENSOR_QOS)
+            self.mask_pubs[name] = create_image_publisher(self, f"{name}/foreground", self.config.queue_depth)
             self.create_subscription(Image, f"{name}/image_raw", self._callback(name), images_qos)
         self.create_service(Trigger, "~/relearn", self._relearn)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)

@@ -54,7 +54,7 @@ from hmocap_ros.gestures.file_watch import FileWatch
 from hmocap_ros.gestures.gesture_messages import gesture_array, probability_image
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, depth_camera_from_info,
+from hmocap_ros.nodes.common import (RESULT_QOS, create_image_publisher, declare_parameters, depth_camera_from_info,
                                      depth_from_msg, image_qos, image_reliability_param, param, run_node)
 
 NODE_NAME = "gesture_detection"
@@ -95,7 +95,7 @@ class GestureDetection(Node):
         self.seconds = 0.0
         self.unit_warned = False
         self.pub = self.create_publisher(GestureArray, "gestures", RESULT_QOS)
-        self.prob_pub = (self.create_publisher(Image, "gestures/probability", SENSOR_QOS)
+        self.prob_pub = (create_image_publisher(self, "gestures/probability", self.config.queue_depth)
                          if self.config.publish_probability else None)
         depth_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         # camera_info as the images: a driver publishes both with one QoS

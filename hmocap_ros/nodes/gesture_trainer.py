@@ -64,7 +64,7 @@ from hmocap_ros.gestures.trainer import INSTRUCTIONS, Trainer, TrainerParams, Tr
 from hmocap_ros.gestures.trainer_feedback import feedback_image
 from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, ns_to_stamp, stamp_to_ns
-from hmocap_ros.nodes.common import (RESULT_QOS, SENSOR_QOS, declare_parameters, depth_camera_from_info,
+from hmocap_ros.nodes.common import (RESULT_QOS, create_image_publisher, declare_parameters, depth_camera_from_info,
                                      depth_from_msg, image_qos, image_reliability_param, param, run_node)
 from hmocap_ros.nodes.gesture_detection import DEPTH_ENCODINGS
 
@@ -156,7 +156,7 @@ class GestureTrainer(Node):
         self.stats = FrameStats()
         self.last_status: TrainerStatus | None = None
         self.state_pub = self.create_publisher(TrainerState, "gesture_trainer/state", RESULT_QOS)
-        self.feedback_pub = (self.create_publisher(Image, "gesture_trainer/feedback", SENSOR_QOS)
+        self.feedback_pub = (create_image_publisher(self, "gesture_trainer/feedback", self.config.queue_depth)
                              if self.config.publish_feedback else None)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
         self.create_subscription(CameraInfo, "depth/camera_info", self._on_info, image)

@@ -5,22 +5,39 @@ lives here so that tests and offline tools get the same numbers.
 
 Frames (REP-155, "Body frames")
 -------------------------------
-Per tracked body with id ``<id>`` (the ``body_id`` of the Skeleton message):
+Per tracked body with id ``<id>`` (the ``body_id`` of the Skeleton message, ``b0`` for the
+first body by default):
 
 - ``<room> -> body_<id>``: the body frame, at the pelvis joint, the root of the tracking
   skeleton (REP-155 puts it at the mid point of the hips; the tracking body's pelvis joint
   lies 2.4 cm above that point);
-- ``<parent frame> -> <joint>_<id>`` for each other joint of the tracking skeleton, along its
+- ``<parent frame> -> <frame>_<id>`` for each other joint of the tracking skeleton, along its
   kinematic tree: the joints whose parent is the pelvis (``spine``, ``l_hip``, ``r_hip``)
   hang from ``body_<id>``, every other joint from its parent joint's frame.
 
-The frame names are the body model's joint names suffixed with the body id, as REP-155
-asks: ``spine``, ``chest``, ``neck``, ``head``, ``l_clavicle``, ``l_shoulder``, ``l_elbow``,
-``l_wrist``, ``r_clavicle``, ``r_shoulder``, ``r_elbow``, ``r_wrist``, ``l_hip``,
-``l_knee``, ``l_ankle``, ``r_hip``, ``r_knee``, ``r_ankle``. REP-155's human model shares
-``head`` and the limb joints (``l_shoulder`` ... ``r_ankle``) with these; ``spine``,
-``chest``, ``neck`` and the clavicles are the tracking skeleton's own. With the default ids
-(``body_0``, ``body_1``, ...) the frames read ``body_body_0``, ``l_wrist_body_0``, ...
+Frame names (:func:`rep155_frame_name`): a joint with a counterpart in REP-155's human model
+(ros4hri/human_description: ``body``, ``waist``, ``head``, ``l_shoulder`` ... ``r_ankle``)
+takes that link's name, the others keep the tracking skeleton's, all suffixed with the body
+id as REP-155 asks:
+
+=================  ====================  =============================================
+tracking joint     frame                 REP-155 counterpart
+=================  ====================  =============================================
+``pelvis``         ``body_<id>``         ``body`` (the root)
+``spine``          ``waist_<id>``        ``waist`` (the lower trunk's bending joint)
+``head``           ``head_<id>``         ``head``
+``l_shoulder``,    ``l_shoulder_<id>``,  the same names: shoulders, elbows, wrists,
+... ``r_ankle``    ...                   hips, knees, ankles of both sides
+``chest``,         ``chest_<id>``,       none: REP-155's trunk is one link (``torso``,
+``neck``,          ``neck_<id>``,        fixed at shoulder height) and its arms hang from
+``l_clavicle``,    ``l_clavicle_<id>``,  it; the tracking skeleton bends at the chest
+``r_clavicle``     ``r_clavicle_<id>``   and the neck and moves the clavicles
+=================  ====================  =============================================
+
+The Skeleton message keeps the tracking skeleton's joint names (``pelvis``, ``spine``, ...),
+and ``humans/bodies/<id>/joint_states`` carries the tracker's degrees of freedom by name: the
+human_description URDF parametrises the body with other joints (``l_y_shoulder``,
+``l_p_shoulder``, ...), so its joint names would not describe these angles.
 
 Orientation follows REP-155 and REP-103: x forward (out of the body), y to the person's
 left, z up (towards the head) for a person standing in the rest pose. The body model's own
@@ -57,9 +74,9 @@ from hmocap_ros.body.kinematics import forward_kinematics
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.io.tf import FrameTransform, rotations_to_quaternions
 
-__all__ = ["AGREEMENT_SCALE", "REP155_AXES", "SPREAD_PARTICLES", "SPREAD_SCALE", "body_frame",
-           "body_transforms", "joint_confidence", "joint_frame", "joint_spread",
-           "joint_transforms"]
+__all__ = ["AGREEMENT_SCALE", "REP155_AXES", "REP155_NAMES", "SPREAD_PARTICLES", "SPREAD_SCALE",
+           "body_frame", "body_transforms", "joint_confidence", "joint_frame", "joint_spread",
+           "joint_transforms", "rep155_frame_name"]
 
 #: Columns: the REP-155 body axes x (forward), y (left), z (up) in the body model's frame
 #: (x left, y up, z forward). ``R_room_frame = G_joint @ REP155_AXES``.
@@ -76,14 +93,25 @@ AGREEMENT_SCALE = 0.05
 SPREAD_PARTICLES = 256
 
 
+#: Tracking joints whose REP-155 link has another name (the rest keep theirs; module docstring).
+REP155_NAMES = {"pelvis": "body", "spine": "waist"}
+
+
+def rep155_frame_name(joint: str) -> str:
+    """The REP-155 link name of a tracking joint (before the body id): ``pelvis`` -> ``body``,
+    ``spine`` -> ``waist``, every other joint its own name."""
+    return REP155_NAMES.get(joint, joint)
+
+
 def body_frame(body_id: str) -> str:
     """REP-155's body frame of ``body_id``: ``body_<id>``."""
     return f"body_{body_id}"
 
 
 def joint_frame(joint: str, body_id: str) -> str:
-    """The frame of ``joint`` of body ``body_id``: ``<joint>_<id>``."""
-    return f"{joint}_{body_id}"
+    """The frame of tracking joint ``joint`` of body ``body_id``: ``<REP-155 name>_<id>``
+    (:func:`rep155_frame_name`)."""
+    return f"{rep155_frame_name(joint)}_{body_id}"
 
 
 def joint_transforms(model, params: np.ndarray, rest_joints: np.ndarray) -> np.ndarray:

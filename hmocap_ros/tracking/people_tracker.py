@@ -21,6 +21,7 @@ visual hull of the frame to look for a new person.
 """
 from __future__ import annotations
 
+import re
 from typing import Sequence
 
 import numpy as np
@@ -32,13 +33,21 @@ from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.result import TrackResult
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS
 
-__all__ = ["PeopleTracker", "body_ids"]
+__all__ = ["DEFAULT_BODY_ID", "PeopleTracker", "body_ids"]
+
+#: The first body's id: REP-155 names its frame ``body_<id>`` (``body_b0``) and its topics
+#: ``humans/bodies/<id>/...``; a ROS name token cannot start with a digit, hence the letter.
+DEFAULT_BODY_ID = "b0"
 
 
 def body_ids(first: str, n: int) -> tuple[str, ...]:
-    """Ids of ``n`` slots: ``first``, then its stem numbered (``body_0`` -> ``body_1``...)."""
-    stem = first.rsplit("_", 1)[0] if first.rsplit("_", 1)[-1].isdigit() else first
-    return (first,) + tuple(f"{stem}_{k}" for k in range(1, n))
+    """Ids of ``n`` slots: ``first``, then numbered on from its trailing number (``b0`` -> ``b1``,
+    ``body_0`` -> ``body_1``), or with ``_1``, ``_2``... appended when it has none."""
+    match = re.fullmatch(r"(.*?)(\d+)", first)
+    if match is None:
+        return (first,) + tuple(f"{first}_{k}" for k in range(1, n))
+    stem, number = match.group(1), int(match.group(2))
+    return (first,) + tuple(f"{stem}{number + k}" for k in range(1, n))
 
 
 class PeopleTracker:
@@ -58,7 +67,7 @@ class PeopleTracker:
         rngs = [rng] + list(rng.spawn(max_people - 1))
         self.trackers = tuple(BodyTracker(model, rig, params, g, shape=shape if k == 0 else None)
                               for k, g in enumerate(rngs))
-        self.ids = tuple(ids) if ids is not None else body_ids("body_0", max_people)
+        self.ids = tuple(ids) if ids is not None else body_ids(DEFAULT_BODY_ID, max_people)
         if len(self.ids) != max_people or len(set(self.ids)) != max_people:
             raise ValueError(f"need {max_people} distinct body ids, got {self.ids}")
 

@@ -8,13 +8,17 @@ same topics, types, stamps and contents. Messages are built through a message fa
 Topics (relative names, as the node publishes them; REP-155 for the ``humans/bodies`` ones;
 every message stamped with the frame set's stamp, in the rig's room frame):
 
-- ``humans/bodies/tracked`` (hmocap_interfaces/IdsList): the ids of the bodies with a pose,
-  one message per frame set (empty: nobody);
+- ``humans/bodies/tracked`` (hri_msgs/IdsList, REP-155's type): the ids of the bodies with a
+  pose, one message per frame set (empty: nobody);
 - ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState) per body with a pose: the pose
   parameters by DoF name;
 - ``skeleton`` (hmocap_interfaces/Skeleton) per body with a pose: 3D joints, parents,
   per-joint confidence (:mod:`hmocap_ros.tracking.body_frames`), fit cost;
-- ``skeleton_markers`` (visualization_msgs/MarkerArray) per body with a pose: joints and bones;
+- ``skeleton_markers`` (visualization_msgs/MarkerArray) per body with a pose: joints and bones,
+  in the body's namespace (its id), kept by the viewer until replaced (no lifetime: poses may
+  come seconds apart on a loaded machine); when a body that had a pose has none, one array
+  with a ``DELETEALL`` marker goes first, so the lost body's skeleton disappears and the
+  bodies still tracked are drawn again after it;
 - ``humans/bodies/<id>/body_shape`` (hmocap_interfaces/BodyShape, latched) when the body's
   anthropometry is new, the first body's also on ``body_shape``;
 - ``/tf`` (tf2_msgs/TFMessage): every tracked body's frames (``body_<id>``, ``<joint>_<id>``)
@@ -38,14 +42,16 @@ __all__ = ["BODY_SHAPE_TOPIC", "MARKERS_TOPIC", "SKELETON_TOPIC", "TRACKED_TOPIC
 
 #: REP-155's list of the bodies tracked now
 TRACKED_TOPIC = "humans/bodies/tracked"
+#: its type (ROS4HRI's, so REP-155 tools read it)
+IDS_LIST_TYPE = "hri_msgs/msg/IdsList"
 SKELETON_TOPIC = "skeleton"
 MARKERS_TOPIC = "skeleton_markers"
 #: the first body's shape, besides its per-body topic
 BODY_SHAPE_TOPIC = "body_shape"
 #: marker colours (r, g, b) of the bodies, in turn
 BODY_COLOURS = ((1.0, 0.3, 0.0), (0.2, 0.9, 0.2), (1.0, 0.8, 0.1), (0.3, 0.5, 1.0))
-#: seconds a marker stays on screen without an update (it disappears when tracking stops)
-MARKER_LIFETIME_NS = 500_000_000
+#: visualization_msgs/Marker types and actions used here
+SPHERE_LIST, LINE_LIST, ADD, DELETEALL = 7, 5, 0, 3
 
 
 def per_body_topic(body_id: str, name: str) -> str:
@@ -55,7 +61,7 @@ def per_body_topic(body_id: str, name: str) -> str:
 
 def tracker_topics(ids: Sequence[str], publish_tf: bool = True) -> dict[str, str]:
     """Every topic the tracker publishes for bodies ``ids`` -> its message type."""
-    out = {TRACKED_TOPIC: "hmocap_interfaces/msg/IdsList",
+    out = {TRACKED_TOPIC: IDS_LIST_TYPE,
            SKELETON_TOPIC: "hmocap_interfaces/msg/Skeleton",
            MARKERS_TOPIC: "visualization_msgs/msg/MarkerArray",
            BODY_SHAPE_TOPIC: "hmocap_interfaces/msg/BodyShape"}
@@ -96,17 +102,22 @@ class TrackerMessages:
         self.factory = factory
         self.publish_tf = publish_tf
         self.last_shape = [None] * len(self.ids)
+        self.had_pose = [False] * len(self.ids)
 
     def frame_set(self, stamp_ns: int, results: Sequence, shape_models: Sequence) -> FrameSetMessages:
         """The messages of one frame set: ``results`` one per slot (TrackResult),
         ``shape_models`` the body model each slot's shape scales (its height)."""
         out = FrameSetMessages()
+        posed = [bool(result.has_pose) for result in results]
+        if any(had and not now for had, now in zip(self.had_pose, posed)):
+            out.messages.append((MARKERS_TOPIC, self.delete_all(stamp_ns)))
+        self.had_pose = posed
         for k, result in enumerate(results):
             if result.has_pose:
                 out.messages += self.pose(k, stamp_ns, result, shape_models[k])
         tracked = [body for body, result in zip(self.ids, results) if result.has_pose]
         out.messages.append((TRACKED_TOPIC, self.factory.make(
-            "hmocap_interfaces/msg/IdsList", header=self._header(stamp_ns), ids=tracked)))
+            IDS_LIST_TYPE, header=self._header(stamp_ns), ids=tracked)))
         if self.publish_tf:
             tf, out.errors = self.transforms(stamp_ns, results)
             if tf is not None:
@@ -153,25 +164,32 @@ class TrackerMessages:
         f = self.factory
         body = self.ids[k]
         points = self._points(joints)
-        lifetime = f.make("builtin_interfaces/msg/Duration", sec=0, nanosec=MARKER_LIFETIME_NS)
         # the identity pose (rclpy's default; a rosbags default quaternion is all zeros)
         pose = f.make("geometry_msgs/msg/Pose", orientation=f.make("geometry_msgs/msg/Quaternion", w=1.0))
         r, g, b = BODY_COLOURS[k % len(BODY_COLOURS)]
         spheres = f.make("visualization_msgs/msg/Marker", header=self._header(stamp_ns), ns=body, id=0,
-                         type=7, action=0,  # SPHERE_LIST, ADD
+                         type=SPHERE_LIST, action=ADD,
                          scale=f.make("geometry_msgs/msg/Vector3", x=0.06, y=0.06, z=0.06),
                          color=f.make("std_msgs/msg/ColorRGBA", r=r, g=g, b=b, a=1.0),
-                         pose=pose, points=points, lifetime=lifetime)
+                         pose=pose, points=points)
         bone_points = []
         for child, parent in enumerate(self.model.parents):
             if parent >= 0:
                 bone_points += [points[parent], points[child]]
         bones = f.make("visualization_msgs/msg/Marker", header=self._header(stamp_ns), ns=body, id=1,
-                       type=5, action=0,  # LINE_LIST, ADD
+                       type=LINE_LIST, action=ADD,
                        scale=f.make("geometry_msgs/msg/Vector3", x=0.02),
                        color=f.make("std_msgs/msg/ColorRGBA", r=0.0, g=0.8, b=1.0, a=1.0),
-                       pose=pose, points=bone_points, lifetime=lifetime)
+                       pose=pose, points=bone_points)
         return f.make("visualization_msgs/msg/MarkerArray", markers=[spheres, bones])
+
+    def delete_all(self, stamp_ns: int):
+        """A MarkerArray holding one ``DELETEALL`` marker: the viewer drops every skeleton."""
+        f = self.factory
+        pose = f.make("geometry_msgs/msg/Pose", orientation=f.make("geometry_msgs/msg/Quaternion", w=1.0))
+        marker = f.make("visualization_msgs/msg/Marker", header=self._header(stamp_ns), action=DELETEALL,
+                        pose=pose)
+        return f.make("visualization_msgs/msg/MarkerArray", markers=[marker])
 
     def transforms(self, stamp_ns: int, results: Sequence):
         """Every tracked body's frames in one TFMessage (None when no body has frames), and

@@ -1,0 +1,123 @@
+"""``hmocap render overlay BAG --out FILE.mp4|DIR``: the tracked skeleton drawn over the cameras.
+
+A multi-view bag (a rig and camera images) gives one picture per frame set: every camera's
+image with the tracked skeletons projected onto it, tiled, coloured by the 3D error of each
+joint where the ground truth is known (green 0, red 150 mm and more, the true skeleton thin and
+white beneath), and the extremity detections as crosses. A depth bag gives the depth image
+false-coloured with the detected gestures' boxes and scores (the true ones in white).
+Pictures and reading: :mod:`hmocap_ros.viz.overlay`, :mod:`hmocap_ros.viz.overlay_bag`.
+
+The skeletons and gestures are the bag's own (a recording of the nodes, or what ``hmocap
+track`` / ``hmocap detect gestures`` wrote), or those of ``--outputs BAG``, matched by stamp;
+``--track`` tracks the bag on the fly first (``hmocap track`` with its defaults, into a
+temporary bag). The ground truth is the bag's, or that of ``--truth BAG`` (the recording the
+nodes were fed). ``--out`` ending in ``.mp4`` (or ``.avi``) writes a video at the bag's frame
+rate (``--fps``), anything else a folder of PNG frames.
+
+Bad input (a bag that cannot be read, no rig, no images, no skeletons or gestures, a video
+that cannot be written) is one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+__all__ = ["add_arguments", "main_from_args", "render_overlay"]
+
+PROG = "hmocap render overlay"
+
+
+def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, overrides: dict | None = None,
+                   width: int | None = None, fps: float | None = None, max_frames: int | None = None,
+                   progress=None) -> tuple[int, Path]:
+    """Draw ``bag`` into ``out`` (module docstring); returns the pictures written and the path.
+    :class:`~hmocap_ros.viz.overlay_bag.OverlayError` for bad input."""
+    from hmocap_ros.viz.overlay_bag import (OverlayError, bag_kind, depth_pictures, multiview_pictures,
+                                            write_pictures)
+
+    bag = Path(bag)
+    kind = bag_kind(bag)
+    with tempfile.TemporaryDirectory(prefix="hmocap_overlay_") as tmp:
+        if track:
+            if kind != "multiview":
+                raise OverlayError(f"{bag}: --track needs a multi-view bag (a rig and camera images)")
+            from hmocap_ros.commands.track import TrackError, track_to_bag
+
+            outputs = Path(tmp) / "tracked.mcap"
+            if progress is not None:
+                progress(f"tracking {bag.name} ...")
+            try:
+                counts = track_to_bag(bag, outputs, max_frames=max_frames, overrides=overrides, progress=progress)
+            except TrackError as err:
+                raise OverlayError(str(err)) from err
+            if not counts["with_pose"]:
+                raise OverlayError(f"{bag}: the tracker found nobody in its {counts['frame_sets']} frame sets")
+        outputs = Path(outputs) if outputs is not None else None
+        truth = Path(truth) if truth is not None else None
+        for path in (outputs, truth):
+            if path is not None and not path.exists():
+                raise OverlayError(f"{path}: does not exist")
+        if kind == "multiview":
+            pictures = multiview_pictures(bag, outputs, truth, tile_width=width or 480, max_frames=max_frames)
+        else:
+            pictures = depth_pictures(bag, outputs, truth, width=width or 640, max_frames=max_frames)
+        return write_pictures(_reported(pictures, progress), Path(out), fps)
+
+
+def _reported(pictures, progress, period_s: float = 5.0):
+    last = time.monotonic()
+    for k, picture in enumerate(pictures):
+        if progress is not None and time.monotonic() - last >= period_s:
+            last = time.monotonic()
+            progress(f"{k} pictures drawn")
+        yield picture
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="multi-view bag (rig + camera images) or depth bag (.mcap or rosbag2 folder)")
+    parser.add_argument("--out", required=True, type=Path,
+                        help="FILE.mp4 (or .avi): a video; any other name: a folder of PNG frames")
+    parser.add_argument("--outputs", type=Path, default=None,
+                        help="bag with the skeletons (/skeleton, /extremities) or gestures (/gestures) to "
+                             "draw, matched by stamp (default: BAG's own)")
+    parser.add_argument("--truth", type=Path, default=None,
+                        help="bag with the ground truth (/ground_truth/...; default: BAG's own, if any)")
+    parser.add_argument("--track", action="store_true",
+                        help="track the multi-view bag on the fly (hmocap track's defaults) instead of "
+                             "reading its skeletons")
+    parser.add_argument("--param", action="append", metavar="KEY=VALUE",
+                        help="with --track: a tracker setting by its dotted name (repeatable)")
+    parser.add_argument("--width", type=int, default=None,
+                        help="width in pixels of each camera's tile (default 480) or of the depth picture (640)")
+    parser.add_argument("--fps", type=float, default=None, help="video frame rate (default: the bag's)")
+    parser.add_argument("--frames", type=int, default=None, help="draw at most this many frames")
+
+
+def main_from_args(ns: argparse.Namespace) -> int:
+    from hmocap_ros.viz.overlay_bag import OverlayError
+
+    if ns.width is not None and ns.width < 32:
+        print(f"{PROG}: --width must be at least 32 pixels, got {ns.width}", file=sys.stderr)
+        return 2
+    if ns.fps is not None and not ns.fps > 0:
+        print(f"{PROG}: --fps must be positive, got {ns.fps}", file=sys.stderr)
+        return 2
+    try:
+        overrides = None
+        if ns.param:
+            from hmocap_ros.eval.mocap_eval import tracker_overrides
+
+            overrides = tracker_overrides(ns.param)
+        count, path = render_overlay(ns.bag, ns.out, outputs=ns.outputs, truth=ns.truth, track=ns.track,
+                                     overrides=overrides,
+                                     width=ns.width, fps=ns.fps, max_frames=ns.frames,
+                                     progress=lambda text: print(f"{PROG}: {text}", file=sys.stderr, flush=True))
+    except (OverlayError, OSError, ValueError) as err:
+        print(f"{PROG}: {err}", file=sys.stderr)
+        return 2
+    print(f"{count} pictures -> {path}")
+    return 0

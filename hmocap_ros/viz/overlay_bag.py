@@ -1,0 +1,256 @@
+"""``hmocap render overlay``'s reading and writing: a bag in, one picture per frame, a video out.
+
+Two kinds of bag (:func:`bag_kind`):
+
+- **multi-view** (the rig on ``/camera_rig``, images on ``/<camera>/image_raw``): every frame set
+  of images (grouped by stamp, as the tracker groups them) with the tracked skeletons of that
+  stamp (``/skeleton``, one message per body: body_tracker's output, recorded or written by
+  ``hmocap track``), the labelled extremities (``/extremities``) and, where the bag (or the
+  ``truth`` bag) has it, the ground truth (``/ground_truth/skeleton``): per-joint errors
+  matched by joint name (:func:`hmocap_ros.eval.metrics.match_joints`);
+- **depth** (``/depth/image_raw``, no rig): every depth frame with the detected gestures of its
+  stamp (``/gestures``) and the true ones (``/ground_truth/gestures``).
+
+The outputs (skeletons, gestures) may come from another bag than the images (``outputs``: the
+recording of the nodes, or a bag that ``hmocap track`` wrote); they are matched by stamp.
+What is missing (no rig, no images, no outputs) raises :class:`OverlayError` with one line
+naming it. :func:`write_pictures` writes an MP4 (OpenCV's ``mp4v`` codec) or a folder of PNGs.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from hmocap_ros.io import topics
+from hmocap_ros.io.bag_reader import BagReader, BagReadError
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.viz.overlay import Banner, BodyDrawing, DepthGesture, depth_picture, multiview_picture
+
+__all__ = ["EXTREMITIES", "GESTURES", "SKELETON", "OverlayError", "Picture", "bag_kind", "depth_pictures",
+           "multiview_pictures", "write_pictures"]
+
+SKELETON = "/skeleton"
+EXTREMITIES = "/extremities"
+GESTURES = "/gestures"
+#: Largest stamp difference (ns) between an output and its frame set (body_tracker's slop).
+SLOP_NS = 5_000_000
+VIDEO_SUFFIXES = {".mp4": "mp4v", ".avi": "MJPG"}
+
+
+class OverlayError(ValueError):
+    """A bag cannot be drawn: the text names what is missing, in one line."""
+
+
+@dataclass
+class Picture:
+    """One frame's picture (RGB uint8) and its stamp."""
+
+    stamp_ns: int
+    image: np.ndarray
+
+
+def _topics(path: Path) -> dict:
+    try:
+        with BagReader(path) as reader:
+            return reader.topics()
+    except BagReadError as err:
+        raise OverlayError(str(err)) from err
+
+
+def bag_kind(path: Path) -> str:
+    """``multiview`` or ``depth`` (module docstring); OverlayError when the bag has neither a
+    rig with camera images nor depth images."""
+    available = _topics(path)
+    images = sorted(t for t in available if t.endswith("/image_raw") and t != topics.DEPTH_IMAGE)
+    if topics.CAMERA_RIG in available:
+        return "multiview"
+    if images:
+        raise OverlayError(f"{path}: no {topics.CAMERA_RIG} (the cameras' calibration, needed to project "
+                           f"the skeleton onto {', '.join(images[:4])}{' ...' if len(images) > 4 else ''})")
+    if topics.DEPTH_IMAGE in available:
+        return "depth"
+    raise OverlayError(f"{path}: no images to draw on: neither {topics.CAMERA_RIG} with camera images "
+                       f"nor {topics.DEPTH_IMAGE}")
+
+
+def _by_stamp(path: Path, topic: str) -> dict[int, list]:
+    out: dict[int, list] = {}
+    with BagReader(path) as reader:
+        if topic in reader.topics():
+            for m in reader.messages([topic]):
+                out.setdefault(stamp_to_ns(m.msg.header.stamp), []).append(m.msg)
+    return out
+
+
+def _near(by_stamp: dict[int, list], stamps: np.ndarray, stamp: int) -> list:
+    """The messages of ``stamp``, else of the nearest stamp within :data:`SLOP_NS`."""
+    if stamp in by_stamp:
+        return by_stamp[stamp]
+    if not len(stamps):
+        return []
+    k = int(np.clip(np.searchsorted(stamps, stamp), 1, len(stamps) - 1)) if len(stamps) > 1 else 0
+    best = min({k, max(k - 1, 0)}, key=lambda i: abs(int(stamps[i]) - stamp))
+    return by_stamp[int(stamps[best])] if abs(int(stamps[best]) - stamp) <= SLOP_NS else []
+
+
+def _points(msg) -> np.ndarray:
+    return np.array([[p.x, p.y, p.z] for p in msg.positions], np.float64).reshape(-1, 3)
+
+
+def _body(msg, truth) -> BodyDrawing:
+    from hmocap_ros.eval.metrics import match_joints
+
+    joints = _points(msg)
+    errors = None
+    if truth is not None:
+        errors = np.full(len(joints), np.nan)
+        i, j = match_joints(list(msg.joint_names), list(truth.joint_names))
+        errors[i] = 1000.0 * np.linalg.norm(joints[i] - _points(truth)[j], axis=1)
+    return BodyDrawing(str(msg.body_id), joints, [int(p) for p in msg.parents], errors)
+
+
+def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = None,
+                       tile_width: int = 480, max_frames: int | None = None) -> Iterator[Picture]:
+    """The pictures of a multi-view bag (module docstring); OverlayError for what is missing."""
+    from hmocap_ros.io.conversions import ConversionError, image_to_rgb
+    from hmocap_ros.rig import RigError, rig_from_msg
+
+    outputs = outputs or bag
+    truth = truth or bag
+    available = _topics(bag)
+    with BagReader(bag) as reader:
+        rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
+    if rig_msg is None:
+        raise OverlayError(f"{bag}: no {topics.CAMERA_RIG} (the cameras' calibration)")
+    try:
+        rig = rig_from_msg(rig_msg)
+    except (RigError, ValueError) as err:
+        raise OverlayError(f"{bag}: {topics.CAMERA_RIG}: {err}") from err
+    image_topics = [topics.camera_image(n) for n in rig.names]
+    present = [t for t in image_topics if t in available]
+    if not present:
+        raise OverlayError(f"{bag}: no camera images ({', '.join(image_topics)})")
+    skeletons = _by_stamp(outputs, SKELETON)
+    if not skeletons:
+        raise OverlayError(f"{outputs}: no tracked skeletons ({SKELETON}, body_tracker's output): "
+                           f"record it, or track on the fly with --track")
+    extremities = _by_stamp(outputs, EXTREMITIES)
+    truths = _by_stamp(truth, topics.GT_SKELETON)
+    sk_stamps, ex_stamps, gt_stamps = (np.array(sorted(d), np.int64) for d in (skeletons, extremities, truths))
+    first = None
+    with BagReader(bag) as reader:
+        for n, (stamp, msgs) in enumerate(reader.frame_sets(present, SLOP_NS, allow_partial=True, min_topics=1)):
+            if max_frames is not None and n >= max_frames:
+                return
+            first = stamp if first is None else first
+            images = []
+            for topic in image_topics:
+                try:
+                    images.append(image_to_rgb(msgs[topic]) if topic in msgs else None)
+                except ConversionError:
+                    images.append(None)
+            gt = _near(truths, gt_stamps, stamp)
+            gt = gt[0] if gt else None
+            bodies = [_body(msg, gt) for msg in _near(skeletons, sk_stamps, stamp)]
+            ex = _near(extremities, ex_stamps, stamp)
+            ex_points = (list(ex[0].labels), _points(ex[0])) if ex and len(ex[0].labels) else None
+            detail = "  ".join(
+                f"{b.body_id}" + (f": mean joint error {np.nanmean(b.errors_mm):.0f} mm"
+                                  if b.errors_mm is not None and np.isfinite(b.errors_mm).any() else "")
+                for b in bodies) or "no body tracked"
+            banner = Banner(f"{bag.name}  t = {(stamp - first) * 1e-9:6.2f} s", detail,
+                            legend=gt is not None and bool(bodies))
+            truth_body = BodyDrawing("truth", _points(gt), [int(p) for p in gt.parents]) if gt is not None else None
+            yield Picture(stamp, multiview_picture(rig.cameras, images, bodies, banner, truth_body, ex_points,
+                                                   tile_width))
+
+
+def depth_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = None,
+                   width: int = 640, max_frames: int | None = None) -> Iterator[Picture]:
+    """The pictures of a depth bag (module docstring); OverlayError for what is missing."""
+    from hmocap_ros.io.conversions import ConversionError, depth_image_to_metres
+
+    outputs = outputs or bag
+    truth = truth or bag
+    detected = _by_stamp(outputs, GESTURES)
+    if not detected:
+        raise OverlayError(f"{outputs}: no gesture detections ({GESTURES}, gesture_detection's output): "
+                           f"record it, or write it with hmocap detect gestures")
+    true = _by_stamp(truth, topics.GT_GESTURES)
+    info = None
+    with BagReader(bag) as reader:
+        if topics.DEPTH_INFO in reader.topics():
+            info = reader.first(topics.DEPTH_INFO)
+    fx = float(info.k[0]) if info is not None and info.k[0] > 0 else None
+    det_stamps, gt_stamps = (np.array(sorted(d), np.int64) for d in (detected, true))
+    first = None
+    with BagReader(bag) as reader:
+        for n, m in enumerate(reader.messages([topics.DEPTH_IMAGE])):
+            if max_frames is not None and n >= max_frames:
+                return
+            stamp = stamp_to_ns(m.msg.header.stamp)
+            first = stamp if first is None else first
+            try:
+                depth = depth_image_to_metres(m.msg)
+            except ConversionError:
+                continue
+            found = [DepthGesture(g.u, g.v, g.name, float(g.score), g.position.z if g.position_valid else 0.0)
+                     for msg in _near(detected, det_stamps, stamp) for g in msg.gestures]
+            held = [DepthGesture(g.u, g.v, g.name, None, g.position.z if g.position_valid else 0.0)
+                    for msg in _near(true, gt_stamps, stamp) for g in msg.gestures]
+            detail = ", ".join(f"{g.name} {g.score:.2f}" for g in found) or "no gesture detected"
+            if held:
+                detail += "   truth: " + ", ".join(g.name for g in held)
+            banner = Banner(f"{bag.name}  t = {(stamp - first) * 1e-9:6.2f} s", detail)
+            yield Picture(stamp, depth_picture(depth, found, held, banner, fx, width))
+
+
+def frame_rate(stamps: list[int], default: float = 25.0) -> float:
+    """Frames per second of stamps (the median interval), for a video that plays in real time."""
+    steps = np.diff(np.asarray(stamps, np.int64))
+    steps = steps[steps > 0]
+    return float(np.clip(1e9 / np.median(steps), 1.0, 120.0)) if len(steps) else default
+
+
+def write_pictures(pictures: Iterator[Picture], out: Path, fps: float | None = None) -> tuple[int, Path]:
+    """Write the pictures to ``out``: a video for a ``.mp4``/``.avi`` name (``fps``: default the
+    stamps' rate), else a folder of ``frame_NNNNN.png``. Returns the count and the path;
+    OverlayError when no picture came or the video cannot be written."""
+    out = Path(out)
+    if fps is None:  # the rate of the first frames, then on as they come
+        pictures = iter(pictures)
+        head = list(itertools.islice(pictures, 10))
+        fps = frame_rate([p.stamp_ns for p in head])
+        pictures = itertools.chain(head, pictures)
+    video = out.suffix.lower() in VIDEO_SUFFIXES
+    count = 0
+    writer = None
+    try:
+        for picture in pictures:
+            bgr = np.ascontiguousarray(picture.image[:, :, ::-1])
+            if video:
+                if writer is None:
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                    h, w = bgr.shape[:2]
+                    writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*VIDEO_SUFFIXES[out.suffix.lower()]),
+                                             fps, (w - w % 2, h - h % 2))
+                    if not writer.isOpened():
+                        raise OverlayError(f"{out}: OpenCV cannot write this video here (no {out.suffix} "
+                                           f"encoder); give a folder to write PNG frames")
+                writer.write(np.ascontiguousarray(bgr[:bgr.shape[0] - bgr.shape[0] % 2, :bgr.shape[1] - bgr.shape[1] % 2]))
+            else:
+                out.mkdir(parents=True, exist_ok=True)
+                cv2.imwrite(str(out / f"frame_{count:05d}.png"), bgr)
+            count += 1
+    finally:
+        if writer is not None:
+            writer.release()
+    if count == 0:
+        raise OverlayError(f"nothing to draw: no frame in the bag (nothing written to {out})")
+    return count, out

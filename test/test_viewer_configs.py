@@ -1,0 +1,67 @@
+"""The shipped viewer layouts show what the demo's bag holds, in the fixed frame the rig publisher puts at the root.
+
+``config/hmocap.rviz`` (RViz 2) and ``config/hmocap_foxglove.json`` (Foxglove) are read as data:
+every topic they display must be one the body demo records (:func:`hmocap_ros.demo.body_topics`),
+the fixed frame must be ``camera_rig_publisher``'s default, and each camera image must have its
+calibration (camera_info) beside it, so the skeleton can be drawn over it.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import yaml
+
+from hmocap_ros.demo import _cameras, DEMO_BAG, body_topics
+from hmocap_ros.io.tf import DEFAULT_FIXED_FRAME
+from hmocap_ros.nodes.camera_rig_publisher import CameraRigPublisherConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _rviz_topics(display: dict) -> list[str]:
+    topic = display.get("Topic")
+    return [topic["Value"]] if isinstance(topic, dict) else []
+
+
+def test_rviz_config_shows_the_demo_bag_in_the_world_frame():
+    config = yaml.safe_load((ROOT / "config" / "hmocap.rviz").read_text())["Visualization Manager"]
+    assert config["Global Options"]["Fixed Frame"] == DEFAULT_FIXED_FRAME == CameraRigPublisherConfig().fixed_frame
+    displays = config["Displays"]
+    recorded = set(body_topics(_cameras(DEMO_BAG)))
+    shown = {t for d in displays for t in _rviz_topics(d)}
+    assert shown <= recorded, shown - recorded
+    classes = {d["Class"] for d in displays}
+    assert {"rviz_default_plugins/Grid", "rviz_default_plugins/TF", "rviz_default_plugins/MarkerArray",
+            "rviz_default_plugins/Camera", "rviz_default_plugins/Image"} <= classes
+    cameras = [d for d in displays if d["Class"] == "rviz_default_plugins/Camera"]
+    # a Camera display reads <image topic's namespace>/camera_info: recorded too
+    assert all(_rviz_topics(d)[0].rsplit("/", 1)[0] + "/camera_info" in recorded for d in cameras)
+    assert all(d["Visibility"]["Skeleton (skeleton_markers)"] for d in cameras)
+    # images published by the nodes are reliable, camera images may be best effort
+    for d in displays:
+        if d.get("Topic", {}).get("Value", "").endswith("/foreground"):
+            assert d["Topic"]["Reliability Policy"] == "Reliable"
+
+
+def test_foxglove_layout_shows_the_skeleton_over_every_camera_of_the_demo():
+    layout = json.loads((ROOT / "config" / "hmocap_foxglove.json").read_text())
+    panels = layout["configById"]
+    recorded = set(body_topics(_cameras(DEMO_BAG)))
+    images = {k: v for k, v in panels.items() if k.startswith("Image!")}
+    for panel in images.values():
+        mode = panel["imageMode"]
+        assert mode["imageTopic"] in recorded
+        if "calibrationTopic" in mode:
+            assert mode["calibrationTopic"] in recorded
+            assert panel["topics"]["/skeleton_markers"]["visible"]
+    overlaid = {p["imageMode"]["imageTopic"] for p in images.values() if "calibrationTopic" in p["imageMode"]}
+    assert overlaid == {f"/{c}/image_raw" for c in _cameras(DEMO_BAG)}
+    scene = panels["3D!room"]
+    assert scene["followTf"] == DEFAULT_FIXED_FRAME and scene["topics"]["/skeleton_markers"]["visible"]
+    assert scene["layers"]["grid"]["frameId"] == DEFAULT_FIXED_FRAME
+
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
+
+    assert sorted(leaves(layout["layout"])) == sorted(panels)  # every panel placed, none missing
