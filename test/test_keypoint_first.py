@@ -25,7 +25,7 @@ from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.keypoint_anthropometry import MEASURES, KeypointShape
 from hmocap_ros.tracking.keypoint_first import KeypointFirstParams, contradicted
 from hmocap_ros.tracking.keypoint_fit import KeypointFit, load_keypoint_model
-from test_body_tracking import clip_poses, scaled_to_height, subject_shape
+from test_body_tracking import clip_poses, render_masks, scaled_to_height, subject_shape
 from test_detector_driven import arms_out
 
 STAMP0 = 1_700_000_000_000_000_000
@@ -235,3 +235,27 @@ def test_the_keypoints_place_a_forearm_the_silhouettes_lost(model, rig):
         assert f == 0 or ("l_shoulder" in tracker.last_keypoints[2] and res.layers)
     # 6 mm on average; on the silhouettes alone the forearm drifts 2-5 cm towards the body
     assert np.mean(errors[1:]) < 0.015, errors
+
+
+def test_the_tracker_measures_the_shape_of_a_new_track_from_its_keypoints(model, rig):
+    """kf-hpf's start: the shape of a subject unlike the model, solved from the keypoints of the
+    track's first frame sets, is nearer the truth than the model scaled to the subject's true
+    height, on the mean over the entities; the track's fit uses it."""
+    shape = subject_shape()
+    rest = apply_shape(model, shape)
+    fit = landmark_fit(model)
+    rng = np.random.default_rng(6)
+    poses = clip_poses(model, 0, 8, shape)
+    masks, _ = render_masks(model, rig, poses, shape)
+    tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
+        "method": "kf-hpf", "filter.particles": 40, "weighting.working_scale": 0.5,
+        "startup.min_foreground": 30, "keypoints.shape_frames": 8}), np.random.default_rng(0))
+    # these keypoints are the model's own points: no bias of the network's to correct
+    tracker.keypoint_shape.corrections = np.ones(len(MEASURES))
+    for f, params in enumerate(poses):
+        tracker.update(list(masks[f]), STAMP0 + f * 40_000_000,
+                       keypoints(fit, params, rest, rng, noise=0.01))
+    truth = entity_sizes(model, shape)
+    error = np.abs(entity_sizes(model, tracker.shape) - truth).mean()
+    stature = np.abs(entity_sizes(model, scaled_to_height(model, shape)) - truth).mean()
+    assert len(tracker.keypoint_shape) == 8 and error < 0.7 * stature, (error, stature)

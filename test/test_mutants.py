@@ -162,11 +162,12 @@ def bundle_adjustment_keeps_outliers(mp: pytest.MonkeyPatch) -> None:
 
 
 def startup_shape_estimation_off(mp: pytest.MonkeyPatch) -> None:
-    """The tracker's start-up keeps the model's proportions (scaled to the hull), whatever
+    """A new track keeps the model's proportions: kf-hpf measures no shape from its keypoints,
+    and the silhouette start-up keeps them scaled to the hull, whatever
     ``startup.estimate_shape`` says."""
     import dataclasses
 
-    from hmocap_ros.tracking import startup
+    from hmocap_ros.tracking import body_tracker, startup
 
     real = startup.StartUp.__init__
 
@@ -176,6 +177,7 @@ def startup_shape_estimation_off(mp: pytest.MonkeyPatch) -> None:
         real(self, params, *args, **kwargs)
 
     mp.setattr(startup.StartUp, "__init__", __init__)
+    mp.setattr(body_tracker.BodyTracker, "_measure_shape", lambda self, *args: False)
 
 
 @dataclass(frozen=True)
@@ -217,11 +219,8 @@ MUTANTS = {
     "bundle_adjustment_keeps_outliers": Mutant(bundle_adjustment_keeps_outliers, (
         "test_calibration.py::test_bundle_adjustment_drops_the_corners_far_from_their_projection",)),
     "startup_shape_estimation_off": Mutant(startup_shape_estimation_off, (
-        TRACKING + "test_anthropometry_estimation_beats_the_model_proportions",
-        TRACKING + "test_anthropometry_estimation_beats_a_fit_of_the_stature_alone"),
-        survives="the per-entity estimation does not yet beat a fit of the stature alone, and "
-                 "the hull's stature alone beats the model's proportions: a start-up that "
-                 "keeps the proportions scaled to the hull loses nothing the tests can see"),
+        "test_keypoint_first.py::"
+        "test_the_tracker_measures_the_shape_of_a_new_track_from_its_keypoints",)),
     "shadow_suppression_off": Mutant(shadow_suppression_off, (
         "test_segmentation.py::test_cast_shadow_is_not_foreground",
         "test_segmentation.py::test_foreground_beats_naive_differencing_with_shadows_and_light_changes")),
