@@ -98,7 +98,7 @@ def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path, capsys):
                    "--seed", "1", "--json", str(out), "--plot", str(png), *SMALL_BUDGET])
     assert rc == 0
     progress = capsys.readouterr().err
-    assert "reading the bag" in progress and "dd-hpf: frame set" in progress
+    assert "reading the bag" in progress and "kf-hpf: frame set" in progress
     assert "hpf: frame set" in progress
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "fg" and report["silhouettes_fallback"] == ""
