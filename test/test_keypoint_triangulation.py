@@ -238,3 +238,18 @@ def test_landmarks_of_wide_angle_lenses_are_undistorted_before_triangulation():
     assert np.nanmax(bend) > 20.0  # the lens matters here
     result = triangulate_views(cameras, _views(cameras, points, rng))
     _check(result, _expected(points), tolerance=0.01)
+
+
+def test_a_view_that_disagrees_with_all_others_is_left_out_and_named():
+    """A fifth camera whose landmarks are another pose altogether (another person, a wrong
+    crop): the other four views place every label, and the result names that view as left
+    out; with four agreeing views none is."""
+    rng = np.random.default_rng(3)
+    points, cameras = _landmarks_3d(), _cameras(5)
+    views = _views(cameras, points, rng)
+    other = _views(cameras, points + np.array([0.8, 0.0, 0.5]), rng)
+    views[4] = other[4]
+    result = triangulate_views(cameras, views)
+    _check(result, _expected(points))
+    assert result.views_left_out == (4,)
+    assert triangulate_views(cameras[:4], views[:4]).views_left_out == ()

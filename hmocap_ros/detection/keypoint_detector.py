@@ -214,6 +214,9 @@ class KeypointDetector:
         self._reported: set[str] = set()
         self._tracks: list[Roi | None] = [None] * len(self.cameras)
         self.last_timings: dict[str, float] = {}
+        #: per camera, the frame sets whose triangulation left the view out (its landmarks
+        #: disagreeing with the other views')
+        self.views_left_out: dict[str, int] = {}
         self.last_sources: list[str | None] = [None] * len(self.cameras)
 
     def close(self) -> None:
@@ -315,6 +318,9 @@ class KeypointDetector:
                 self._skip(self.cameras[v], "the pose detector finds nobody")
         used_masks = [m if plan is not None else None for m, plan in zip(masks, plans)]
         result = triangulate_views(self.cameras, views, used_masks, previous, self.params)
+        for v in result.views_left_out:
+            name = self.cameras[v].name
+            self.views_left_out[name] = self.views_left_out.get(name, 0) + 1
         t3 = time.perf_counter()
         timings.update(triangulation=t3 - t2, total=t3 - t0)
         self.last_timings = timings

@@ -82,6 +82,9 @@ HEAD_OFFSET = (-0.078, 0.040)
 #: Metres each hip point moves outwards along the hips' axis: BlazePose's hip landmarks lie
 #: inside the body model's hip joints.
 HIP_WIDENING = 0.03
+#: a view whose landmarks agree with the triangulated points on fewer than this share of the
+#: points it has is reported as left out (a view of another person, a wrong crop)
+LEFT_OUT_SHARE = 0.25
 #: points triangulated besides the labels, to orient the head
 _AUXILIARY = {"nose": (0,), "left_ear": (7,), "right_ear": (8,)}
 _POINTS = KEYPOINT_LABELS + tuple(_AUXILIARY)
@@ -150,13 +153,16 @@ class Keypoints3D:
 
     labels: subset of :data:`KEYPOINT_LABELS`, in its order; positions: (K, 3) room frame,
     metres; scores: (K,) confidence in [0, 1] (module docstring); views_used: (K,) the number
-    of views the point was triangulated from.
+    of views the point was triangulated from; views_left_out: the views (camera indices) whose
+    landmarks disagree with the other views on nearly every point (:data:`LEFT_OUT_SHARE`),
+    left out of this frame set.
     """
 
     labels: tuple[str, ...]
     positions: np.ndarray
     scores: np.ndarray
     views_used: np.ndarray
+    views_left_out: tuple = ()
 
     def as_dict(self) -> dict[str, np.ndarray]:
         """``{label: (3,) position}``, the form :func:`triangulate_views` takes as ``previous``."""
@@ -365,5 +371,11 @@ def triangulate_views(cameras, views: Sequence[ViewLandmarks | None],
     positions = _body_points(points)
     keep = np.isfinite(positions).all(axis=1) & (scores >= params.min_score)
     views_used = inliers.sum(axis=0)[:len(KEYPOINT_LABELS)]
-    return Keypoints3D(labels=tuple(str(n) for n in np.array(KEYPOINT_LABELS)[keep]),
+    # a view with landmarks that agree with the triangulated points on almost none of them
+    usable = (weights > 0) & np.isfinite(points).all(axis=1)[None, :]
+    agreed = (inliers & usable).sum(axis=1)
+    left_out = tuple(int(v) for v in np.flatnonzero(
+        (usable.sum(axis=1) >= 3) & (agreed < LEFT_OUT_SHARE * usable.sum(axis=1))))
+    return Keypoints3D(views_left_out=left_out,
+                       labels=tuple(str(n) for n in np.array(KEYPOINT_LABELS)[keep]),
                        positions=positions[keep], scores=scores[keep], views_used=views_used[keep])

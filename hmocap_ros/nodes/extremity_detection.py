@@ -302,8 +302,15 @@ class ExtremityDetectionNode(Node):
                     KeyValue(key="cpu_ms_per_frame_set", value=f"{cpu_ms:.1f}"),
                     KeyValue(key="skipped_frame_sets", value=str(self.skipped)),
                     KeyValue(key="detections", value=str(self.last_counts[0])),
-                    KeyValue(key="views", value=str(self.last_counts[1]))]))
+                    KeyValue(key="views", value=str(self.last_counts[1])),
+                    KeyValue(key="views_left_out", value=" ".join(
+                        f"{name}:{n}" for name, n in sorted(self._left_out().items())))]))
         self.pub_diag.publish(out)
+
+    def _left_out(self) -> dict:
+        """Per camera, the frame sets whose keypoints left the view out (disagreeing)."""
+        keypoints = getattr(self.pipeline, "keypoints", None) if self.pipeline else None
+        return dict(keypoints.views_left_out) if keypoints is not None else {}
 
     def log_totals(self) -> None:
         self.get_logger().info(f"frame sets detected: {self.frames}")
