@@ -259,3 +259,31 @@ def test_the_tracker_measures_the_shape_of_a_new_track_from_its_keypoints(model,
     error = np.abs(entity_sizes(model, tracker.shape) - truth).mean()
     stature = np.abs(entity_sizes(model, scaled_to_height(model, shape)) - truth).mean()
     assert len(tracker.keypoint_shape) == 8 and error < 0.7 * stature, (error, stature)
+
+
+def test_joints_without_keypoints_keep_their_prediction_with_a_low_confidence(model, rig,
+                                                                            arms_scene):
+    """The legs' keypoints gone after the first frame sets (the person's legs out of the
+    cameras' view, say): the legs stay where they were (no jump) and their confidence drops
+    below 0.1, while the seen joints keep theirs."""
+    params, masks = arms_scene
+    fit = landmark_fit(model)
+    rest = apply_shape(model, None)
+    rng = np.random.default_rng(7)
+    tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
+        "method": "kf-hpf", "filter.particles": 40, "weighting.working_scale": 0.5,
+        "startup.min_foreground": 30, "keypoints.shape_frames": 0}), np.random.default_rng(0))
+    legs = ("left_knee", "left_ankle", "left_foot", "right_knee", "right_ankle", "right_foot")
+    knees = [model.joint_index("l_knee"), model.joint_index("r_knee")]
+    for f in range(3):
+        res = tracker.update(list(masks), STAMP0 + f * 40_000_000,
+                             keypoints(fit, params, rest, rng, noise=0.005))
+    before = res.joints[knees].copy()
+    det = keypoints(fit, params, rest, rng, noise=0.005)
+    keep = [i for i, lab in enumerate(det.labels) if lab not in legs]
+    det = Detections("keypoints", tuple(det.labels[i] for i in keep), det.positions[keep],
+                     det.scores[keep])
+    res = tracker.update(list(masks), STAMP0 + 3 * 40_000_000, det, budget_s=0.0)
+    assert np.linalg.norm(res.joints[knees] - before, axis=1).max() < 0.03
+    confidence = res.confidence
+    assert confidence[knees].max() < 0.1 and confidence[model.joint_index("pelvis")] > 0.5

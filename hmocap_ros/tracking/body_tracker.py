@@ -91,6 +91,9 @@ log = logging.getLogger(__name__)
 
 #: Stages timed per frame (``TrackResult.timings``), besides the weighting's own.
 STAGES = ("observe", "hull", "init", "filter", "proposals", "detection", "fit")
+#: Spread (m) reported for a joint no keypoint places in a frame set where no filter ran: its
+#: confidence is then exp(-3), whatever the other joints' fit
+UNSEEN_SPREAD = 0.15
 #: Most frame periods between two processed frame sets that the motion model accounts for
 #: (velocity extrapolation and diffusion; module docstring).
 MAX_ELAPSED_PERIODS = 4
@@ -432,12 +435,12 @@ class BodyTracker:
         return Assigned(detections.positions, effectors, joints, scores)
 
     def _fit_spread(self, fit) -> np.ndarray:
-        """Per joint, the RMS residual (m) of the fitted keypoints of its body block (of all
-        of them for a joint whose block has none): how far the keypoints and the body
-        disagree, in place of the particles' spread where no filter ran."""
+        """Per joint, the RMS residual (m) of the fitted keypoints of its body block: how far
+        the keypoints and the body disagree, in place of the particles' spread where no filter
+        ran. A joint whose block has no keypoint (a leg out of view) is held at its prediction
+        and gets :data:`UNSEEN_SPREAD`, a low confidence."""
         resid = dict(zip(fit.labels, fit.residuals))
-        overall = float(np.sqrt(np.mean(np.square(fit.residuals))))
-        out = np.full(self.skel.n_joints, overall)
+        out = np.full(self.skel.n_joints, UNSEEN_SPREAD)
         for j, group in enumerate(self._joint_blocks):
             own = [resid[k] for k in BLOCK_KEYPOINTS.get(group, ()) if k in resid]
             if own:
