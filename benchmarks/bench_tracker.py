@@ -39,6 +39,7 @@ import numpy as np
 from hmocap_ros.body import load_body_model, local_rotations_to_pose
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
+from hmocap_ros.tracking.body_tracker import working_scale
 from hmocap_ros.eval.mocap_eval import tracker_overrides
 from hmocap_ros.params import from_flat
 from hmocap_ros.render import project_batch, render_silhouettes
@@ -78,8 +79,8 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--threads", type=int, nargs="*", default=[1, 2])
     ap.add_argument("--methods", nargs="*", default=list(method_names()), choices=method_names())
-    ap.add_argument("--working-scale", type=float, default=TrackerParams().weighting.working_scale,
-                    help="weighting.working_scale (default %(default)s)")
+    ap.add_argument("--working-width", type=int, default=TrackerParams().weighting.working_width,
+                    help="weighting.working_width (default %(default)s)")
     ap.add_argument("--mesh", default=TrackerParams().weighting.mesh, choices=TRACKER_MESHES,
                     help="mesh the tracker renders its particles with, weighting.mesh "
                          "(default %(default)s)")
@@ -88,15 +89,16 @@ def main() -> None:
                          "(repeatable; as hmocap eval mocap --param)")
     args = ap.parse_args()
     try:
-        # --param wins over --working-scale and --mesh
-        settings = {"weighting.working_scale": args.working_scale, "weighting.mesh": args.mesh,
+        # --param wins over --working-width and --mesh
+        settings = {"weighting.working_width": args.working_width, "weighting.mesh": args.mesh,
                     **tracker_overrides(args.param)}
         base = from_flat(TrackerParams, settings)
     except ValueError as err:
         ap.error(str(err))
-    scale, mesh = base.weighting.working_scale, base.weighting.mesh
+    mesh = base.weighting.mesh
     model = load_body_model("tracking")
     rig = load_rig(ROOT / "config" / "rig_example.yaml")
+    scale = working_scale(list(rig), base.weighting.working_width)
     shape, masks, maps = scene(model, rig, args.frames + 1)
     print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
           f"{platform.machine()}, cpus {numba.config.NUMBA_NUM_THREADS}")

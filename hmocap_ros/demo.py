@@ -46,12 +46,10 @@ DEMO_BAG = DATA_DIR / "mocap_4cam.mcap"
 DEMO_RIG = DATA_DIR / "mocap_4cam_rig.yaml"
 GESTURE_BAG = DATA_DIR / "gestures_depth.mcap"
 
-#: body_tracker settings of the demo: the shipped bag is 160x120, so compare at full scale;
-#: every frame is queued and tracked (a live room, ``latest_only`` as the node's default,
-#: would rather skip frames than lag).
+#: body_tracker settings of the demo: every frame is queued and tracked (a live room,
+#: ``latest_only`` as the node's default, would rather skip frames than lag).
 #: extremity_detection runs its default detector.
-TRACKER_ARGS = ["-p", "weighting.working_scale:=1.0", "-p", "method:=kf-hpf", "-p",
-                "queue_depth:=100", "-p", "latest_only:=false"]
+TRACKER_ARGS = ["-p", "queue_depth:=100", "-p", "latest_only:=false"]
 
 
 def _cameras(bag: Path) -> list[str]:

@@ -88,8 +88,8 @@ def test_the_pipeline_benchmark_runs_the_nodes_on_the_shipped_bags(tmp_path, fre
                           "--logs", str(tmp_path / "logs"), "--domain-id", str(free_domain_id),
                           *(a for kv in ("foreground_segmentation:learn_frames=8",
                                          "foreground_segmentation:min_blob_area=20",
-                                         "foreground_segmentation:max_hole_area=60",
-                                         "body_tracker:weighting.working_scale=1.0") for a in ("--param", kv))],
+                                         "foreground_segmentation:max_hole_area=60")
+                             for a in ("--param", kv))],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
     r = json.loads(out.read_text())

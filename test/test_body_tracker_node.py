@@ -34,8 +34,7 @@ CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
 #: the extremity detector of the pipeline test (the shipped bag is 160x120)
 DETECTOR = "keypoints"
 FAST = ["-p", "filter.particles:=120", "-p", "filter.layers:=0", "-p", "startup.particles:=60",
-        "-p", "startup.frames:=2", "-p", "weighting.working_scale:=1.0",
-        "-p", "startup.working_scale:=1.0"]
+        "-p", "startup.frames:=2"]
 #: every frame set answered, in stamp order (a slow replay), with every mask kept
 EVERY_FRAME = ["-p", "latest_only:=false", "-p", "queue_depth:=100"]
 BODY_0 = "/humans/bodies/b0"

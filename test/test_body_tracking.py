@@ -316,7 +316,7 @@ def shape_estimate(model, rig):
     masks, _ = render_masks(model, rig, params, shape)
     tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
         "method": "hpf-apo", "startup.frames": 2, "startup.particles": 120,
-        "startup.working_scale": 0.5, "weighting.working_scale": 0.5,
+        "startup.working_width": 160,
         "startup.min_foreground": 30, "filter.particles": 20}), np.random.default_rng(0))
     states = [tracker.update(list(m), STAMP0 + f).state for f, m in enumerate(masks)]
     assert states == ["initialising", "tracking"] and tracker.shape is not None
@@ -793,8 +793,8 @@ def test_start_up_hull_travel_seeds_the_pelvis_track(model, rig):
 
 #: a small budget for the tracker tests (dotted settings, :func:`hmocap_ros.params.from_flat`)
 #: the thesis' silhouette tracking at a small budget (kf-hpf without keypoints runs it too)
-SMALL = {"method": "hpf-apo", "filter.particles": 120, "weighting.working_scale": 0.5,
-         "startup.working_scale": 0.5, "startup.particles": 80, "startup.frames": 2,
+SMALL = {"method": "hpf-apo", "filter.particles": 120, "startup.working_width": 160,
+         "startup.particles": 80, "startup.frames": 2,
          "startup.min_foreground": 30}
 
 

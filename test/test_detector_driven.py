@@ -254,7 +254,7 @@ def _a_pose_baseline(model, params, truth):
 
 def _dd_tracker(model, rig):
     return BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "dd-hpf", "filter.particles": 100, "weighting.working_scale": 0.5,
+        "method": "dd-hpf", "filter.particles": 100, "startup.working_width": 160,
         "startup.min_foreground": 30, "startup.estimate_shape": False}),
         np.random.default_rng(0))
 

@@ -41,7 +41,7 @@ pytestmark = pytest.mark.faults
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
 FAST = ["-p", "filter.particles:=120", "-p", "filter.layers:=0", "-p", "startup.particles:=60",
-        "-p", "startup.frames:=2", "-p", "weighting.working_scale:=1.0", "-p", "startup.working_scale:=1.0"]
+        "-p", "startup.frames:=2"]
 EVERY_FRAME = ["-p", "latest_only:=false", "-p", "queue_depth:=100"]
 BODY_0 = "/humans/bodies/b0"
 #: the recorder flushes at least once a second; a loaded machine adds scheduling delay

@@ -139,7 +139,7 @@ def test_the_silhouettes_drop_a_wrist_put_in_empty_space(model, rig, arms_scene)
     alone = fit.fit(wrong, rest, params)
     dragged = np.linalg.norm(joints_of(model, alone.params[None], rest)[0][wrist] - truth[wrist])
     tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "kf-hpf", "filter.particles": 120, "weighting.working_scale": 0.5,
+        "method": "kf-hpf", "filter.particles": 120,
         "startup.min_foreground": 30, "keypoints.shape_frames": 0}), np.random.default_rng(0))
     for f in range(4):
         res = tracker.update(list(masks), STAMP0 + f * 40_000_000,
@@ -161,7 +161,7 @@ def test_kf_hpf_starts_from_keypoints_and_runs_on_silhouettes_without_them(model
     rest = apply_shape(model, None)
     rng = np.random.default_rng(3)
     tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "kf-hpf", "filter.particles": 60, "weighting.working_scale": 0.5,
+        "method": "kf-hpf", "filter.particles": 60,
         "startup.min_foreground": 30, "keypoints.shape_frames": 0}), np.random.default_rng(0))
     truth = joints_of(model, params[None], rest)[0]
     res = tracker.update(list(masks), STAMP0, keypoints(fit, params, rest, rng, noise=0.005))
@@ -219,7 +219,7 @@ def test_the_keypoints_place_a_forearm_the_silhouettes_lost(model, rig):
     rest = apply_shape(model, None)
     rng = np.random.default_rng(5)
     tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "kf-hpf", "filter.particles": 120, "weighting.working_scale": 0.5,
+        "method": "kf-hpf", "filter.particles": 120,
         "startup.min_foreground": 30, "keypoints.shape_frames": 0,
         "keypoints.check_views": len(rig) + 1}), np.random.default_rng(0))
     truth = joints_of(model, params[None], rest)[0]
@@ -248,7 +248,7 @@ def test_the_tracker_measures_the_shape_of_a_new_track_from_its_keypoints(model,
     poses = clip_poses(model, 0, 8, shape)
     masks, _ = render_masks(model, rig, poses, shape)
     tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "kf-hpf", "filter.particles": 40, "weighting.working_scale": 0.5,
+        "method": "kf-hpf", "filter.particles": 40,
         "startup.min_foreground": 30, "keypoints.shape_frames": 8}), np.random.default_rng(0))
     # these keypoints are the model's own points: no bias of the network's to correct
     tracker.keypoint_shape.corrections = np.ones(len(MEASURES))
@@ -271,7 +271,7 @@ def test_joints_without_keypoints_keep_their_prediction_with_a_low_confidence(mo
     rest = apply_shape(model, None)
     rng = np.random.default_rng(7)
     tracker = BodyTracker(model, rig, from_flat(TrackerParams, {
-        "method": "kf-hpf", "filter.particles": 40, "weighting.working_scale": 0.5,
+        "method": "kf-hpf", "filter.particles": 40,
         "startup.min_foreground": 30, "keypoints.shape_frames": 0}), np.random.default_rng(0))
     legs = ("left_knee", "left_ankle", "left_foot", "right_knee", "right_ankle", "right_foot")
     knees = [model.joint_index("l_knee"), model.joint_index("r_knee")]

@@ -26,8 +26,7 @@ from hmocap_ros.rig import Rig, load_rig, rig_to_msg
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_BAG = ROOT / "hmocap_ros" / "data" / "demo" / "mocap_4cam.mcap"
 STAMP0 = 1_700_000_000_000_000_000
-SMALL_BUDGET = ["--particles", "40", "--param", "weighting.working_scale=1.0",
-                "--param", "startup.working_scale=1.0", "--param", "startup.particles=40",
+SMALL_BUDGET = ["--particles", "40", "--param", "startup.particles=40",
                 "--param", "startup.frames=1", "--param", "startup.min_foreground=15"]
 
 

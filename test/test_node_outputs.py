@@ -15,8 +15,7 @@ from hmocap_ros.processes import loopback_dds_env, replay_through_nodes
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
 SMALL_TRACKER = ["-p", "filter.particles:=60", "-p", "filter.layers:=0", "-p", "startup.particles:=40",
-                 "-p", "startup.frames:=2", "-p", "weighting.working_scale:=1.0",
-                 "-p", "startup.working_scale:=1.0"]
+                 "-p", "startup.frames:=2"]
 
 
 def _stamps(reader: BagReader, topic: str) -> list[int]:

@@ -233,7 +233,7 @@ def test_a_node_names_a_parameter_it_does_not_have(free_domain_id):
 
     exe = Path(sys.executable).parent / "body_tracker"
     assert exe.exists(), f"{exe} is not installed: make setup installs the package's executables"
-    proc = subprocess.Popen([str(exe), "--ros-args", "-p", "working_scale:=1.0", "-p",
+    proc = subprocess.Popen([str(exe), "--ros-args", "-p", "working_width:=160", "-p",
                              f"rig_file:={DEMO_RIG}"], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True,
                             env=loopback_dds_env(domain_id=free_domain_id))
@@ -248,8 +248,8 @@ def test_a_node_names_a_parameter_it_does_not_have(free_domain_id):
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)
     text = "".join(lines)
-    assert "unknown parameter 'working_scale' ignored" in text, text
-    assert "weighting.working_scale" in text and "startup.working_scale" in text
+    assert "unknown parameter 'working_width' ignored" in text, text
+    assert "weighting.working_width" in text and "startup.working_width" in text
 
 
 def test_every_hmocap_subcommand_answers_help(capsys):

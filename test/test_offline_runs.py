@@ -27,8 +27,7 @@ from hmocap_ros.tracking.body_frames import joint_frame
 
 #: a small tracker budget (the figures of the README come from ``hmocap eval mocap``)
 SMALL = ["--param", "filter.particles=60", "--param", "filter.layers=0", "--param", "startup.particles=40",
-         "--param", "startup.frames=2", "--param", "weighting.working_scale=1.0",
-         "--param", "startup.working_scale=1.0"]
+         "--param", "startup.frames=2"]
 #: the demo bag's 8 empty-room frames and 4 with the subject: start-up, then tracking
 TRACK_FRAMES = 12
 

@@ -25,8 +25,7 @@ from test_body_tracking import STAMP0, clip_poses, render_masks, subject_shape
 
 FRAMES = 5
 SMALL = ["-p", "method:=hpf", "-p", "filter.particles:=120", "-p", "filter.layers:=0",
-         "-p", "startup.particles:=60", "-p", "startup.frames:=2", "-p", "weighting.working_scale:=0.5",
-         "-p", "startup.working_scale:=0.5"]
+         "-p", "startup.particles:=60", "-p", "startup.frames:=2", "-p", "startup.working_width:=160"]
 IDS = ("b0", "b1")
 
 

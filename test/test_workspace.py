@@ -5,7 +5,8 @@ colcon (colcon-common-extensions from the package index, in the venv) lists ``hm
 checkout, and builds ``hmocap_ros`` (ament_python) into an install tree with its executables,
 launch and config files. The rosdep keys of both ``package.xml`` files resolve for ROS 2 Jazzy on
 Ubuntu 24.04: each is in ``test/data/rosdep_keys_jazzy.txt`` (the rosdistro index's keys at one
-commit, written by ``tools/rosdep_keys.py``) or is a package of the workspace, which
+commit, written by ``tools/rosdep_keys.py``), has a pip rule in ``rosdep/hmocap_ros.yaml`` (which the README adds to
+rosdep's sources first), or is a package of the workspace, which
 ``--ignore-src`` leaves out. (Building ``hmocap_interfaces`` needs the ROS install's CMake
 packages; ``make setup`` builds it against the PyPI wheels instead.)
 """
@@ -17,8 +18,11 @@ import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import yaml
+
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ROOT / "test" / "data" / "rosdep_keys_jazzy.txt"
+OWN_RULES = ROOT / "rosdep" / "hmocap_ros.yaml"
 COLCON = Path(sys.executable).parent / "colcon"
 
 
@@ -95,9 +99,28 @@ def _keys(package_xml: Path) -> set[str]:
                                        "test_depend") for e in root.iter(tag)}
 
 
+def own_pip_rules() -> dict[str, list[str]]:
+    """Key -> pip packages of the rules ``rosdep/hmocap_ros.yaml`` adds for Ubuntu."""
+    rules = yaml.safe_load(OWN_RULES.read_text())
+    return {key: rule["ubuntu"]["pip"]["packages"] for key, rule in rules.items()}
+
+
+def test_the_readme_adds_the_own_rules_to_rosdep_before_installing():
+    lines = readme_lines()
+    source = next(i for i, line in enumerate(lines) if "rosdep/hmocap_ros.yaml" in line)
+    install = next(i for i, line in enumerate(lines) if line.startswith("rosdep install"))
+    assert source < install
+    assert "/etc/ros/rosdep/sources.list.d/" in lines[source] and "rosdep update" in lines[source]
+    assert "yaml file://$HOME/ws/src/hmocap_ros/rosdep/hmocap_ros.yaml" in lines[source]
+
+
 def test_every_rosdep_key_of_both_packages_resolves_on_jazzy():
-    known = {line for line in KEYS.read_text().splitlines() if line and not line.startswith("#")}
-    assert {"rclpy", "python3-numpy", "tf2_msgs", "hri_msgs"} <= known and len(known) > 1000
+    index = {line for line in KEYS.read_text().splitlines() if line and not line.startswith("#")}
+    assert {"rclpy", "python3-numpy", "tf2_msgs", "hri_msgs"} <= index and len(index) > 1000
+    own = own_pip_rules()
+    assert own == {"python3-ai-edge-litert-pip": ["ai-edge-litert"]}
+    assert not set(own) & index, "a rule of our own must not shadow one of the index"
+    known = index | set(own)
     workspace = workspace_packages(readme_paths("rosdep"))
     for name, folder in workspace.items():
         missing = sorted(_keys(folder / "package.xml") - known - set(workspace))

@@ -141,7 +141,7 @@ def declare_parameters(node: Node, config_cls):
 def unknown_parameter_overrides(node: Node) -> list[str]:
     """Parameters set for ``node`` (``-p``, ``--params-file``) that it never declared: a
     misspelt or outdated name (a grouped setting is named with its group,
-    ``weighting.working_scale``), which rclpy would otherwise ignore without a word."""
+    ``weighting.working_width``), which rclpy would otherwise ignore without a word."""
     declared = set(node._parameters)  # noqa: SLF001  (rclpy keeps no public list of overrides)
     return sorted(name for name in node._parameter_overrides if name not in declared)
 

@@ -99,6 +99,11 @@ UNSEEN_SPREAD = 0.15
 MAX_ELAPSED_PERIODS = 4
 
 
+def working_scale(cameras, width: int) -> float:
+    """The image scale that takes the widest camera to ``width`` pixels, at most 1."""
+    return min(1.0, float(width) / max(c.width for c in cameras))
+
+
 class BodyTracker:
     """Layered-filter body tracker for one rig (see the module docstring).
 
@@ -124,7 +129,8 @@ class BodyTracker:
         self.skel = model.skeleton
         self.rng = rng if rng is not None else np.random.default_rng()
         self.given_shape = shape
-        scale, shape_scale = p.weighting.working_scale, p.startup.working_scale
+        scale = working_scale(self.cameras, p.weighting.working_width)
+        shape_scale = working_scale(self.cameras, p.startup.working_width)
         self.fitness = SilhouetteFitness(model, self.cameras, scale)
         self.shape_fitness = (self.fitness if shape_scale == scale else
                               SilhouetteFitness(model, self.cameras, shape_scale))
@@ -596,7 +602,7 @@ class BodyTracker:
             self.reset(forget_shape=forget)
 
     def _shape_obs(self, masks, obs: Observation, stamp_ns: int) -> Observation:
-        """The start-up's observation (at ``startup.working_scale``)."""
+        """The start-up's observation (at ``startup.working_width``)."""
         if self.shape_fitness is self.fitness:
             return obs
         return self.shape_fitness.observe(masks, stamp_ns)

@@ -85,8 +85,10 @@ class FilterParams:
 class WeightingParams:
     """The silhouette weighting (eq. 2.8) and the observation boxes (eq. 2.15)."""
 
-    working_scale: float = param(0.25, "Image scale in (0, 1] at which silhouettes are "
-                                       "compared (0.25: 640x480 -> 160x120).")
+    working_width: int = param(160, "Width (pixels, >= 16) at which silhouettes are compared: "
+                                    "the masks are reduced by the scale that takes the rig's "
+                                    "widest camera to it (640x480 -> 160x120, 1280x720 -> "
+                                    "160x90), and kept whole when narrower.")
     mesh: str = param("tracking", "Body mesh the particles are rendered with (same joints "
                                   "and DoFs): 'tracking' (2,400 triangles) or "
                                   "'tracking_coarse' (1,000, about one per silhouette pixel "
@@ -102,7 +104,7 @@ class WeightingParams:
 
     def __post_init__(self):
         _check([
-            (0.0 < self.working_scale <= 1.0, "weighting.working_scale must lie in (0, 1]"),
+            (self.working_width >= 16, "weighting.working_width must be >= 16"),
             (self.mesh in TRACKER_MESHES, f"weighting.mesh must be one of {TRACKER_MESHES}"),
             (self.box_reach > 0.0, "weighting.box_reach must be > 0"),
             (self.box_spread >= 0.0 and self.box_margin >= 0.0,
@@ -143,7 +145,8 @@ class StartupParams:
                                        "hull.")
     frames: int = param(4, "Frames (>= 1) of layered filtering over shape and pose at start.")
     particles: int = param(250, "Particles per layer (>= 2) of the start-up filter.")
-    working_scale: float = param(0.5, "Image scale in (0, 1] of the start-up weighting.")
+    working_width: int = param(320, "Width (pixels, >= 16) of the start-up weighting's "
+                                    "silhouettes (as weighting.working_width).")
     rejection_tau: float = param(0.7, "Acceptance ratio tau in (0, 1] of the "
                                       "rejection-sampling shape kernel (eq. 2.13).")
     height_margin: float = param(0.03, "During the start-up frames: when the followed visual "
@@ -166,7 +169,7 @@ class StartupParams:
             (self.min_views >= 1, "startup.min_views must be >= 1"),
             (self.frames >= 1 and self.particles >= 2,
              "startup.frames >= 1, startup.particles >= 2"),
-            (0.0 < self.working_scale <= 1.0, "startup.working_scale must lie in (0, 1]"),
+            (self.working_width >= 16, "startup.working_width must be >= 16"),
             (0.0 < self.rejection_tau <= 1.0, "startup.rejection_tau must lie in (0, 1]"),
             (self.height_margin >= 0.0, "startup.height_margin must be >= 0"),
             (self.height_column >= 0.0, "startup.height_column must be >= 0"),

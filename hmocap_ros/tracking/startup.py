@@ -81,7 +81,7 @@ class HullFinder:
 class StartUp:
     """One start-up (sec. 2.3): the anthropometry estimator and the hull it follows.
 
-    fitness: the start-up's weighting (at ``startup.working_scale``); shape: a known shape
+    fitness: the start-up's weighting (at ``startup.working_width``); shape: a known shape
     (pose-only start); proposer: limb proposals for the heading search, or None.
     """
 
