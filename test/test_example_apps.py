@@ -5,11 +5,13 @@ light_switch, and body_tracker's messages for a walk through the room's zones in
 Asserted: what each app published, on which input's stamp, and its reaction time, the DDS
 publication time of its output minus that of the room's output it reacted to (target: under
 200 ms); the scenes' bad input (a gesture without a 3D point, a skeleton short of a position, a
-skeleton without its pelvis) is one log line each and the app goes on. The tests wait on
+skeleton without its pelvis) and a zone file with an error are one log line each and the app
+goes on. The tests wait on
 messages, never on the wall clock.
 """
 
 import re
+from pathlib import Path
 
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.processes import loopback_dds_env
@@ -17,6 +19,7 @@ from hmocap_ros.processes import loopback_dds_env
 from hmocap_examples import scenes
 from hmocap_examples.drive import drive_light_switch, drive_presence, light_reactions, reaction_ms
 
+ROOT = Path(__file__).resolve().parents[1]
 #: (ms) the issue's target for an app's reaction to the output it depends on
 REACTION_TARGET_MS = 200.0
 
@@ -48,7 +51,13 @@ WALK_CHANGES = [("door", "b0"), ("sofa", "b1"), ("door", ""), ("middle", "b0"), 
 
 def test_presence_follows_a_walk_through_the_zones_in_order(tmp_path):
     bag = scenes.walk_scene(tmp_path)
-    run = drive_presence(bag, tmp_path / "run", loopback_dds_env(), changes=len(WALK_CHANGES))
+    # the example room's zones and one with an error: a line, the other zones still work
+    zones = tmp_path / "zones.yaml"
+    zones.write_text((ROOT / "config" / "places_example.yaml").read_text()
+                     + "  hall: {box: {min: [0.0, 0.0], max: [0.0, 1.0]}}\n")
+    run = drive_presence(bag, tmp_path / "run", loopback_dds_env(), [f"zones_file:={zones}"],
+                         changes=len(WALK_CHANGES))
+    assert len(_warnings(run.logs["presence"], "zones hall:")) == 1
     states = [{s.name: s.message for s in n.msg.status} for n in run.messages["/presence"]]
     assert set(states[0]) == {"door", "middle", "by_the_window", "sofa"} and not any(states[0].values())
     changes = [next((zone, now[zone]) for zone in now if now[zone] != before[zone])
