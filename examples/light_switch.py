@@ -37,6 +37,8 @@ class LightSwitch(Node):
         self.config = declare_parameters(self, LightSwitchConfig)
         self.room = Room(self, self.config.fixed_frame, on_gesture=self.on_gesture)
         self.places = self.room.load_places(self.config.places_file, "places")
+        if self.places.get(self.config.place) is None and not self.places.errors:
+            self.get_logger().warning(f"no place '{self.config.place}' in {self.places.path}: the light stays as it is")
         self.first_of_hold = OncePerHold(int(self.config.cooldown_s * 1e9))
         self.light = Bool(data=False)
         self.pub = self.create_publisher(Bool, "light", LATCHED_QOS)
