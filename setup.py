@@ -14,12 +14,16 @@ CONSOLE_SCRIPTS = [
     "gesture_trainer = hmocap_ros.nodes.gesture_trainer:main",
     "extremity_detection = hmocap_ros.nodes.extremity_detection:main",
     "body_tracker = hmocap_ros.nodes.body_tracker:main",
+    # the example apps on hmocap_ros.client (examples/, installed as the package hmocap_examples)
+    "light_switch = hmocap_examples.light_switch:main",
+    "presence = hmocap_examples.presence:main",
 ]
 
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=find_packages(exclude=["test", "test.*"]),
+    packages=find_packages(exclude=["test", "test.*", "examples", "examples.*"]) + ["hmocap_examples"],
+    package_dir={"hmocap_examples": "examples"},
     package_data={PACKAGE: ["data/*", "data/**/*"]},
     include_package_data=True,
     data_files=[

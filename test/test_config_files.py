@@ -30,7 +30,14 @@ NODE_CONFIGS = {
     "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.params", "TrackerParams"),
     "extremity_detection": ("hmocap_ros.nodes.extremity_detection", "ExtremityNodeConfig",
                             "hmocap_ros.detection.extremity_pipeline", "ExtremityDetectionParams"),
+    # the example apps (examples/, installed as hmocap_examples; APP_NODES)
+    "light_switch": ("hmocap_examples.light_switch", "LightSwitchConfig"),
+    "presence": ("hmocap_examples.presence", "PresenceConfig"),
 }
+#: The example apps: started by hand next to the pipeline (``ros2 run``), not by a launch file.
+APP_NODES = {"light_switch", "presence"}
+#: config/*.yaml that are not a node's parameters: rigs, and the example room's places and zones
+NOT_NODE_YAMLS = ("rig", "places")
 
 
 def dotted(tree: dict, prefix: str = "") -> dict:
@@ -45,7 +52,7 @@ def dotted(tree: dict, prefix: str = "") -> dict:
 
 
 def test_every_node_yaml_is_known():
-    node_yamls = {p.stem for p in (ROOT / "config").glob("*.yaml") if not p.stem.startswith("rig")}
+    node_yamls = {p.stem for p in (ROOT / "config").glob("*.yaml") if not p.stem.startswith(NOT_NODE_YAMLS)}
     assert node_yamls == set(NODE_CONFIGS)
 
 
@@ -126,10 +133,12 @@ SESSION_NODES = {"gesture_trainer": "gesture_trainer.launch.py"}
 def test_launch_file_starts_every_node_with_its_config():
     """launch/hmocap.launch.py starts each node executable of setup.py (every one but the
     ``hmocap`` tool and the session nodes, which their own launch files start), under its own
-    name, with its config/<node>.yaml."""
+    name, with its config/<node>.yaml; the example apps are console scripts of their own package."""
     setup_py = (ROOT / "setup.py").read_text()
     scripts = set(re.findall(r'^\s*"(\w+) = hmocap_ros\.nodes\.\w+:main",', setup_py, re.M))
-    assert scripts == set(NODE_CONFIGS)
+    assert scripts == set(NODE_CONFIGS) - APP_NODES
+    apps = set(re.findall(r'^\s*"(\w+) = hmocap_examples\.(\w+):main",', setup_py, re.M))
+    assert apps == {(name, name) for name in APP_NODES}
     launched = _launched_nodes(ROOT / "launch" / "hmocap.launch.py")
     assert set(launched) == scripts - set(SESSION_NODES)
     for executable, launch_file in SESSION_NODES.items():  # started for a session, with their own launch file

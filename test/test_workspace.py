@@ -85,11 +85,12 @@ def test_colcon_lists_both_packages_and_builds_hmocap_ros(tmp_path):
     assert built.returncode == 0, built.stdout + built.stderr
     share = tmp_path / "install" / "hmocap_ros" / "share" / "hmocap_ros"
     for name in ("package.xml", "launch/hmocap.launch.py", "config/body_tracker.yaml", "config/hmocap.rviz",
-                 "config/hmocap_foxglove.json", "config/fastdds_local.xml"):
+                 "config/hmocap_foxglove.json", "config/fastdds_local.xml", "config/places_example.yaml",
+                 "config/light_switch.yaml"):
         assert (share / name).is_file(), name
     bin_dir = tmp_path / "install" / "hmocap_ros" / "lib" / "hmocap_ros"  # where `ros2 run` looks
-    assert {"body_tracker", "camera_rig_publisher", "foreground_segmentation", "hmocap"} <= \
-        {p.name for p in bin_dir.iterdir()}
+    assert {"body_tracker", "camera_rig_publisher", "foreground_segmentation", "hmocap", "light_switch",
+            "presence"} <= {p.name for p in bin_dir.iterdir()}
     assert (tmp_path / "install" / "setup.bash").is_file()
 
 
