@@ -1,10 +1,17 @@
-"""body_tracker: the 3D body pose of the people in the room from N foreground masks (thesis ch. 2).
+"""body_tracker: the 3D body pose of the people in the room from N cameras (thesis ch. 2).
 
-Synchronises the foreground masks of the rig cameras by stamp and runs
-:class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on each set: layered particle filtering
-of a skinned body with the silhouette XOR weighting (``method``: one of
-:data:`~hmocap_ros.tracking.methods.METHODS`, APF, HPF, HPF with approximate partitioning of
-observations, or detector-driven HPF), anthropometry estimated when a person appears.
+Synchronises the foreground masks of the rig cameras (and the extremity node's keypoints) by
+stamp and runs :class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on each set. The default
+method, ``kf-hpf`` (keypoint-first), fits the skinned body to the triangulated keypoints of
+the frame set (robust Levenberg-Marquardt IK over the kinematic tree, the motion model as its
+prior), checks every limb segment against the foreground of each view, and runs the layered
+silhouette filter (thesis eq. 2.8) only on the blocks the keypoints leave uncertain or the
+silhouettes contradict, within ``budget_ms``; a track starts from the keypoints and measures
+the body's shape from them over its first frames. Without keypoints (no extremity node, a dark
+or occluded view, no model file) it falls back to the silhouette filter, says so once and in
+the diagnostics, and keeps publishing. The thesis' silhouette methods (``apf``, ``hpf``,
+``hpf-apo``) and its detector-driven ``dd-hpf`` stay selectable by ``method``
+(:data:`~hmocap_ros.tracking.methods.METHODS`). Design and figures: docs/tracking.md.
 
 Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
@@ -12,10 +19,10 @@ Subscriptions:
   ``<camera>/foreground`` (sensor_msgs/Image mono8, ``image_reliability``, queue ``queue_depth``),
   per rig camera.
   ``extremities`` (hmocap_interfaces/Extremities, reliable, a queue of ``queue_depth`` but at
-  least 10), with a method that uses a detector (``dd-hpf``) only: the 3D detections of the
-  extremity_detection node, matched by stamp with the masks. While that topic has a publisher, a frame set waits for its detections like for
-  a camera (``max_wait_ms``); with none, frame sets go out on their masks alone and the
-  method runs as its boxed schedule.
+  least 10), with a method that uses detections (``kf-hpf``, ``dd-hpf``) only: the 3D keypoints of
+  the extremity_detection node, matched by stamp with the masks. While that topic has a
+  publisher, a frame set waits for its detections like for a camera (``max_wait_ms``); with
+  none, frame sets go out on their masks alone and the tracker runs on the silhouettes.
 Publications (all with the stamp of the frame set), following REP-155 (Human-Robot
 Interaction: ``humans/bodies/...`` topics and body frames), built by
 :class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages` (``hmocap track`` writes the
@@ -31,7 +38,7 @@ same messages to a bag):
   ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove,
   one namespace per body.
   ``/tf`` (tf2_msgs/TFMessage, with ``publish_tf``): per tracked body, room frame ->
-  ``body_<id>`` (the pelvis) and a frame per joint, ``<joint>_<id>`` (``l_wrist_body_0``...),
+  ``body_<id>`` (the pelvis) and a frame per joint, ``<joint>_<id>`` (``l_wrist_b0``...),
   along the kinematic tree, oriented as REP-155 asks (x forward, y left, z up at rest); the
   names and conventions are those of :mod:`hmocap_ros.tracking.body_frames`. One message per
   frame set with every tracked body's frames.
@@ -48,11 +55,10 @@ TF tree, and a renamed plain topic (``body/joint_states``) would only repeat the
 ``humans/bodies/<body_id>/joint_states`` under a name no REP-155 tool looks for. The first
 body's id is the ``body_id`` parameter, so its per-body topic is as stable a name as any.
 
-Per-joint confidence (``Skeleton.confidence``, in [0, 1]): from the spread of the joint's
-position over the particles of the filter's final layer, ``exp(-spread / 5 cm)``, raised
-where a labelled joint detection (``dd-hpf`` with the keypoint detector) agrees with the
-estimate (:mod:`hmocap_ros.tracking.body_frames`). Empty on start-up frames, which run no
-particle filter over the whole pose.
+Per-joint confidence (``Skeleton.confidence``, in [0, 1]): ``exp(-spread / 5 cm)``, the
+spread being the joint's position over the particles of the filter's final layer, or with
+``kf-hpf`` on a set the fit answers alone, the RMS residual of the keypoints of the joint's
+body block; a joint whose block has no keypoint keeps its prediction at ``exp(-3)`` (:mod:`hmocap_ros.tracking.body_frames`).
 
 Synchronisation (:class:`~hmocap_ros.stamp_sync.StampSynchronizer`): a frame set is complete
 when every camera's mask of its stamp (within ``slop_ms``) is there, or, with a camera
@@ -96,7 +102,7 @@ every setting of :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotte
 Several people (``max_people``): one tracker per person
 (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); the first body is the one a
 single tracker would follow (the person the cameras see best when the track starts), the
-others are ``body_id`` numbered on (``body_0``, ``body_1``, ...). Each followed person costs
+others are ``body_id`` numbered on (``b0``, ``b1``, ...). Each followed person costs
 a filter run per frame.
 
 A dropped camera is tracked on the remaining views; a frame without a person publishes
