@@ -123,6 +123,7 @@ COMMAND_GROUPS = {
             "mocap": ("hmocap_ros.eval.mocap_eval", "3D joint error and speed of the body tracker on a multi-view bag"),
             "gestures": ("hmocap_ros.eval.gesture_eval", "precision-recall and AP per gesture on a depth bag"),
             "extremities": ("hmocap_ros.eval.extremity_eval", "precision, recall and 3D error of the extremity detection on a multi-view bag"),
+            "consistency": ("hmocap_ros.eval.consistency", "the tracked body against the images of a bag without ground truth: reprojection, silhouettes, triangulation"),
         },
     ),
     "detect": (
@@ -131,6 +132,21 @@ COMMAND_GROUPS = {
         "the node would publish, with the input frames' stamps, to a new bag.",
         {
             "gestures": ("hmocap_ros.commands.detect_gestures", "gesture_detection's gestures on a depth bag"),
+        },
+    ),
+    "import": (
+        "turn other tools' recordings into bags",
+        "Turn recordings made outside ROS (synchronised video files and another tool's camera "
+        "calibration) into bags in the documented layout.",
+        {
+            "videos": ("hmocap_ros.commands.import_videos", "synchronised videos and their calibration into a multi-view bag"),
+        },
+    ),
+    "rig": (
+        "camera rig files",
+        "Read and write camera calibrations in other tools' formats.",
+        {
+            "convert": ("hmocap_ros.commands.rig_convert", "a calibration from one format into another (rig YAML, Pose2Sim/Anipose TOML, Qualisys QCA, OpenCV/EasyMocap, ROS camera_info)"),
         },
     ),
     "train": (
