@@ -45,6 +45,12 @@ class PersonMasks:
     def probability(self, key, image_rgb: np.ndarray) -> np.ndarray | None:
         """Float32 ``(H, W)`` in [0, 1]: the person's segmentation in camera ``key``'s RGB uint8
         image, or None when nobody is there."""
+        return self.segment(key, image_rgb)[1]
+
+    def segment(self, key, image_rgb: np.ndarray):
+        """``(landmarks, probability)`` of camera ``key``'s RGB uint8 image: the network's
+        :class:`~hmocap_ros.detection.keypoint_network.ViewLandmarks` and the person's
+        segmentation (float32 ``(H, W)`` in [0, 1]); ``(None, None)`` when nobody is there."""
         from hmocap_ros.detection.keypoint_roi import landmarks_roi
 
         height, width = image_rgb.shape[:2]
@@ -53,12 +59,12 @@ class PersonMasks:
             found = self._detector.detect(image_rgb)
             roi = found[0].roi() if found else None
             if roi is None:
-                return None
+                return None, None
         self.runs += 1
         view, probability = self._network.segment(image_rgb, roi)
         if view.score < self.min_pose_score:
             self._tracks[key] = None
-            return None
+            return None, None
         following = landmarks_roi(view.xy)
         self._tracks[key] = following if following is not None and following.overlaps(width, height) else None
-        return probability
+        return view, probability
