@@ -204,3 +204,25 @@ def test_videos_of_different_lengths_import_to_the_shortest_with_a_warning(recor
     assert "imported to the shortest (cam1.avi)" in err
     with BagReader(bag) as reader:
         assert reader.topics()["/cam1/image_raw"].count == FRAMES
+
+
+def test_views_a_few_pixels_larger_are_cut_to_the_others_size(tmp_path, capsys):
+    """The tracker stacks a frame set's silhouettes: a camera calibrated (and filmed) 8x6 pixels
+    larger than the other is cut at its right and bottom, its intrinsics kept, so the ball
+    still lands where the camera projects it (a resize would move it by up to 8 px)."""
+    cam1, big = _rig().cameras[:2]
+    big = dataclasses.replace(big, width=168, height=126)
+    _write_video(tmp_path / "cam1.avi", _frames(cam1, FRAMES))
+    _write_video(tmp_path / "cam2.avi", _frames(big, FRAMES))
+    save_calibration_rig(Rig("room", (cam1, big)), tmp_path / "calib.qca", "qca")
+    bag = tmp_path / "cut.mcap"
+    assert main(["import", "videos", str(tmp_path / "cam1.avi"), str(tmp_path / "cam2.avi"),
+                 "--calibration", str(tmp_path / "calib.qca"), "--out", str(bag), "--quiet"]) == 0
+    assert "cam2: cut to 160x120 at the right and bottom" in capsys.readouterr().err
+    rig, pixels = _centroids(bag)
+    assert [(c.width, c.height) for c in rig] == [(160, 120), (160, 120)]
+    for i in range(FRAMES):
+        expected = project_points([rig.cameras[1]], _ball(i)[None])[0][0, 0]
+        assert np.linalg.norm(pixels[i, 1] - expected) < 1.0, (i, pixels[i, 1], expected)
+        point = triangulate(list(rig.cameras), pixels[i][:, None, :])[0]
+        assert np.linalg.norm(point - _ball(i)) < 0.025

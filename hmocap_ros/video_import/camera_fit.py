@@ -23,7 +23,8 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["MAX_CROP_PX", "CameraFitError", "fit_camera", "rotate_camera", "upright_turns"]
+__all__ = ["MAX_CROP_PX", "CameraFitError", "common_size", "crop_camera", "fit_camera",
+           "rotate_camera", "upright_turns"]
 
 #: Most pixels a video may lack along an axis (at the right or bottom) for a cut, not a mismatch.
 MAX_CROP_PX = 16
@@ -62,7 +63,9 @@ def rotate_camera(camera, turns: int):
     return camera
 
 
-def _cropped(camera, width: int, height: int):
+def crop_camera(camera, width: int, height: int):
+    """The camera of its image cut to ``width x height`` at the right and bottom edges: the
+    intrinsics stay."""
     P = np.hstack([np.asarray(camera.K), np.zeros((3, 1))])
     return dataclasses.replace(camera, width=width, height=height, projection=P)
 
@@ -90,8 +93,22 @@ def fit_camera(camera, size: tuple[int, int], turns: int = 0):
         return camera.scaled(sx), ", ".join(notes)
     if 0 <= cw - width <= MAX_CROP_PX and 0 <= ch - height <= MAX_CROP_PX:
         notes.append(f"cut to {width}x{height} at the right and bottom")
-        return _cropped(camera, width, height), ", ".join(notes)
+        return crop_camera(camera, width, height), ", ".join(notes)
     raise CameraFitError(where)
+
+
+def common_size(cameras) -> tuple[int, int] | None:
+    """``(width, height)`` every camera is cut to when their image sizes differ by at most
+    :data:`MAX_CROP_PX` pixels along each axis (the smallest of each), so that all views of a
+    frame set share one size as the tracker's silhouette stack needs; None when they are equal
+    or differ by more."""
+    sizes = np.array([(c.width, c.height) for c in cameras])
+    if len(sizes) == 0 or (sizes == sizes[0]).all():
+        return None
+    smallest = sizes.min(axis=0)
+    if (sizes - smallest).max() > MAX_CROP_PX:
+        return None
+    return int(smallest[0]), int(smallest[1])
 
 
 def upright_turns(camera) -> int:

@@ -2,8 +2,10 @@
 
 :func:`plan_import` matches the videos with the calibration's cameras, reads the calibration into
 the room frame (:mod:`hmocap_ros.calibration.formats`), fits each camera to its video's frames
-(:mod:`.camera_fit`: turned, scaled or cut) and turns it upright, and settles which frames make
-the frame sets; :func:`import_videos` writes the bag. The bag is in the documented layout
+(:mod:`.camera_fit`: turned, scaled or cut) and turns it upright, cuts views a few pixels larger
+than the others to their size (:func:`~.camera_fit.common_size`: the tracker stacks the views'
+silhouettes, so a frame set's views share one size), and settles which frames make the frame
+sets; :func:`import_videos` writes the bag. The bag is in the documented layout
 (:mod:`hmocap_ros.io.topics`), as ``hmocap sim mocap`` writes it without the ground truth:
 
 * ``/camera_rig`` (latched ``hmocap_interfaces/CameraRig``) and ``/tf_static`` (latched: the room
@@ -33,8 +35,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from hmocap_ros.video_import.camera_fit import (CameraFitError, fit_camera, rotate_camera,
-                                                upright_turns)
+from hmocap_ros.video_import.camera_fit import (CameraFitError, common_size, crop_camera,
+                                                fit_camera, rotate_camera, upright_turns)
 from hmocap_ros.video_import.videos import FrameSetReader, VideoError, VideoInfo, probe_video
 
 __all__ = ["BASE_STAMP_NS", "ImportOptions", "ImportPlan", "ImportResult", "VideoImportError",
@@ -81,7 +83,8 @@ class ImportOptions:
 class ImportPlan:
     """The frame sets to import: the bag's rig (cameras in video order), the videos, the first
     frame of each, the number of sets, the frame rate, the quarter turns each video's frames
-    are turned by, and the notes and warnings for the user."""
+    are turned by, the notes and warnings for the user, and the size ``(width, height)`` all
+    turned frames are cut to (None: none is cut)."""
 
     rig: object
     videos: tuple[VideoInfo, ...]
@@ -91,6 +94,7 @@ class ImportPlan:
     turns: tuple[int, ...]
     notes: tuple[str, ...]
     warnings: tuple[str, ...]
+    cut: tuple[int, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -222,22 +226,31 @@ def plan_import(video_paths, calibration, options: ImportOptions = ImportOptions
         if k:
             camera = rotate_camera(camera, k)
             notes.append(f"{name}: frames turned {90 * k} deg clockwise so that the room's up is up")
-        if options.scale != 1:
-            camera = camera.scaled(options.scale)
         cameras.append(dataclasses.replace(camera, name=bag_name, frame_id=""))
         turns.append(k)
+    cut = common_size(cameras)
+    if cut is not None:
+        cut_names = [c.name for c in cameras if (c.width, c.height) != cut]
+        cameras = [crop_camera(c, *cut) if c.name in cut_names else c for c in cameras]
+        notes.append(f"{', '.join(cut_names)}: cut to {cut[0]}x{cut[1]} at the right and bottom, "
+                     f"the size of the other views")
+    if options.scale != 1:
+        cameras = [c.scaled(options.scale) for c in cameras]
     first, count, fps = _frames(videos, options, warnings)
     return ImportPlan(Rig(room_rig.frame_id, tuple(cameras)), tuple(videos), first, count, fps,
-                      tuple(turns), tuple(notes), tuple(warnings))
+                      tuple(turns), tuple(notes), tuple(warnings), cut)
 
 
 _ROTATIONS = {1: cv2.ROTATE_90_CLOCKWISE, 2: cv2.ROTATE_180, 3: cv2.ROTATE_90_COUNTERCLOCKWISE}
 
 
-def _rgb(frame: np.ndarray, turns: int, camera) -> np.ndarray:
-    """A decoded BGR frame as the camera's RGB image: turned, resized, converted."""
+def _rgb(frame: np.ndarray, turns: int, camera, cut: tuple[int, int] | None = None) -> np.ndarray:
+    """A decoded BGR frame as the camera's RGB image: turned, cut to ``cut`` (width, height)
+    at the right and bottom, resized, converted."""
     if turns:
         frame = cv2.rotate(frame, _ROTATIONS[turns])
+    if cut is not None:
+        frame = frame[:cut[1], :cut[0]]
     if frame.shape[:2] != (camera.height, camera.width):
         frame = cv2.resize(frame, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
     return cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
@@ -278,7 +291,8 @@ def import_videos(video_paths, calibration, out, options: ImportOptions = Import
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         with whole_bag(out, compress=options.compress) as writer:
-            convert = [functools.partial(_rgb, turns=k, camera=c) for k, c in zip(plan.turns, rig)]
+            convert = [functools.partial(_rgb, turns=k, camera=c, cut=plan.cut)
+                       for k, c in zip(plan.turns, rig)]
             with FrameSetReader([v.path for v in plan.videos], list(plan.first), plan.count,
                                 convert) as reader:
                 for images in reader:
@@ -303,7 +317,6 @@ def import_videos(video_paths, calibration, out, options: ImportOptions = Import
     if ended and total is not None:
         warnings.append(f"{', '.join(p.name for p in ended)} ended after {written} of {total} frame "
                         f"sets (the container's frame count was wrong)")
-    plan = ImportPlan(plan.rig, plan.videos, plan.first, written, plan.fps, plan.turns,
-                      plan.notes, tuple(warnings))
+    plan = dataclasses.replace(plan, count=written, warnings=tuple(warnings))
     return ImportResult(Path(out), written, len(rig), time.perf_counter() - wall0,
                         time.process_time() - cpu0, plan)
