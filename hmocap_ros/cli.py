@@ -116,9 +116,10 @@ COMMAND_GROUPS = {
         },
     ),
     "eval": (
-        "evaluate the algorithms offline on bags with ground truth",
+        "evaluate the algorithms offline on bags with ground truth, or a tracked body against the images",
         "Replay a bag through the same algorithm code the nodes run (no DDS, seeded) and report the "
-        "errors against the bag's ground truth as JSON and a plot.",
+        "errors against the bag's ground truth as JSON and a plot; consistency checks a bag "
+        "without ground truth against its own images.",
         {
             "mocap": ("hmocap_ros.eval.mocap_eval", "3D joint error and speed of the body tracker on a multi-view bag"),
             "gestures": ("hmocap_ros.eval.gesture_eval", "precision-recall and AP per gesture on a depth bag"),
