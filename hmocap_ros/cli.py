@@ -122,13 +122,15 @@ COMMAND_GROUPS = {
         },
     ),
     "eval": (
-        "evaluate the algorithms offline on bags with ground truth",
+        "evaluate the algorithms offline on bags with ground truth, or a tracked body against the images",
         "Replay a bag through the same algorithm code the nodes run (no DDS, seeded) and report the "
-        "errors against the bag's ground truth as JSON and a plot.",
+        "errors against the bag's ground truth as JSON and a plot; consistency checks a bag "
+        "without ground truth against its own images.",
         {
             "mocap": ("hmocap_ros.eval.mocap_eval", "3D joint error and speed of the body tracker on a multi-view bag"),
             "gestures": ("hmocap_ros.eval.gesture_eval", "precision-recall and AP per gesture on a depth bag"),
             "extremities": ("hmocap_ros.eval.extremity_eval", "precision, recall and 3D error of the extremity detection on a multi-view bag"),
+            "consistency": ("hmocap_ros.eval.consistency", "the tracked body against the images of a bag without ground truth: reprojection, silhouettes, triangulation"),
         },
     ),
     "detect": (
@@ -147,6 +149,21 @@ COMMAND_GROUPS = {
             "overlay": ("hmocap_ros.commands.render_overlay", "the skeleton projected onto every camera, tiled "
                                                              "(per-joint error colours with ground truth); "
                                                              "gesture boxes and scores on depth"),
+        },
+    ),
+    "import": (
+        "turn other tools' recordings into bags",
+        "Turn recordings made outside ROS (synchronised video files and another tool's camera "
+        "calibration) into bags in the documented layout.",
+        {
+            "videos": ("hmocap_ros.commands.import_videos", "synchronised videos and their calibration into a multi-view bag"),
+        },
+    ),
+    "rig": (
+        "camera rig files",
+        "Read and write camera calibrations in other tools' formats.",
+        {
+            "convert": ("hmocap_ros.commands.rig_convert", "a calibration from one format into another (rig YAML, Pose2Sim/Anipose TOML, Qualisys QCA, OpenCV/EasyMocap, ROS camera_info)"),
         },
     ),
     "train": (

@@ -3,7 +3,8 @@ non-zero exit status, never a traceback.
 
 A zoo of bad files (missing, empty, a folder, random bytes, a text file, a valid bag truncated at
 several offsets and one with bytes overwritten in the middle of its data) goes through ``hmocap
-info``, ``eval mocap``, ``eval gestures``, ``train gestures``, ``detect gestures`` and ``track`` in
+info``, ``eval mocap``, ``eval gestures``, ``eval consistency``, ``train gestures``, ``detect
+gestures`` and ``track`` in
 this process (``cli.main``;
 none of them starts DDS) and through ``hmocap replay`` as subprocesses, in parallel, with the
 loopback DDS settings and domain id of ``conftest.py`` inherited from the environment. Impossible
@@ -55,6 +56,7 @@ IN_PROCESS_COMMANDS = {
     "info": (["info"], []),
     "eval_mocap": (["eval", "mocap"], []),
     "eval_gestures": (["eval", "gestures"], ["--json", "OUT/eval.json"]),
+    "eval_consistency": (["eval", "consistency"], ["--json", "OUT/consistency.json", "--quiet"]),
     "train_gestures": (["train", "gestures"], ["--out", "OUT/forest.npz", "--quiet"]),
     "detect_gestures": (["detect", "gestures"], ["--out", "OUT/gestures.mcap", "--quiet"]),
     "track": (["track"], ["--out", "OUT/tracked.mcap", "--quiet"]),

@@ -206,11 +206,16 @@ def write_tiny_bag(path: Path, n_empty: int, n_subject: int = 3) -> None:
                     parents=np.asarray(model.parents, np.int32)), stamp)
 
 
-def test_eval_falls_back_to_gt_silhouettes_without_empty_frames(tmp_path, capsys):
+def test_eval_without_empty_frames_learns_from_person_masks_or_falls_back_to_gt(tmp_path, capsys):
     bag = tmp_path / "no_background.mcap"
     write_tiny_bag(bag, n_empty=0)
     out = tmp_path / "r.json"
     assert run_eval([str(bag), "--json", str(out), *SMALL_BUDGET,
+                     "--param", "startup.min_views=2"]) == 0
+    report = json.loads(out.read_text())
+    assert report["silhouettes"] == "fg" and "person masks" in report["silhouettes_fallback"]
+    assert "person masks" in capsys.readouterr().err
+    assert run_eval([str(bag), "--json", str(out), *SMALL_BUDGET, "--learn-from", "empty_room",
                      "--param", "startup.min_views=2"]) == 0
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "gt" and "ground-truth silhouettes" in \

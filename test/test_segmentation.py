@@ -351,12 +351,14 @@ def test_params_are_validated_frozen_and_described():
         ForegroundParams(shadow_min_brightness=1.2)
     with pytest.raises(ValueError, match="learn_frames"):
         ForegroundParams(learn_frames=0)
+    with pytest.raises(ValueError, match="learn_from must be one of empty_room, person_masks"):
+        ForegroundParams(learn_from="guess")
     params = ForegroundParams()
     with pytest.raises(dataclasses.FrozenInstanceError):
         params.k_sigma = 2.0  # type: ignore[misc]
     for field in dataclasses.fields(ForegroundParams):
         assert len(field.metadata.get("description", "")) > 20, field.name
-        assert type(field.default) in (int, float, bool), field.name
+        assert type(field.default) in (int, float, bool, str), field.name
 
 
 def test_clean_up_removes_specks_and_fills_enclosed_holes_only():

@@ -275,6 +275,33 @@ def test_same_seed_same_bytes_and_other_options(tmp_path):
     assert len(e) == len(a) and skel_e == skel_a
 
 
+def test_still_seconds_hold_the_first_pose_in_view_from_the_first_frame(tmp_path):
+    """``--still-seconds`` with ``--background-seconds 0``: the subject is there in the first
+    frame and stands in the motion's first pose, then moves as without the option."""
+    def skeletons(name, still):
+        cfg = MocapSimConfig(out=tmp_path / f"{name}.mcap", cameras=2, width=64, height=48,
+                             seconds=0.12, background_seconds=0.0, still_seconds=still, seed=7,
+                             contact_frames=0, progress=False, noise=False, shadows=False)
+        generate(cfg)
+        with BagReader(cfg.out) as reader:
+            first_image = reader.first(topics.camera_image("cam_1")).header.stamp
+            joints = [np.array([(p.x, p.y, p.z) for p in m.msg.positions])
+                      for m in reader.messages([topics.GT_SKELETON])]
+            first_truth = reader.first(topics.GT_SKELETON).header.stamp
+            silhouette = reader.first(topics.gt_silhouette("cam_1"))
+        assert first_truth == first_image and np.frombuffer(silhouette.data, np.uint8).any()
+        return np.stack(joints)
+
+    moving = skeletons("moving", 0.0)
+    held = skeletons("held", 0.08)
+    assert len(moving) == 3 and len(held) == 5
+    np.testing.assert_allclose(held[1], held[0]) and np.testing.assert_allclose(held[2], held[0])
+    assert np.abs(moving[2] - moving[0]).max() > 1e-3  # the motion does move ...
+    # ... and is the same after the hold (up to where the subject is placed and how its feet are
+    # levelled over the clip: a few millimetres)
+    np.testing.assert_allclose(held[2:] - held[2:, :1], moving - moving[:, :1], atol=2e-3)
+
+
 def test_lighting_events_dim_the_lamp_and_come_back():
     t = np.arange(150) / 25.0
     lamp, exposure, window = mocap_lighting._lighting_events(np.random.default_rng(3), t, 1.0, 6.0)

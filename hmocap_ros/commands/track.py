@@ -12,13 +12,16 @@ detection (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`, 
 frame set too, and its ``/extremities`` go into the bag. No ground truth is needed.
 
 Foreground (``--silhouettes``): ``masks``: the bag's ``/<camera>/foreground`` (a recording of
-``foreground_segmentation``); ``fg``: the images segmented as the foreground node does
-(:class:`~hmocap_ros.segmentation.BackgroundModel` per camera, learning the empty room from the
-first ``--learn-frames`` frames; by default, in a bag with ground truth, from the frames before
-the first skeleton as ``hmocap eval mocap`` does, else the node's ``learn_frames``); ``gt``: the
+``foreground_segmentation``); ``fg``: the images segmented as the foreground node does (a
+background model per camera, :func:`~hmocap_ros.segmentation.background_models`); ``gt``: the
 bag's exact silhouettes ``/ground_truth/<camera>/silhouette``. ``auto`` (default) takes the
-first of these the bag has, ``fg`` only where it can learn (a bag whose ground truth starts with
-its first frame has no empty room: ``gt`` then, as ``hmocap eval mocap`` falls back).
+first of these the bag has. The background of ``fg`` is learnt as ``--learn-from`` says:
+``empty_room`` from the first ``--learn-frames`` frames, ``person_masks`` where the landmark
+network's person masks leave the room free (no empty room needed). By default: in a bag with
+ground truth that starts with an empty room, from the frames before the first skeleton (as
+``hmocap eval mocap`` does); with ``--learn-frames``, from that many first frames; else (a
+recording without ground truth, or one whose subject is there from the first frame)
+``person_masks``, since nothing says the room is empty at the start.
 
 Frame sets are grouped by stamp as ``body_tracker`` groups them (``slop_ms`` 5, at least
 ``min_views_to_sync`` 2 views); a missing view is a dropped camera. Progress goes to stderr;
@@ -59,7 +62,7 @@ class _Source:
     topics: list
     note: str = ""
     learn_frames: int = 0
-    chosen: bool = False  # by auto: may fall back to gt
+    learn_from: str = "empty_room"
 
 
 def _source(bag, available: dict, rig, wanted: str) -> _Source:
@@ -81,15 +84,14 @@ def _source(bag, available: dict, rig, wanted: str) -> _Source:
         kinds = [kind for kind in ("masks", "fg", "gt") if present[kind]]
     if kinds:
         truth = kinds[0] == "fg" and topics.GT_SKELETON in available
-        return _Source(kinds[0], by_kind[kinds[0]], note="truth" if truth else "",
-                       chosen=wanted == "auto" and bool(present["gt"]))
+        return _Source(kinds[0], by_kind[kinds[0]], note="truth" if truth else "")
     raise TrackError(f"{bag}: no foreground masks, images or silhouettes of the rig's cameras "
                      f"({', '.join(names)}) in the bag")
 
 
-def _learn_frames(reader, source: _Source, requested: int | None) -> _Source:
-    """Settle how many frames the background model of ``fg`` learns from (module docstring);
-    ``auto`` without an empty room falls back to ``gt``."""
+def _learn_frames(reader, source: _Source, requested: int | None,
+                  learn_from: str | None) -> _Source:
+    """Settle how the background model of ``fg`` learns (module docstring)."""
     from hmocap_ros.eval.mocap_frames import _empty_room_frames
     from hmocap_ros.io import topics
     from hmocap_ros.io.msg_factory import stamp_to_ns
@@ -97,24 +99,32 @@ def _learn_frames(reader, source: _Source, requested: int | None) -> _Source:
 
     if source.kind != "fg":
         return source
-    if requested is not None:
-        source.learn_frames, source.note = requested, ""
-        return source
-    if source.note == "truth":
-        first = stamp_to_ns(reader.first(topics.GT_SKELETON).header.stamp)
-        present = [t for t in source.topics if t in reader.topics()]
-        n_empty = _empty_room_frames(reader, present, int(SLOP_MS * 1e6), first)
-        if n_empty == 0 and source.chosen:
-            names = [t.split("/")[1] for t in source.topics]
-            return _Source("gt", [topics.gt_silhouette(n) for n in names],
-                           note="the bag has no empty-room frames before the subject appears, so no "
-                                "background model can learn: using the ground-truth silhouettes")
-        if n_empty > 0:
-            source.learn_frames = int(np.clip(n_empty, 1, 100))
-            source.note = f"learning the background from the {source.learn_frames} frames before the subject"
-            return source
+    source.learn_frames = ForegroundParams().learn_frames if requested is None else requested
+    truth = source.note == "truth"
     source.note = ""
-    source.learn_frames = ForegroundParams().learn_frames
+    if learn_from == "person_masks" or (learn_from is None and requested is None and not truth):
+        source.learn_from = "person_masks"
+        if learn_from is None:
+            source.note = ("nothing says the recording starts with an empty room: the background "
+                           "is learnt where the person masks leave the room free (--learn-from "
+                           "empty_room to learn it from the first --learn-frames frames)")
+        return source
+    if requested is not None or learn_from == "empty_room" and not truth:
+        return source
+    first = stamp_to_ns(reader.first(topics.GT_SKELETON).header.stamp)
+    present = [t for t in source.topics if t in reader.topics()]
+    n_empty = _empty_room_frames(reader, present, int(SLOP_MS * 1e6), first)
+    if n_empty > 0:
+        source.learn_frames = int(np.clip(n_empty, 1, 100))
+        source.note = f"learning the background from the {source.learn_frames} frames before the subject"
+    elif learn_from is None:
+        source.learn_from = "person_masks"
+        source.note = ("the bag has no empty-room frames before the subject appears: the background "
+                       "is learnt where the person masks leave the room free")
+    else:
+        source.note = (f"the bag has no empty-room frames before the subject appears: the "
+                       f"background is learnt from its first {source.learn_frames} frames, the "
+                       f"subject with it")
     return source
 
 
@@ -160,7 +170,8 @@ def _extremities_msg(det, stamp_ns: int, frame_id: str, factory):
 
 
 def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = None,
-                 silhouettes: str = "auto", learn_frames: int | None = None, max_people: int = 1,
+                 silhouettes: str = "auto", learn_frames: int | None = None,
+                 learn_from: str | None = None, max_people: int = 1,
                  seed: int = 0, overrides: dict | None = None, body_id: str = "b0",
                  publish_tf: bool = True, rig_file: str | None = None, max_frames: int | None = None,
                  progress=None) -> dict:
@@ -179,7 +190,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.rig import RigError, load_rig, rig_from_msg
-    from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
+    from hmocap_ros.segmentation import ForegroundParams, background_models
     from hmocap_ros.tracking.params import TrackerParams
     from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
     from hmocap_ros.tracking.tracker_messages import TrackerMessages, latched_topics
@@ -210,7 +221,8 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                 raise TrackError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown "
                                  f"(give the rig file with --rig)")
             rig = rig_from_msg(rig_msg)
-        source = _learn_frames(reader, _source(bag, available, rig, silhouettes), learn_frames)
+        source = _learn_frames(reader, _source(bag, available, rig, silhouettes), learn_frames,
+                               learn_from)
         if source.note:
             counts["notes"].append(source.note)
         counts["silhouettes"] = source.kind
@@ -226,8 +238,8 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                 counts["notes"].append(f"no images in the bag: {params.method} runs without detections")
         models = None
         if source.kind == "fg":
-            fg = ForegroundParams(learn_frames=source.learn_frames)
-            models = [BackgroundModel(fg) for _ in rig.names]
+            fg = ForegroundParams(learn_frames=source.learn_frames, learn_from=source.learn_from)
+            models = background_models(fg, rig.names)
         read = [t for t in source.topics if t in available]
         if pipeline is not None:
             read += [t for t in image_topics if t in available and t not in read]
@@ -302,9 +314,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--silhouettes", choices=SILHOUETTES, default="auto",
                         help="masks: the bag's /<camera>/foreground; fg: segment the images; gt: the "
                              "bag's exact silhouettes; auto: the first the bag has (default)")
+    parser.add_argument("--learn-from", choices=("empty_room", "person_masks"), default=None,
+                        help="how the background model of fg learns: from the first frames (the "
+                             "room empty) or where the person masks leave the room free "
+                             "(default: empty_room when the ground truth shows an empty room "
+                             "first or --learn-frames is given, else person_masks)")
     parser.add_argument("--learn-frames", type=int, default=None,
-                        help="frames the background model learns from with fg (default: the frames "
-                             "before the ground truth's first skeleton, else the node's learn_frames)")
+                        help="frames the background model learns from with fg: the first ones "
+                             "(empty_room), or per pixel the steady ones free of the person "
+                             "(person_masks) (default: the frames before the ground truth's first "
+                             "skeleton, else the node's learn_frames)")
     parser.add_argument("--max-people", type=int, default=1, help="people followed at once (default 1)")
     parser.add_argument("--body-id", default="b0",
                         help="REP-155 id of the first body (default b0, body_tracker's; the others are "
@@ -335,7 +354,8 @@ def main_from_args(ns: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         counts = track_to_bag(ns.bag, out, method=ns.method, detector=ns.detector, silhouettes=ns.silhouettes,
-                              learn_frames=ns.learn_frames, max_people=ns.max_people, seed=ns.seed,
+                              learn_frames=ns.learn_frames, learn_from=ns.learn_from,
+                              max_people=ns.max_people, seed=ns.seed,
                               overrides=tracker_overrides(ns.param), body_id=ns.body_id,
                               publish_tf=not ns.no_tf, rig_file=ns.rig, max_frames=ns.frames,
                               progress=None if ns.quiet else progress)

@@ -12,7 +12,10 @@ Method: the pre- and post-processing of MediaPipe's ``PoseLandmarkByRoiCpu`` gra
    ``output_tensor_float_range {min: 0, max: 1}``), NHWC 1 x 256 x 256 x 3.
 3. **Outputs**: ``Identity`` (39 x [x, y, z, visibility, presence], x and y in input pixels,
    visibility and presence as logits: a sigmoid gives [0, 1]), ``Identity_1`` (the pose
-   presence score, already in [0, 1]) and ``Identity_3`` (39 heatmaps of 64 x 64, logits).
+   presence score, already in [0, 1]) and ``Identity_3`` (39 heatmaps of 64 x 64, logits);
+   with ``segmentation=True`` also ``Identity_2``, the person's segmentation over the crop
+   (256 x 256 logits; MediaPipe's ``segmentation_mask`` after a sigmoid), which
+   :meth:`PoseLandmarkNetwork.segment` maps back onto the image.
 4. **Heatmap refinement** (MediaPipe's ``RefineLandmarksFromHeatmapCalculator``, kernel 7):
    each landmark's x, y becomes the sigmoid(heatmap)-weighted mean of the 7 x 7 heatmap cells
    around it, where the window's largest weight reaches 0.5.
@@ -59,6 +62,8 @@ LANDMARK_NAMES = (
 #: the outputs used, with their shapes (NHWC heatmaps)
 _OUTPUTS = {"Identity": (1, NUM_LANDMARKS * 5), "Identity_1": (1, 1),
             "Identity_3": (1, 64, 64, NUM_LANDMARKS)}
+#: the person segmentation over the crop (logits), read with ``segmentation=True``
+_SEGMENTATION_OUTPUT = {"Identity_2": (1, INPUT_SIZE, INPUT_SIZE, 1)}
 _HEATMAP_KERNEL = 7
 _HEATMAP_MIN_CONFIDENCE = 0.5
 _GET_MODEL = ("it ships with hmocap_ros as hmocap_ros/data/models/pose_landmark_full.tflite "
@@ -124,14 +129,19 @@ class PoseLandmarkNetwork:
     """BlazePose "Pose landmark full" on LiteRT (see the module docstring).
 
     Not thread-safe: give each thread its own instance. ``threads``: LiteRT threads of this
-    instance. Raises :class:`ModelFileError` when the model file is missing, corrupt or not
-    this model (its input and output shapes are checked and it runs once on zeros).
+    instance; ``segmentation``: also read the person segmentation (:meth:`segment`). Raises
+    :class:`ModelFileError` when the model file is missing, corrupt or not this model (its
+    input and output shapes are checked and it runs once on zeros).
     """
 
-    def __init__(self, path: str | Path | None = None, threads: int = 1):
+    def __init__(self, path: str | Path | None = None, threads: int = 1,
+                 segmentation: bool = False):
         self.path = Path(DEFAULT_MODEL if path is None else path)
-        self._model = load_model(self.path, "pose landmark model", _OUTPUTS,
+        outputs = {**_OUTPUTS, **(_SEGMENTATION_OUTPUT if segmentation else {})}
+        self.segmentation = bool(segmentation)
+        self._model = load_model(self.path, "pose landmark model", outputs,
                                  (1, INPUT_SIZE, INPUT_SIZE, 3), _GET_MODEL, threads)
+        self._last_segmentation: np.ndarray | None = None
 
     def infer(self, crop_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """The network on a 256 x 256 RGB uint8 crop: landmarks ``(39, 2)`` in input pixels
@@ -139,7 +149,8 @@ class PoseLandmarkNetwork:
         if crop_rgb.shape != (INPUT_SIZE, INPUT_SIZE, 3):
             raise ValueError(f"crop must be {INPUT_SIZE}x{INPUT_SIZE}x3, got {crop_rgb.shape}")
         blob = crop_rgb[None].astype(np.float32) * np.float32(1.0 / 255.0)  # NHWC, [0, 1]
-        raw, flag, heat = self._model.run(blob)
+        raw, flag, heat, *rest = self._model.run(blob)
+        self._last_segmentation = rest[0].reshape(INPUT_SIZE, INPUT_SIZE) if rest else None
         raw = raw.reshape(NUM_LANDMARKS, 5).astype(np.float64)
         heat = heat.reshape(64, 64, NUM_LANDMARKS).transpose(2, 0, 1)
         xy = refine_from_heatmap(raw[:, :2], heat)
@@ -157,4 +168,20 @@ class PoseLandmarkNetwork:
                               borderMode=cv2.BORDER_REPLICATE)
         xy, visibility, presence, score = self.infer(crop)
         xy = (xy - matrix[:, 2]) @ np.linalg.inv(matrix[:, :2]).T
+        self._last_matrix = matrix
         return ViewLandmarks(xy=xy, visibility=visibility, presence=presence, score=score)
+
+    def segment(self, image_rgb: np.ndarray, roi: Roi) -> tuple[ViewLandmarks, np.ndarray]:
+        """:meth:`run`, and the probability that each pixel of the image is the person: float32
+        ``(H, W)`` in [0, 1], the sigmoid of the network's segmentation mapped back through the
+        crop's affine map (bilinear; 0 outside the crop). Needs ``segmentation=True``."""
+        if not self.segmentation:
+            raise ValueError("this network was loaded without its segmentation output "
+                             "(segmentation=True)")
+        view = self.run(image_rgb, roi)
+        height, width = np.asarray(image_rgb).shape[:2]
+        probability = _sigmoid(self._last_segmentation).astype(np.float32)
+        mask = cv2.warpAffine(probability, self._last_matrix, (width, height),
+                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        return view, mask

@@ -17,9 +17,11 @@ truth ``/ground_truth/skeleton`` (joints matched by name) and, if present,
 by ``header.stamp``; a camera missing from a set is passed to the tracker as a dropped view.
 
 Silhouettes: ``fg`` (default) segments the images; the background model learns from the frames
-before the first ground-truth skeleton (the empty room). A bag without such frames cannot
-teach a background model: the evaluation then falls back to ``gt`` (the bag's exact
-silhouettes) and says so in its output and in the JSON (``silhouettes_fallback``).
+before the first ground-truth skeleton (the empty room), or, in a bag without such frames,
+where the landmark network's person masks leave the room free (``--learn-from person_masks``,
+:class:`~hmocap_ros.segmentation.PersonMaskedBackground`), and says so in its output and in
+the JSON (``silhouettes_fallback``). ``--learn-from empty_room`` on a bag without an empty room
+falls back to ``gt`` (the bag's exact silhouettes).
 
 Several people (``--max-people N``): N trackers run side by side, each on a person of its own
 (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); each frame is scored on the
@@ -399,6 +401,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the tracker (default 0)")
     parser.add_argument("--silhouettes", choices=("fg", "gt"), default="fg",
                         help="fg: segment the images (default); gt: the bag's exact silhouettes")
+    parser.add_argument("--learn-from", choices=("empty_room", "person_masks"), default=None,
+                        help="how the background model learns with fg (default: empty_room when "
+                             "the bag starts with an empty room, else person_masks)")
     parser.add_argument("--given-shape", action="store_true",
                         help="track with the bag's true body shape (no anthropometry estimation)")
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
@@ -439,7 +444,9 @@ def main_from_args(ns: argparse.Namespace) -> int:
         report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
                           seed=ns.seed, particles=ns.particles, layers=ns.layers,
                           overrides=overrides, given_shape=ns.given_shape,
-                          max_people=ns.max_people, rig=rig, detector=detector)
+                          max_people=ns.max_people, rig=rig,
+                          fg_params={"learn_from": ns.learn_from} if ns.learn_from else None,
+                          detector=detector)
         if ns.rig:
             report["rig"] = str(ns.rig)
     except (ValueError, OSError, RuntimeError) as err:

@@ -191,7 +191,11 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
 
     max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
-    ForegroundParams fields to override (``learn_frames`` is set from the bag).
+    ForegroundParams fields to override. The background is learnt as ``fg_params``'s
+    ``learn_from`` says, by default from the bag's empty-room frames (the frames before the
+    first skeleton: ``learn_frames`` is set from them) and, in a bag without them, where the
+    landmark network's person masks leave the room free (``person_masks``); ``empty_room``
+    asked for on a bag without an empty room falls back to the exact silhouettes.
     detector: ExtremityDetectionParams: also run the extremity detection on every frame set
     (the detections of detector-driven tracking), or None. rig: the cameras to track with
     instead of the bag's ``/camera_rig`` (e.g. a calibrated rig), with the bag's camera names.
@@ -199,10 +203,12 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.rig import rig_from_msg
-    from hmocap_ros.segmentation import BackgroundModel, ForegroundParams
+    from hmocap_ros.segmentation import ForegroundParams, background_models
 
     out = sys.stderr if out is None else out
     given_rig = rig
+    fg_params = dict(fg_params or {})
+    learn_from = fg_params.pop("learn_from", None)
     if silhouettes not in ("fg", "gt"):
         raise ValueError("silhouettes must be 'fg' or 'gt'")
     with BagReader(bag) as reader:
@@ -227,9 +233,16 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
         if silhouettes == "fg":
             n_empty = _empty_room_frames(reader, present_images, slop_ns,
                                          min(truth_by_stamp) if truth_by_stamp else None)
-            if n_empty == 0:
+            if learn_from is None:
+                learn_from = "empty_room" if n_empty else "person_masks"
+                if not n_empty:
+                    fallback = ("the bag has no empty-room frames before the subject appears: the "
+                                "background is learnt where the person masks leave the room free")
+                    print(f"hmocap eval mocap: {fallback}", file=out)
+            elif learn_from == "empty_room" and n_empty == 0:
                 fallback = ("the bag has no empty-room frames before the subject appears, so no "
-                            "background model can learn: using the ground-truth silhouettes")
+                            "background model can learn from an empty room: using the "
+                            "ground-truth silhouettes")
                 silhouettes = "gt"
                 print(f"hmocap eval mocap: {fallback}", file=out)
         use = gt_topics if silhouettes == "gt" else image_topics
@@ -239,9 +252,10 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                              f"topics ({use})")
         bg = None
         if silhouettes == "fg":
-            params = ForegroundParams(**{**(fg_params or {}),
-                                         "learn_frames": int(np.clip(n_empty, 1, 100))})
-            bg = [BackgroundModel(params) for _ in names]
+            if learn_from == "empty_room":
+                fg_params["learn_frames"] = int(np.clip(n_empty, 1, 100))
+            bg = background_models(ForegroundParams(**{**fg_params, "learn_from": learn_from}),
+                                   names)
         pipeline = None
         if detector is not None:
             from hmocap_ros.detection.extremity_pipeline import ExtremityPipeline

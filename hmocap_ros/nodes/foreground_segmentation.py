@@ -3,7 +3,9 @@
 One node serves a list of cameras. For each camera a
 :class:`~hmocap_ros.segmentation.BackgroundModel` (per-pixel single Gaussian after Xu et al.,
 shadow and illumination-change suppression, morphological clean-up) learns the empty room
-from the first frames, then adapts slowly where there is no foreground.
+from the first frames, then adapts slowly where there is no foreground; with
+``learn_from:=person_masks`` a :class:`~hmocap_ros.segmentation.PersonMaskedBackground` learns
+each pixel where the landmark network's person masks leave it free (no empty room needed).
 
 Subscriptions:
   ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8), per camera: ``image_reliability``
@@ -45,7 +47,7 @@ from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.nodes.common import (RESULT_QOS, create_image_publisher, declare_parameters, image_qos,
                                      image_reliability_param, param, run_node)
-from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels
+from hmocap_ros.segmentation import ForegroundParams, background_models, compile_kernels
 
 NODE_NAME = "foreground_segmentation"
 
@@ -69,8 +71,8 @@ def is_colour(encoding: str) -> bool:
 
 
 class _CameraState:
-    def __init__(self, params: ForegroundParams):
-        self.model = BackgroundModel(params)
+    def __init__(self, model):
+        self.model = model
         self.frames = 0
         self.seconds = 0.0
         self.size_errors = 0
@@ -90,7 +92,8 @@ class ForegroundSegmentation(Node):
         self.factory = RclpyFactory()
         # Before subscribing: compiling on the first frames with a person would drop frames.
         compile_kernels(self.params)
-        self.cameras = {name: _CameraState(self.params) for name in self.config.cameras}
+        models = background_models(self.params, self.config.cameras)
+        self.cameras = {name: _CameraState(model) for name, model in zip(self.config.cameras, models)}
         self.mask_pubs = {}
         images_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         for name in self.cameras:
@@ -101,8 +104,8 @@ class ForegroundSegmentation(Node):
         if self.config.diagnostics_period > 0:
             self.create_timer(self.config.diagnostics_period, self._publish_diagnostics)
         self.get_logger().info(
-            f"segmenting {len(self.cameras)} cameras ({', '.join(self.cameras)}); learning the background "
-            f"from the first {self.params.learn_frames} frames")
+            f"segmenting {len(self.cameras)} cameras ({', '.join(self.cameras)}); background learnt "
+            f"from {self.params.learn_from.replace('_', ' ')} (learn_frames {self.params.learn_frames})")
 
     def _callback(self, name: str):
         state = self.cameras[name]

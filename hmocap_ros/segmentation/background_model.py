@@ -300,7 +300,8 @@ class BackgroundModel:
 
 
 def compile_kernels(params: ForegroundParams | None = None) -> None:
-    """Compile (or load from numba's cache) every kernel a segmenting model calls, now.
+    """Compile (or load from numba's cache) every kernel a segmenting model calls, now (those
+    of :class:`~hmocap_ros.segmentation.PersonMaskedBackground` too).
 
     numba compiles a kernel on its first call. On a fresh checkout (no cache yet) that is
     seconds per kernel, and the clean-up kernels run only once a mask holds a small blob or
@@ -324,3 +325,6 @@ def compile_kernels(params: ForegroundParams | None = None) -> None:
     scene[26:30, 2:8] = 60              # ... and a shadow-like darker patch
     model.apply(scene, 2)
     model.apply(scene, 3)
+    from hmocap_ros.segmentation.person_masked_background import compile_learning
+
+    compile_learning()

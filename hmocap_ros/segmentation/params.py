@@ -19,9 +19,16 @@ class ForegroundParams:
     Colour values are in uint8 levels of the input image; rates are per frame.
     """
 
+    learn_from: str = param(
+        "empty_room", "Where the background is learnt: empty_room: from the first learn_frames "
+                      "frames (after start or relearn), which must show the room empty, no "
+                      "foreground before they are done; person_masks: each pixel from "
+                      "learn_frames steady frames in which the landmark network's person "
+                      "segmentation leaves it free, the network's mask standing in where a pixel "
+                      "is not learnt yet (a person may be in view from the first frame).")
     learn_frames: int = param(
-        50, "Frames (>= 1; from the first one, or after relearn) that learn the background mean "
-            "and variance; no foreground is reported before they are done.")
+        50, "Frames (>= 1) that learn the background mean and variance: the first ones "
+            "(empty_room), or per pixel the steady frames free of the person (person_masks).")
     k_sigma: float = param(
         3.5, "Foreground threshold: a pixel is foreground when its Mahalanobis distance to the "
              "background Gaussian (diagonal, 3 channels) exceeds k_sigma (standard deviations, > 0).")
@@ -77,8 +84,26 @@ class ForegroundParams:
     max_hole_area: int = param(
         300, "Background holes inside a blob up to this area (pixels, >= 0) are filled; 0 fills none.")
 
+    person_period: int = param(
+        1, "person_masks: frames between two runs of the landmark network on a camera while it "
+           "has pixels not learnt (>= 1; the last mask stands in between); the network stops "
+           "once every pixel is learnt.")
+    person_margin: float = param(
+        0.02, "person_masks: growth of the person's mask, as a share of the image's height "
+              "(>= 0; 10 pixels at 480), before it keeps pixels from being learnt.")
+    person_threshold: float = param(
+        0.5, "person_masks: the network's person probability (in (0, 1)) above which a pixel "
+             "is the person.")
+
     def __post_init__(self):
+        from hmocap_ros.segmentation import BACKGROUND_MODELS
+
         checks = [
+            (self.learn_from in BACKGROUND_MODELS,
+             f"learn_from must be one of {', '.join(BACKGROUND_MODELS)}, got {self.learn_from!r}"),
+            (self.person_period >= 1, "person_period must be >= 1"),
+            (self.person_margin >= 0, "person_margin must be >= 0"),
+            (0.0 < self.person_threshold < 1.0, "person_threshold must be in (0, 1)"),
             (self.learn_frames >= 1, "learn_frames must be >= 1"),
             (self.k_sigma > 0.0, "k_sigma must be > 0"),
             (0.0 < self.min_sigma <= self.max_sigma, "need 0 < min_sigma <= max_sigma"),

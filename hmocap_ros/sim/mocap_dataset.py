@@ -29,6 +29,10 @@ Output, next to each other (``BAG`` = ``--out``, e.g. ``run.mcap``):
 The recording starts with ``--background-seconds`` of the empty room (for background
 models to learn; those frames have images and empty silhouettes but no skeleton or joint
 states), then the subject appears and performs ``--seconds`` of the clip from ``--start``.
+With ``--background-seconds 0`` the subject is in view from the first frame, as in most real
+recordings; ``--still-seconds`` makes the subject first stand still in the clip's first pose
+for that long (someone waiting for the recording to start: no pixel of the body's outline
+changes then, so no background model can tell the person from the room by motion).
 The subject is placed (position and heading searched with the seed) so that all joints stay
 inside every camera's image and away from the furniture; a motion that travels farther than
 the cameras' common view (a run) is placed to stay in view as long as it can, with a warning.
@@ -114,6 +118,7 @@ class MocapSimConfig:
     start: float = 0.0
     seconds: float = 4.0
     background_seconds: float = 1.0
+    still_seconds: float = 0.0
     seed: int = 0
     distractors: bool = False
     lighting_changes: bool = False
@@ -285,6 +290,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="seconds of motion to render (default 4)")
     parser.add_argument("--background-seconds", type=float, default=1.0,
                         help="seconds of empty room before the subject appears (default 1)")
+    parser.add_argument("--still-seconds", type=float, default=0.0,
+                        help="seconds the subject first stands still in the clip's first pose "
+                             "(default 0)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of subject shape, look, room, placement and noise (default 0)")
     parser.add_argument("--distractors", action="store_true",
@@ -313,7 +321,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
     config = MocapSimConfig(
         out=ns.out, bvh=ns.bvh, cameras=ns.cameras, width=ns.width, height=ns.height, fps=ns.fps,
         start=ns.start, seconds=ns.seconds, background_seconds=ns.background_seconds,
-        seed=ns.seed, distractors=ns.distractors, lighting_changes=ns.lighting_changes,
+        still_seconds=ns.still_seconds, seed=ns.seed, distractors=ns.distractors, lighting_changes=ns.lighting_changes,
         shadows=ns.shadows, noise=ns.noise,
         supersample=ns.supersample, rig=ns.rig, contact_frames=ns.contact_frames,
         force=ns.force, progress=not ns.quiet)

@@ -72,8 +72,9 @@ def _retargeted(bvh_path, tracking, shape, fps):
                        fps=fps)
 
 
-def _motion_window(motion, start: float, seconds: float, fps: float):
-    """``seconds`` of ``motion`` from ``start`` (shorter, with a warning, where the clip ends)."""
+def _motion_window(motion, start: float, seconds: float, fps: float, still: float = 0.0):
+    """``seconds`` of ``motion`` from ``start`` (shorter, with a warning, where the clip ends),
+    after ``still`` seconds of its first frame held (the subject standing before it moves)."""
     n = motion.n_frames
     first = int(round(start * fps))
     count = int(round(seconds * fps))
@@ -85,9 +86,9 @@ def _motion_window(motion, start: float, seconds: float, fps: float):
         count = n - first
         print(f"hmocap sim mocap: the clip ends after {count / fps:.2f} s of motion from "
               f"--start {start}", file=sys.stderr)
-    return replace(motion, local_rotations=motion.local_rotations[first:first + count],
-                   root_translation=motion.root_translation[first:first + count],
-                   source_frames=None)
+    held = [first] * int(round(still * fps)) + list(range(first, first + count))
+    return replace(motion, local_rotations=motion.local_rotations[held],
+                   root_translation=motion.root_translation[held], source_frames=None)
 
 
 def _performer(motion, tracking, full, shape, look) -> _Performer:
@@ -207,6 +208,6 @@ def _subject_in_room(config: MocapSimConfig, rng_room, rng_shape, rng_place) -> 
     tracking = load_body_model("tracking")
     shape = sample_shape(rng_shape)
     motion = _retargeted(Path(config.bvh), tracking, shape, fps)
-    motion = _motion_window(motion, config.start, config.seconds, fps)
+    motion = _motion_window(motion, config.start, config.seconds, fps, config.still_seconds)
     motion = _place(motion, rig, room, rng_place, _shaped_skeleton(tracking, shape))
     return rig, room, tracking, shape, motion

@@ -1,0 +1,391 @@
+"""``hmocap eval consistency BAG [--tracked TRACKED_BAG] --json OUT``: how well a tracked body
+agrees with the images of a recording that has no ground truth.
+
+Without ground truth three checks remain, each against what the images show (the landmark
+network of :mod:`hmocap_ros.detection` and the foreground of :mod:`hmocap_ros.segmentation`):
+
+1. **Reprojection**: the tracked body's 12 limb joints (shoulders, elbows, wrists, hips, knees,
+   ankles: :data:`~hmocap_ros.detection.detections.MODEL_JOINT`) projected into every view,
+   against that view's keypoint of the same label where the network is confident of it
+   (landmark weight of :func:`~hmocap_ros.detection.keypoint_triangulation.view_keypoints` at
+   least ``confident_visibility``, 0.5): pixels, median and 90th percentile, overall, per
+   joint and per view.
+2. **Silhouettes**: the tracked body model (its joint states and shape) rendered in every view,
+   against the view's foreground: intersection over union, mean over the views and frame sets
+   with a pose.
+3. **Triangulation**: the same joints against the plain robust triangulation of the views'
+   keypoints (:func:`~hmocap_ros.detection.keypoint_triangulation.triangulate_views`, no body
+   model, no tracking) where at least ``--min-views`` (3) views agree: millimetres, median
+   and per joint.
+
+The views' keypoints come from the landmark network on each view's tracked crop
+(:class:`~hmocap_ros.segmentation.person_masks.PersonMasks`, the detector's crops); the
+foreground from a background model per camera (``--learn-from``, default ``person_masks``:
+a recording without ground truth does not say that its room starts empty). Without
+``--tracked`` the bag is tracked first with ``hmocap track``'s defaults
+(:func:`~hmocap_ros.commands.track.track_to_bag`, into a temporary bag); with it, the tracked
+bag's first body (``/skeleton``, ``/humans/bodies/<id>/joint_states`` and ``body_shape``,
+:func:`~hmocap_ros.export.motion.read_motion`). A frame set is checked where the body has a
+skeleton at its stamp; a tracker that found nobody gives ``frames_with_pose`` 0 and null
+figures, not an error.
+
+JSON (``--json``): ``frames``, ``frames_with_pose``, ``reprojection_median_px``,
+``reprojection_p90_px``, ``silhouette_iou_mean``, ``triangulation_gap_mm`` (median), and
+``per_joint``, ``per_view``, ``image_size``, ``keypoint_pairs``, ``triangulated_points``,
+``tracked`` (the ``--tracked`` bag, null when tracked here) and ``tracking`` (the on-the-fly
+run's frame sets, frame sets with a body, foreground source and notes). ``--picture``: each view of a few frame sets with the foreground's outline
+(green), the rendered body's (magenta), the views' keypoints (yellow) and the tracked joints
+projected (red, with the skeleton's bones). Pixels are those of the bag's images.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["ConsistencyError", "add_arguments", "consistency_report", "evaluate_consistency",
+           "main_from_args", "silhouette_iou"]
+
+PROG = "hmocap eval consistency"
+#: Frame sets drawn in the picture.
+PICTURE_FRAMES = 4
+
+
+class ConsistencyError(ValueError):
+    """Bad input of the consistency check (one line for the user)."""
+
+
+def silhouette_iou(rendered: np.ndarray, foreground: np.ndarray) -> float | None:
+    """Intersection over union of two masks (non-zero = inside); None when both are empty."""
+    a, b = np.asarray(rendered) != 0, np.asarray(foreground) != 0
+    union = np.count_nonzero(a | b)
+    return None if union == 0 else np.count_nonzero(a & b) / union
+
+
+def _stats(values) -> dict:
+    values = np.asarray(values, dtype=np.float64)
+    if values.size == 0:
+        return {"median": None, "p90": None, "count": 0}
+    return {"median": float(np.median(values)), "p90": float(np.percentile(values, 90)),
+            "count": int(values.size)}
+
+
+class _Body:
+    """The tracked body's joints and mesh at a frame set's stamp."""
+
+    def __init__(self, motion):
+        from hmocap_ros.body import load_body_model
+        from hmocap_ros.detection.detections import MODEL_JOINT
+
+        self.model = load_body_model("tracking")
+        self.motion = motion
+        names = list(motion.point_names)
+        self.joints = {label: names.index(joint) for label, joint in MODEL_JOINT.items()
+                       if joint in names}
+        self.by_stamp = {int(s): i for i, s in enumerate(motion.stamps_ns)}
+        dof_index = {n: i for i, n in enumerate(motion.dof_names)}
+        self.dof_columns = [dof_index.get(n) for n in self.model.skeleton.dof_names]
+        self.dofs = motion.dofs_at_skeleton_frames() if len(motion.dof_names) else None
+
+    def shape_at(self, stamp: int):
+        shapes = [s for t, s in self.motion.shapes if t <= stamp] or [s for _, s in self.motion.shapes[:1]]
+        return shapes[-1] if shapes else None
+
+    def at(self, stamp: int):
+        """(label -> (3,) joint, mesh vertices (V, 3) or None), or None without a pose."""
+        i = self.by_stamp.get(int(stamp))
+        if i is None or not np.isfinite(self.motion.points[i]).all():
+            return None
+        joints = {label: self.motion.points[i, j] for label, j in self.joints.items()}
+        vertices = None
+        if self.dofs is not None and None not in self.dof_columns:
+            params = self.dofs[i, self.dof_columns]
+            shape = self.shape_at(stamp)
+            if np.isfinite(params).all() and shape is not None:
+                vertices = self.model.forward(params[None], shape).vertices[0]
+        return joints, vertices
+
+
+def _outline(mask: np.ndarray) -> np.ndarray:
+    import cv2
+
+    mask = (np.asarray(mask) != 0).astype(np.uint8)
+    return (mask - cv2.erode(mask, np.ones((3, 3), np.uint8))).astype(bool)
+
+
+def _tile(rgb, foreground, rendered, pixels, weights, labels, joint_pixels, bones):
+    import cv2
+
+    image = np.ascontiguousarray(rgb.copy())
+    if foreground is not None:
+        image[_outline(foreground)] = (40, 220, 40)
+    if rendered is not None:
+        image[_outline(rendered)] = (230, 40, 230)
+    radius = max(2, image.shape[0] // 160)
+    for (a, b) in bones:
+        if a in joint_pixels and b in joint_pixels:
+            cv2.line(image, tuple(int(v) for v in joint_pixels[a]),
+                     tuple(int(v) for v in joint_pixels[b]), (230, 40, 40), max(1, radius // 2))
+    for k, label in enumerate(labels):
+        if weights[k] > 0:
+            cv2.circle(image, tuple(int(v) for v in pixels[k]), radius, (250, 230, 40), -1)
+    for pixel in joint_pixels.values():
+        cv2.circle(image, tuple(int(v) for v in pixel), radius, (230, 40, 40), 1)
+    return image
+
+
+def _picture(path: Path, rows: list) -> None:
+    """Tiles (one row per frame set, one column per view) at a common height, as a PNG."""
+    import cv2
+
+    height = 360
+    lines = []
+    for tiles in rows:
+        scaled = [cv2.resize(t, (max(1, round(t.shape[1] * height / t.shape[0])), height),
+                             interpolation=cv2.INTER_AREA) for t in tiles]
+        lines.append(np.hstack(scaled))
+    width = max(line.shape[1] for line in lines)
+    sheet = np.vstack([np.pad(line, ((0, 0), (0, width - line.shape[1]), (0, 0))) for line in lines])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+
+
+_BONES = (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"),
+          ("left_shoulder", "left_hip"), ("right_shoulder", "right_hip"),
+          *((f"{s}_shoulder", f"{s}_elbow") for s in ("left", "right")),
+          *((f"{s}_elbow", f"{s}_wrist") for s in ("left", "right")),
+          *((f"{s}_hip", f"{s}_knee") for s in ("left", "right")),
+          *((f"{s}_knee", f"{s}_ankle") for s in ("left", "right")))
+
+
+def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_views: int = 3,
+                       max_frames: int | None = None, picture: Path | None = None,
+                       progress=None) -> dict:
+    """The checks of the module docstring for ``bag`` and a tracked body's ``motion``
+    (:class:`~hmocap_ros.export.motion.BodyMotion`)."""
+    from hmocap_ros.camera_projection import project_points
+    from hmocap_ros.detection.keypoint_detector import KeypointParams
+    from hmocap_ros.detection.keypoint_triangulation import (_POINTS, triangulate_views,
+                                                             view_keypoints)
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.conversions import image_to_rgb
+    from hmocap_ros.render import render_silhouettes
+    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.segmentation import ForegroundParams, background_models
+    from hmocap_ros.segmentation.person_masks import PersonMasks
+
+    body = _Body(motion)
+    labels = list(body.joints)
+    params = KeypointParams()
+    with BagReader(bag) as reader:
+        available = reader.topics()
+        if topics.CAMERA_RIG not in available:
+            raise ConsistencyError(f"{bag}: no {topics.CAMERA_RIG}: the cameras are unknown")
+        rig = rig_from_msg(reader.first(topics.CAMERA_RIG))
+        image_topics = [topics.camera_image(n) for n in rig.names]
+        present = [t for t in image_topics if t in available]
+        if not present:
+            raise ConsistencyError(f"{bag}: none of the image topics {', '.join(image_topics)}")
+        fg_models = background_models(ForegroundParams(learn_from=learn_from), rig.names)
+        masks = PersonMasks(threads=params.threads)
+        total = max(available[t].count for t in present)
+        if max_frames is not None:
+            total = min(total, max_frames)
+        chosen = set(np.linspace(0, max(total - 1, 0), PICTURE_FRAMES).round().astype(int).tolist())
+        reproj = {(label, name): [] for label in labels for name in rig.names}
+        gaps = {label: [] for label in labels}
+        ious = {name: [] for name in rig.names}
+        n_frames = n_pose = 0
+        rows = []
+        for stamp, msgs in reader.frame_sets(present, 0, allow_partial=True, min_topics=1):
+            images = [image_to_rgb(msgs[t]) if t in msgs else None for t in image_topics]
+            views, foregrounds = [], []
+            for k, (name, image) in enumerate(zip(rig.names, images)):
+                if image is None or image.shape[:2] != (rig[k].height, rig[k].width):
+                    views.append(None)
+                    foregrounds.append(None)
+                    continue
+                foregrounds.append(fg_models[k].apply(image, int(stamp)))
+                views.append(masks.segment(name, image)[0])
+            pixels, weights = view_keypoints(rig.cameras, views, foregrounds, params)
+            keypoints = triangulate_views(rig.cameras, views, foregrounds, None, params)
+            found = body.at(stamp)
+            n_frames += 1
+            tiles = []
+            if found is not None:
+                n_pose += 1
+                joints, vertices = found
+                points = np.array([joints[label] for label in labels])
+                projected = project_points(rig.cameras, points)
+                rendered = [None] * len(rig)
+                if vertices is not None:
+                    mesh = project_points(rig.cameras, vertices)
+                    for k, camera in enumerate(rig):
+                        if np.all(mesh.depth[k] > 0):
+                            rendered[k] = render_silhouettes(mesh.pixels[k], body.model.faces,
+                                                             camera.height, camera.width)
+                for k, name in enumerate(rig.names):
+                    for j, label in enumerate(labels):
+                        p = _POINTS.index(label)
+                        if weights[k, p] >= params.confident_visibility and projected.depth[k, j] > 0:
+                            reproj[(label, name)].append(
+                                float(np.linalg.norm(projected.pixels[k, j] - pixels[k, p])))
+                    if rendered[k] is not None and foregrounds[k] is not None:
+                        iou = silhouette_iou(rendered[k], foregrounds[k])
+                        if iou is not None:
+                            ious[name].append(iou)
+                triangulated = dict(zip(keypoints.labels, zip(keypoints.positions, keypoints.views_used)))
+                for label in labels:
+                    if label in triangulated and triangulated[label][1] >= min_views:
+                        gaps[label].append(1000.0 * float(np.linalg.norm(
+                            triangulated[label][0] - joints[label])))
+                if picture is not None and n_frames - 1 in chosen:
+                    for k in range(len(rig)):
+                        if images[k] is None:
+                            continue
+                        joint_pixels = {label: projected.pixels[k, j] for j, label in enumerate(labels)
+                                        if projected.depth[k, j] > 0}
+                        tiles.append(_tile(images[k], foregrounds[k], rendered[k], pixels[k],
+                                           weights[k] * (weights[k] >= params.confident_visibility),
+                                           _POINTS, joint_pixels, _BONES))
+            if tiles:
+                rows.append(tiles)
+            if progress is not None:
+                progress(n_frames, total)
+            if max_frames is not None and n_frames >= max_frames:
+                break
+    if picture is not None and rows:
+        _picture(Path(picture), rows)
+    every_error = [e for values in reproj.values() for e in values]
+    every_gap = [g for values in gaps.values() for g in values]
+    every_iou = [v for values in ious.values() for v in values]
+    overall = _stats(every_error)
+    return {
+        "bag": str(bag),
+        "tracked": str(motion.bag),
+        "body_id": motion.body_id,
+        "frames": n_frames,
+        "frames_with_pose": n_pose,
+        "reprojection_median_px": overall["median"],
+        "reprojection_p90_px": overall["p90"],
+        "silhouette_iou_mean": float(np.mean(every_iou)) if every_iou else None,
+        "triangulation_gap_mm": _stats(every_gap)["median"],
+        "keypoint_pairs": overall["count"],
+        "triangulated_points": len(every_gap),
+        "min_views": int(min_views),
+        "image_size": {name: [c.width, c.height] for name, c in zip(rig.names, rig)},
+        "learn_from": learn_from,
+        "per_joint": {label: {"reprojection": _stats([e for n in rig.names for e in reproj[(label, n)]]),
+                              "triangulation_gap_mm": _stats(gaps[label])} for label in labels},
+        "per_view": {name: {"reprojection": _stats([e for label in labels for e in reproj[(label, name)]]),
+                            "silhouette_iou_mean": float(np.mean(ious[name])) if ious[name] else None}
+                     for name in rig.names},
+    }
+
+
+def _tracked_motion(path, name: str):
+    """The first body of body_tracker's output bag ``path``; a motion without frames when the
+    tracker found nobody (its ``/humans/bodies/tracked`` there, no ``/skeleton``)."""
+    from hmocap_ros.export.motion import BodyMotion, read_motion
+    from hmocap_ros.io.bag_reader import BagReader
+
+    with BagReader(path) as reader:
+        available = reader.topics()
+    if "/skeleton" in available:
+        return read_motion(path, "tracked")
+    if "/humans/bodies/tracked" not in available:
+        raise ConsistencyError(f"{name}: not body_tracker's output (no /skeleton, no "
+                               f"/humans/bodies/tracked; make it with hmocap track)")
+    return BodyMotion(bag=Path(path), source="tracked", body_id="b0",
+                      stamps_ns=np.zeros(0, np.int64), point_names=(), parents=np.zeros(0, int),
+                      points=np.zeros((0, 0, 3)), dof_stamps_ns=np.zeros(0, np.int64),
+                      dof_names=(), dofs=np.zeros((0, 0)))
+
+
+def evaluate_consistency(bag, tracked=None, *, learn_from: str = "person_masks",
+                         min_views: int = 3, max_frames: int | None = None,
+                         picture: Path | None = None, progress=None) -> dict:
+    """Track ``bag`` unless ``tracked`` is given, then :func:`consistency_report`.
+    :class:`ConsistencyError` for bad input."""
+    from hmocap_ros.commands.track import TrackError, track_to_bag
+    from hmocap_ros.export.motion import ExportError
+    from hmocap_ros.io.bag_reader import BagReadError
+
+    try:
+        if tracked is None:
+            with tempfile.TemporaryDirectory(prefix="hmocap_consistency_") as folder:
+                out = Path(folder) / "tracked.mcap"
+                tracking = track_to_bag(bag, out, max_frames=max_frames)
+                motion = _tracked_motion(out, f"{bag} tracked")
+        else:
+            tracking = None
+            motion = _tracked_motion(tracked, str(tracked))
+    except (TrackError, ExportError, BagReadError) as error:
+        raise ConsistencyError(str(error)) from None
+    try:
+        report = consistency_report(bag, motion, learn_from=learn_from, min_views=min_views,
+                                    max_frames=max_frames, picture=picture, progress=progress)
+    except BagReadError as error:
+        raise ConsistencyError(str(error)) from None
+    report["tracked"] = None if tracked is None else str(tracked)
+    if tracking is not None:
+        report["tracking"] = {"frame_sets": tracking["frame_sets"], "with_pose": tracking["with_pose"],
+                              "silhouettes": tracking.get("silhouettes"), "notes": tracking["notes"]}
+    return report
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="multi-view bag in the documented layout (no ground truth needed)")
+    parser.add_argument("--tracked", default=None,
+                        help="bag of body_tracker's output for BAG (default: track BAG now with "
+                             "hmocap track's defaults)")
+    parser.add_argument("--json", required=True, metavar="OUT", help="write the report as JSON")
+    parser.add_argument("--picture", default=None, metavar="OUT.png",
+                        help="draw a few frame sets: foreground, rendered body, keypoints, joints")
+    parser.add_argument("--learn-from", choices=("empty_room", "person_masks"),
+                        default="person_masks",
+                        help="how the foreground's background is learnt (default person_masks)")
+    parser.add_argument("--min-views", type=int, default=3,
+                        help="views that must agree on a triangulated keypoint (default 3)")
+    parser.add_argument("--frames", type=int, default=None, help="check at most this many frame sets")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def main_from_args(ns: argparse.Namespace) -> int:
+    import time
+
+    last = [0.0]
+
+    def progress(done: int, total: int) -> None:
+        if not ns.quiet and time.monotonic() - last[0] >= 2.0:
+            last[0] = time.monotonic()
+            print(f"{PROG}: {done}/{total} frame sets", file=sys.stderr, flush=True)
+
+    try:
+        if ns.min_views < 2:
+            raise ConsistencyError(f"--min-views must be >= 2, got {ns.min_views}")
+        report = evaluate_consistency(ns.bag, ns.tracked, learn_from=ns.learn_from,
+                                      min_views=ns.min_views, max_frames=ns.frames,
+                                      picture=Path(ns.picture) if ns.picture else None,
+                                      progress=progress)
+    except (ConsistencyError, ValueError, OSError) as error:
+        print(f"{PROG}: {error}", file=sys.stderr)
+        return 2
+    Path(ns.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(ns.json).write_text(json.dumps(report, indent=1))
+
+    def show(value, unit):
+        return "-" if value is None else f"{value:.1f}{unit}"
+
+    print(f"{ns.bag}: a pose on {report['frames_with_pose']} of {report['frames']} frame sets; "
+          f"reprojection median {show(report['reprojection_median_px'], ' px')} "
+          f"(p90 {show(report['reprojection_p90_px'], ' px')}); silhouette IoU "
+          f"{show(report['silhouette_iou_mean'], '')}; "
+          f"triangulation gap {show(report['triangulation_gap_mm'], ' mm')} "
+          f"({report['triangulated_points']} points seen by >= {report['min_views']} views)")
+    return 0
