@@ -954,3 +954,32 @@ def test_tracker_survives_dropped_cameras_empty_frames_and_no_person(model, rig)
     assert res.state in STATES and res.has_pose
     with pytest.raises(ValueError):
         BodyTracker(model, [], TrackerParams())
+
+
+def test_cameras_of_different_sizes_are_tracked_together(model, rig):
+    """A rig whose views differ in size (one camera at half the others' resolution): the views
+    are stacked padded, each projects with its own intrinsics, and the tracker follows the
+    person as on the same-size rig."""
+    from hmocap_ros.rig import Rig
+
+    mixed = Rig(rig.frame_id, tuple(c.scaled(0.5) if i == 2 else c for i, c in enumerate(rig)))
+    shape = subject_shape()
+    params = clip_poses(model, 0, 3, shape)
+    same, joints = render_masks(model, rig, params, shape)
+    small, _ = render_masks(model, Rig(rig.frame_id, (mixed[2],)), params, shape)
+    masks = [[*same[f, :2], small[f, 0], same[f, 3]] for f in range(len(params))]
+    fitness = SilhouetteFitness(model, mixed, working_scale=0.5)
+    obs = fitness.observe(masks[0])
+    assert obs.masks.shape == (4, 120, 160) and obs.views.tolist() == [0, 1, 2, 3]
+    assert obs.masks[2, 60:].max() == 0 and obs.masks[2, :, 80:].max() == 0  # the padding
+    assert obs.counts[2] == pytest.approx(obs.counts[0] / 4, rel=0.5)
+    truth = params[0]
+    assert fitness.costs(truth[None], obs)[0] < fitness.costs(truth[None] + 0.05, obs)[0]
+    tracker = small_tracker(model, mixed, shape=shape)
+    errors = []
+    for f in range(len(params)):
+        res = tracker.update(masks[f], STAMP0 + f)
+        if res.has_pose:
+            errors.append(joint_errors_mm(res.joints, joints[f]).mean())
+    base = image_free_errors(model, params, joints, shape)["a_pose"].mean()
+    assert res.state == "tracking" and errors and errors[-1] < 0.6 * base, (errors, base)

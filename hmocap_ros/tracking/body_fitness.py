@@ -189,7 +189,8 @@ class SilhouetteFitness:
         """Working-resolution observation from one foreground mask per rig camera.
 
         A mask that is None or whose size is neither the camera's full nor its working
-        resolution is dropped (listed in ``Observation.dropped``), never an error.
+        resolution is dropped (listed in ``Observation.dropped``), never an error. Views of
+        different sizes are stacked padded at the right and bottom to the largest (below).
         """
         if len(masks) != len(self.cameras):
             raise ValueError(f"expected {len(self.cameras)} masks (one per camera, None for a "
@@ -207,7 +208,7 @@ class SilhouetteFitness:
             small.append(downsample_mask(mask, work.width, work.height))
         views = np.asarray(kept, dtype=np.intp)
         if small:
-            stack = np.ascontiguousarray(np.stack(small))
+            stack = _stack_padded(small)
         else:
             w = self.working[0]
             stack = np.zeros((0, w.height, w.width), dtype=np.uint8)
@@ -311,3 +312,19 @@ class SilhouetteFitness:
     def mean_view_cost(self, cost: float | np.ndarray, obs: Observation):
         """Eq. 2.8 cost divided by the number of views: comparable across dropped cameras."""
         return np.asarray(cost) / max(obs.n_views, 1)
+
+
+def _stack_padded(masks: list[np.ndarray]) -> np.ndarray:
+    """The masks as one (V, H, W) array; a view smaller than the largest is padded with
+    background at its right and bottom. Its pixels keep their coordinates, so its camera
+    projects as it is; a body part beyond such a view's edge counts in the XOR as model
+    without foreground (the renderer clips at the stack's size), a small pull into that
+    view that same-size rigs do not have."""
+    height = max(m.shape[0] for m in masks)
+    width = max(m.shape[1] for m in masks)
+    if all(m.shape == (height, width) for m in masks):
+        return np.ascontiguousarray(np.stack(masks))
+    out = np.zeros((len(masks), height, width), dtype=masks[0].dtype)
+    for i, m in enumerate(masks):
+        out[i, :m.shape[0], :m.shape[1]] = m
+    return out
