@@ -28,8 +28,8 @@ def shuffled_votes(seed: int = 0):
 
     rng = np.random.default_rng(seed)
 
-    def votes(flat, padded, stride):
-        class_map, grid_depth = grid_votes.forest_grid_votes(flat, padded, stride)
+    def votes(flat, padded, stride, vote_reach=1.0):
+        class_map, grid_depth = grid_votes.forest_grid_votes(flat, padded, stride, vote_reach)
         valid = class_map >= 0
         class_map[valid] = rng.permutation(class_map[valid])
         return class_map, grid_depth

@@ -46,6 +46,7 @@ from hmocap_ros.gestures.forest import train_forest_on_frames  # noqa: E402
 from hmocap_ros.gestures.forest_file import load_forest, save_forest  # noqa: E402
 from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
 from hmocap_ros.sim import gesture_dataset as gd  # noqa: E402
+from hmocap_ros.sim.gesture_set import GESTURE_CLASSES  # noqa: E402
 
 #: name -> ``hmocap sim gestures`` arguments (all 640x480). Short holds in the training bags give
 #: more distinct poses per frame; the validation and test bags hold gestures 5-10 frames.
@@ -56,9 +57,16 @@ BAGS = {
     "val": dict(seed=3001, subjects=8, subject_offset=3100, frames=1200),
     "test": dict(seed=2000, subjects=8, subject_offset=2000, frames=1200),
     "test_close": dict(seed=2001, subjects=8, subject_offset=2100, frames=1200, background="close"),
+    "train_near": dict(seed=1003, subjects=16, subject_offset=1300, frames=3000, hold=(2, 4), near_misses=6),
+    "val_near": dict(seed=3002, subjects=8, subject_offset=3200, frames=600, gestures=(), negatives=0,
+                     near_misses=6, near_of=GESTURE_CLASSES),
+    "test_near": dict(seed=2002, subjects=8, subject_offset=2200, frames=1200, gestures=(), negatives=0,
+                      near_misses=6, near_of=GESTURE_CLASSES),
 }
-TRAIN = ("train1", "train2", "train3")
+TRAIN = ("train1", "train2", "train3", "train_near")
 EVAL = ("val", "test", "test_close")
+#: Bags of near misses only (no gesture): scored by the false detections at the node's thresholds.
+NEAR = ("val_near", "test_near")
 KAPPAS = (None, 0.15, 0.30, 0.50)
 DEFAULT = "boosted, kappa 15 cm"
 
@@ -71,6 +79,14 @@ def sim_command(name: str) -> str:
         args.append(f"--hold {kw['hold'][0]} {kw['hold'][1]}")
     if "background" in kw:
         args.append(f"--background {kw['background']}")
+    if "gestures" in kw:
+        args.append("--gestures " + " ".join(kw["gestures"]))
+    if "negatives" in kw:
+        args.append(f"--negatives {kw['negatives']}")
+    if "near_misses" in kw:
+        args.append(f"--near-misses {kw['near_misses']}")
+    if "near_of" in kw:
+        args.append("--near-misses-of " + " ".join(kw["near_of"]))
     return f"hmocap sim gestures {' '.join(args)} --out {name}.mcap"
 
 

@@ -50,6 +50,7 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from hmocap_ros.camera_model import PinholeCamera
 from hmocap_ros.gestures.depth_units import implausible_depth
+from hmocap_ros.gestures.detection import node_detections
 from hmocap_ros.gestures.file_watch import FileWatch
 from hmocap_ros.gestures.gesture_messages import gesture_array, probability_image
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
@@ -192,8 +193,10 @@ class GestureDetection(Node):
         stamp = stamp_to_ns(msg.header.stamp)
         t0 = time.perf_counter()
         try:
-            detections = [d for d in self.detector.update(depth, stamp)
-                          if d.score >= self.thresholds.get(d.name, self.params.min_score)]
+            self.detector.update(depth, stamp)
+            detections = node_detections(self.detector.candidates,
+                                         replace(self.detector.active_params, min_score=self.params.min_score),
+                                         self.thresholds)
         except ValueError as err:
             log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
             return

@@ -73,6 +73,8 @@ class GestureTeacher:
         self.held = None               # (a, b, x, z, yaw, side, frames) of the held gesture
         self.frames_in_mode = 0
         self.actor.params = self._standing()
+        #: False: the user has left the room (the camera sees it empty), e.g. for an empty session.
+        self.present = True
 
     @property
     def next_stamp(self) -> int:
@@ -184,7 +186,8 @@ class GestureTeacher:
         self.actor.params = self._pose_for(status)
         meshes = [(self.layout.vertices, self.layout.faces)]
         meshes += [(p.vertices(self.model), self.model.faces) for p in self.people]
-        meshes.append((self.actor.vertices(self.model), self.model.faces))
+        if self.present:
+            meshes.append((self.actor.vertices(self.model), self.model.faces))
         render = render_depth(self.camera, meshes, self.noise_rng)
         stamp = START_NS + self.index * self.period
         self.index += 1
