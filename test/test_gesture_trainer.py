@@ -199,8 +199,8 @@ def test_recording_keeps_the_learnt_frames_and_their_annotation(tmp_path):
     assert write_recording_bag(tmp_path / "session.mcap", rec, camera) == 35
     data = read_gesture_bag(tmp_path / "session.mcap")
     assert data.focal_px == 100.0 and data.depth.shape == (35, 48, 64)
-    assert data.class_names[7] == "wave"  # after the simulator's six gestures
-    assert data.labels[0] == (7, pytest.approx(32.0), pytest.approx(0.45 * 48)) and data.labels[20] is None
+    assert data.class_names[9] == "wave"  # after the simulator's eight gestures
+    assert data.labels[0] == (9, pytest.approx(32.0), pytest.approx(0.45 * 48)) and data.labels[20] is None
     assert np.array_equal(data.depth[3], rec[3].depth_mm)
 
 

@@ -113,10 +113,10 @@ class GestureBag:
 
 
 def _class_names(names_by_id: dict) -> tuple:
-    from hmocap_ros.sim.gesture_set import GESTURE_CLASSES
+    from hmocap_ros.sim.gesture_kinds import ALL_GESTURES, GESTURE_CLASSES
 
     n = max([len(GESTURE_CLASSES)] + list(names_by_id))
-    return ("background",) + tuple(names_by_id.get(c, GESTURE_CLASSES[c - 1] if c <= len(GESTURE_CLASSES)
+    return ("background",) + tuple(names_by_id.get(c, ALL_GESTURES[c - 1] if c <= len(ALL_GESTURES)
                                                     else f"gesture_{c}") for c in range(1, n + 1))
 
 

@@ -13,7 +13,7 @@ kind                misses       what is wrong
 ==================  ===========  ==============================================================
 tee_apart           tee          the top hand 9-15 cm above the stem's fingertips, not on them
 tee_fist            tee          the top hand a fist
-pause_curled        pause        the four fingers bent at the knuckles (60-90 deg), not open
+pause_curled        pause        the four fingers bent (knuckles 60-90 deg, middle joints 40-70), not open
 pause_sideways      pause        the open hand turned 65-110 deg in its plane (fingers sideways)
 pause_half          pause        the arm half raised: the palm 30-45 cm lower, below the shoulder
 silence_cheek       silence      the finger on the cheek, 4-7 cm beside the mouth
@@ -88,7 +88,7 @@ def _pause_curled(c: PoseContext) -> list:
     m = c.model.skeleton
     for f in ("index", "middle", "ring", "pinky"):
         c.params[m.dof_index(f"{c.side}_{f}1_flex")] = np.deg2rad(c.rng.uniform(60, 90))
-        c.params[m.dof_index(f"{c.side}_{f}2_flex")] = np.deg2rad(c.rng.uniform(20, 50))
+        c.params[m.dof_index(f"{c.side}_{f}2_flex")] = np.deg2rad(c.rng.uniform(40, 70))
     return stages
 
 
