@@ -328,7 +328,7 @@ def test_stamps_that_start_over_continue_the_session():
         return out, tr
 
     plain, _ = run(len(frames))
-    restarted, tr = run(22)  # in update_positive of round 1
+    restarted, tr = run(22)  # in the first update_positive
     assert restarted == plain and tr.restarts == 1 and tr.state == "done" and "wave" in tr.thresholds
 
 

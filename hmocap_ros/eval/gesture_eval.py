@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from hmocap_ros.gestures.depth_units import implausible_depth
-from hmocap_ros.gestures.detection import GestureDetector, node_detections
+from hmocap_ros.gestures.detection import GestureDetector, node_detections, suppress_other_classes
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.gestures.trees import Forest
@@ -66,8 +66,8 @@ from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.params import field_overrides, from_flat
 
-__all__ = ["DEFAULT_MODEL", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE",
-           "average_precision", "detect_gestures", "evaluate_gestures", "false_detections", "read_gesture_bag",
+__all__ = ["DEFAULT_MODEL", "DetectorRun", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE",
+           "average_precision", "detect_gestures", "evaluate_gestures", "false_detections", "run_detector", "score_run", "read_gesture_bag",
            "read_gesture_bags", "add_arguments", "main_from_args"]
 
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
@@ -241,6 +241,103 @@ def false_detections(records: list, n_frames: int, minutes: float, class_names: 
             "events_per_minute": events / minutes if minutes > 0 else 0.0, "per_class": per_class}
 
 
+@dataclass
+class DetectorRun:
+    """The detector run over an annotated bag once (:func:`run_detector`): per frame the
+    localized candidates (:attr:`GestureDetector.candidates`, before suppression) at the run's
+    thresholds; what :func:`score_run` scores at any thresholds at or above them."""
+
+    candidates: list
+    active_params: DetectorParams
+    offset_scale: float
+    seconds: float
+
+
+def run_detector(data: GestureBag, forest: Forest, params: DetectorParams | None = None) -> DetectorRun:
+    """Run the detector (the node's code) over ``data`` in stamp order, at the sweep thresholds
+    (:data:`SWEEP_MIN_SCORE`, no volume test) unless ``params`` are given."""
+    if params is None:
+        params = DetectorParams(min_score=SWEEP_MIN_SCORE, min_volume=0.0)
+    detector = GestureDetector(forest, params, focal_px=data.focal_px)
+    candidates, seconds = [], 0.0
+    for i in range(len(data.labels)):
+        t0 = time.perf_counter()
+        detector.update(data.depth[i], int(data.stamps_ns[i]))
+        seconds += time.perf_counter() - t0
+        candidates.append(list(detector.candidates))
+    return DetectorRun(candidates, detector.active_params, detector.offset_scale, seconds)
+
+
+def score_run(data: GestureBag, forest: Forest, run: DetectorRun, node_params: DetectorParams | None = None,
+              thresholds: dict | None = None) -> dict:
+    """Precision-recall and AP per gesture of a :class:`DetectorRun` (module docstring), and its
+    false detections at ``node_params``' thresholds (default the node's) with the per-gesture
+    ``thresholds`` (default the forest's taught ones, as the node's ``use_taught_thresholds``)."""
+    node_params = node_params if node_params is not None else DetectorParams()
+    swept = run.active_params
+    if node_params.min_score < swept.min_score or node_params.min_volume < swept.min_volume:
+        raise ValueError("the node's thresholds must not be below the run's")
+    taught = ({str(k): float(v) for k, v in forest.meta.get("gesture_thresholds", {}).items()}
+              if thresholds is None else dict(thresholds))
+    tolerance = TOLERANCE_PX_640 * data.width / REFERENCE_WIDTH
+    n_gestures = forest.n_classes - 1
+    scores = [[] for _ in range(n_gestures)]
+    correct = [[] for _ in range(n_gestures)]
+    positives = np.zeros(n_gestures, int)
+    found = np.zeros(n_gestures, int)
+    at_node = []
+    scaled = replace(swept, min_score=node_params.min_score, min_volume=node_params.min_volume)
+
+    def hit(det, label) -> bool:
+        return bool(label is not None and det.class_id == label[0]
+                    and np.hypot(det.u - label[1], det.v - label[2]) <= tolerance)
+
+    for i, candidates in enumerate(run.candidates):
+        if not data.visible[i]:
+            continue
+        label = data.labels[i]
+        if label is not None and 1 <= label[0] <= n_gestures:
+            positives[label[0] - 1] += 1
+        for det in suppress_other_classes(candidates, swept.suppression_radius_px_m):
+            scores[det.class_id - 1].append(det.score)
+            correct[det.class_id - 1].append(hit(det, label))
+        reported = node_detections(candidates, scaled, taught)
+        at_node += [(i, d.class_id, not hit(d, label)) for d in reported]
+        if label is not None and 1 <= label[0] <= n_gestures and any(hit(d, label) for d in reported):
+            found[label[0] - 1] += 1
+    per_class = {}
+    for k in range(n_gestures):
+        ap, precision, recall, score_steps = average_precision(scores[k], correct[k], int(positives[k]))
+        per_class[forest.class_names[k + 1]] = {
+            "ap": ap, "positives": int(positives[k]), "detections": len(scores[k]),
+            "true_positives": int(np.sum(correct[k])), "found_at_node_thresholds": int(found[k]),
+            "pr": {"precision": precision.round(4).tolist(), "recall": recall.round(4).tolist(),
+                   "score": np.round(score_steps, 4).tolist()},
+        }
+    aps = [c["ap"] for c in per_class.values() if c["positives"] > 0]
+    n = len(data.labels)
+    return {
+        "bags": data.sources,
+        "frames": n,
+        "scored_frames": int(data.visible.sum()),
+        "image_size": [data.width, data.height],
+        "focal_px": data.focal_px,
+        "model_focal_px": forest.training_focal_px,
+        "offset_scale": run.offset_scale,
+        "criterion": f"correct class and location within {tolerance:g} px "
+                     f"(10 px at 640x480, scaled by width {data.width}/640)",
+        "tolerance_px": tolerance,
+        "per_class": per_class,
+        "mean_ap": float(np.mean(aps)) if aps else 0.0,
+        "false_detections": false_detections(at_node, int(data.visible.sum()), _minutes(data.stamps_ns),
+                                             forest.class_names),
+        "node_thresholds": {"min_score": node_params.min_score, "min_volume": node_params.min_volume,
+                            "taught": taught},
+        "fps": n / run.seconds if run.seconds > 0 else 0.0,
+        "detector_params": dataclasses.asdict(swept),
+    }
+
+
 def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams | None = None,
                       node_params: DetectorParams | None = None) -> dict:
     """Run the detector over ``data`` in order and score it (module docstring); a JSON-able dict.
@@ -249,71 +346,9 @@ def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams |
     which ``false_detections`` counts what the ``gesture_detection`` node would report wrongly
     (:func:`~hmocap_ros.gestures.detection.node_detections`, with the forest's taught thresholds
     as the node's ``use_taught_thresholds``): a detection of a gesture in a frame of another or
-    of none, or away from the annotated point."""
-    if params is None:
-        params = DetectorParams(min_score=SWEEP_MIN_SCORE, min_volume=0.0)
-    node_params = node_params if node_params is not None else DetectorParams()
-    if node_params.min_score < params.min_score or node_params.min_volume < params.min_volume:
-        raise ValueError("the node's thresholds must not be below the sweep's")
-    taught = {str(k): float(v) for k, v in forest.meta.get("gesture_thresholds", {}).items()}
-    detector = GestureDetector(forest, params, focal_px=data.focal_px)
-    tolerance = TOLERANCE_PX_640 * data.width / REFERENCE_WIDTH
-    n_gestures = forest.n_classes - 1
-    scores = [[] for _ in range(n_gestures)]
-    correct = [[] for _ in range(n_gestures)]
-    positives = np.zeros(n_gestures, int)
-    at_node = []
-    seconds = 0.0
-
-    def hit(det, label) -> bool:
-        return bool(label is not None and det.class_id == label[0]
-                    and np.hypot(det.u - label[1], det.v - label[2]) <= tolerance)
-
-    for i in range(len(data.labels)):
-        t0 = time.perf_counter()
-        detections = detector.update(data.depth[i], int(data.stamps_ns[i]))
-        seconds += time.perf_counter() - t0
-        if not data.visible[i]:
-            continue
-        label = data.labels[i]
-        if label is not None and 1 <= label[0] <= n_gestures:
-            positives[label[0] - 1] += 1
-        for det in detections:
-            scores[det.class_id - 1].append(det.score)
-            correct[det.class_id - 1].append(hit(det, label))
-        scaled = replace(detector.active_params, min_score=node_params.min_score, min_volume=node_params.min_volume)
-        at_node += [(i, d.class_id, not hit(d, label)) for d in node_detections(detector.candidates, scaled, taught)]
-    per_class = {}
-    for k in range(n_gestures):
-        ap, precision, recall, thresholds = average_precision(scores[k], correct[k], int(positives[k]))
-        per_class[forest.class_names[k + 1]] = {
-            "ap": ap, "positives": int(positives[k]), "detections": len(scores[k]),
-            "true_positives": int(np.sum(correct[k])),
-            "pr": {"precision": precision.round(4).tolist(), "recall": recall.round(4).tolist(),
-                   "score": np.round(thresholds, 4).tolist()},
-        }
-    aps = [c["ap"] for c in per_class.values() if c["positives"] > 0]
-    n = len(data.labels)
-    scored = np.flatnonzero(data.visible)
-    return {
-        "bags": data.sources,
-        "frames": n,
-        "scored_frames": int(data.visible.sum()),
-        "image_size": [data.width, data.height],
-        "focal_px": data.focal_px,
-        "model_focal_px": forest.training_focal_px,
-        "offset_scale": detector.offset_scale,
-        "criterion": f"correct class and location within {tolerance:g} px "
-                     f"(10 px at 640x480, scaled by width {data.width}/640)",
-        "tolerance_px": tolerance,
-        "per_class": per_class,
-        "mean_ap": float(np.mean(aps)) if aps else 0.0,
-        "false_detections": false_detections(at_node, scored.size, _minutes(data.stamps_ns), forest.class_names),
-        "node_thresholds": {"min_score": node_params.min_score, "min_volume": node_params.min_volume,
-                            "taught": taught},
-        "fps": n / seconds if seconds > 0 else 0.0,
-        "detector_params": dataclasses.asdict(detector.active_params),
-    }
+    of none, or away from the annotated point; ``found_at_node_thresholds`` per gesture counts
+    the frames whose gesture the node would report where it is."""
+    return score_run(data, forest, run_detector(data, forest, params), node_params)
 
 
 def _info_topic(depth_topic: str) -> str:
