@@ -41,7 +41,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.eval.gesture_eval import evaluate_gestures, plot_pr, read_gesture_bag  # noqa: E402
+from hmocap_ros.eval.gesture_eval import SWEEP_MIN_SCORE, evaluate_gestures, plot_pr, read_gesture_bag  # noqa: E402
+from hmocap_ros.gestures.params import DetectorParams  # noqa: E402
 from hmocap_ros.gestures.forest import train_forest_on_frames  # noqa: E402
 from hmocap_ros.gestures.forest_file import load_forest, save_forest  # noqa: E402
 from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
@@ -63,10 +64,15 @@ BAGS = {
     "test_near": dict(seed=2002, subjects=8, subject_offset=2200, frames=1200, gestures=(), negatives=0,
                       near_misses=6, near_of=GESTURE_CLASSES),
 }
-TRAIN = ("train1", "train2", "train3", "train_near")
+TRAIN = ("train1", "train2", "train3")
+#: The shipped forest: the default variant trained on :data:`TRAIN` and the near-miss bag.
+SHIPPED_TRAIN = TRAIN + ("train_near",)
 EVAL = ("val", "test", "test_close")
 #: Bags of near misses only (no gesture): scored by the false detections at the node's thresholds.
 NEAR = ("val_near", "test_near")
+#: The variants are scored with the exact vote (every tree walked for an undecided pixel): the
+#: table compares forests, not the detector's speed setting (DetectorParams.vote_reach).
+EXACT = DetectorParams(min_score=SWEEP_MIN_SCORE, min_volume=0.0, vote_reach=1.0)
 KAPPAS = (None, 0.15, 0.30, 0.50)
 DEFAULT = "boosted, kappa 15 cm"
 
@@ -111,22 +117,28 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--only", nargs="*", help="train/score only these variants (names as in the table)")
     p.add_argument("--out-dir", default=str(ROOT / "docs" / "figures"))
-    p.add_argument("--ship", action="store_true", help=f"copy the '{DEFAULT}' forest to hmocap_ros/data/")
+    p.add_argument("--shipped", action="store_true",
+                   help="train and score only the shipped forest (the default variant on the training bags and "
+                        "the near-miss bag): docs/figures/gesture_shipped.md and .json")
+    p.add_argument("--ship", action="store_true", help="with --shipped: copy that forest to hmocap_ros/data/")
     return p
 
 
-def train_variant(ns, bags: dict, boosted: bool, kappa: float | None, model: Path, training: dict) -> None:
-    """Train one variant on the training bags and save it to ``model``; ``training`` holds the
-    training frames once read (shared by the variants)."""
-    if "data" not in training:
-        training["data"], _ = read_training_bags([bags[b] for b in TRAIN])
+def train_variant(ns, bags: dict, boosted: bool, kappa: float | None, model: Path, training: dict,
+                  names: tuple = TRAIN) -> None:
+    """Train one variant on the training bags ``names`` and save it to ``model``; ``training``
+    holds the training frames once read (shared by the variants)."""
+    if training.get("names") != names:
+        training.clear()
+        training["data"], _ = read_training_bags([bags[b] for b in names])
+        training["names"] = names
     train = training["data"]
     params = train_params_for_focal(train.focal_px, n_trees=ns.trees, max_depth=ns.depth, kappa_m=kappa,
                                     boosted=boosted)
     t0 = time.perf_counter()
     forest = train_forest_on_frames(train.depth, train.labels, params, np.random.default_rng(ns.seed),
                                     class_names=train.class_names)
-    forest.meta["training"].update({"focal_px": train.focal_px, "bags": [f"{b}.mcap" for b in TRAIN],
+    forest.meta["training"].update({"focal_px": train.focal_px, "bags": [f"{b}.mcap" for b in names],
                                     "seed": ns.seed})
     save_forest(forest, model)
     print(f"{variant_name(boosted, kappa)}: trained in {time.perf_counter() - t0:.0f} s ({forest.n_nodes} nodes)",
@@ -142,12 +154,54 @@ def score_variant(name: str, model: Path, bags: dict) -> dict:
          "train_frames": forest.meta["training"]["n_frames"]}
     for bag in EVAL:
         data = read_gesture_bag(bags[bag])
-        e = evaluate_gestures(data, forest)
+        e = evaluate_gestures(data, forest, EXACT)
         r[bag] = e
         aps = " ".join(f"{g} {c['ap']:.2f}" for g, c in e["per_class"].items())
         print(f"{name} on {bag}: mean AP {e['mean_ap']:.3f} ({aps})", flush=True)
         del data
     return r
+
+
+def score_shipped(model: Path, bags: dict) -> dict:
+    """The shipped forest as the node runs it (``DetectorParams`` defaults): AP and false
+    detections on :data:`EVAL` and the near-miss bags :data:`NEAR`, and its exact-vote APs."""
+    forest = load_forest(model)
+    r = {"forest": str(model), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
+         "train_seconds": forest.meta["training"]["seconds_total"], "train_frames": forest.meta["training"]["n_frames"],
+         "train_samples": forest.meta["training"]["n_samples"], "bags": {b: sim_command(b) for b in SHIPPED_TRAIN}}
+    for bag in EVAL + NEAR:
+        data = read_gesture_bag(bags[bag])
+        e = evaluate_gestures(data, forest)
+        r[bag] = {"mean_ap": e["mean_ap"], "ap": {g: c["ap"] for g, c in e["per_class"].items()},
+                  "found": {g: [c["found_at_node_thresholds"], c["positives"]] for g, c in e["per_class"].items()},
+                  "false_detections": e["false_detections"], "fps": e["fps"], "command": sim_command(bag)}
+        if bag in EVAL:
+            r[bag]["exact_mean_ap"] = evaluate_gestures(data, forest, EXACT)["mean_ap"]
+        fd = e["false_detections"]
+        print(f"shipped on {bag}: mean AP {e['mean_ap']:.3f}, false detections in {100 * fd['per_frame']:.1f} % "
+              f"of the frames", flush=True)
+        del data
+    return r
+
+
+def shipped_lines(r: dict) -> list[str]:
+    """The shipped forest's tables (docs/figures/gesture_shipped.md)."""
+    gestures = list(r["test"]["ap"])
+    lines = ["<!-- written by tools/gesture_table.py --shipped; do not edit -->", "",
+             "Training: " + ", ".join(f"`{c}`" for c in r["bags"].values())
+             + f" ({r['train_frames']} frames, {r['train_samples']} samples after mining); {r['n_nodes']} nodes, "
+               f"{r['file_bytes'] / 1e6:.2f} MB, {r['train_seconds']:.0f} s of training.", "",
+             "| bag | " + " | ".join(gestures) + " | mean AP | mean AP, exact vote | frames with a false detection |",
+             "|---|" + "---:|" * (len(gestures) + 3)]
+    for bag in EVAL + NEAR:
+        e = r[bag]
+        cells = ([f"{e['ap'][g]:.2f}" for g in gestures] + [f"**{e['mean_ap']:.3f}**", f"{e['exact_mean_ap']:.3f}"]
+                 if bag in EVAL else ["-"] * len(gestures) + ["-", "-"])
+        fd = e["false_detections"]
+        lines.append(f"| {bag} | " + " | ".join(cells) + f" | {100 * fd['per_frame']:.1f} % ({fd['frames']}/"
+                     f"{fd['scored_frames']}) |")
+    lines += ["", "Bags: " + "; ".join(f"{b}: `{r[b]['command']}`" for b in EVAL + NEAR)]
+    return lines
 
 
 def table_lines(results: dict, names: list, ns) -> list[str]:
@@ -190,6 +244,8 @@ def main(argv=None) -> int:
     ns = _parser().parse_args(argv)
     work = Path(ns.workdir)
     work.mkdir(parents=True, exist_ok=True)
+    if ns.shipped:
+        return shipped(ns, work)
     bags = {name: make_bag(work, name) for name in TRAIN + EVAL}
     variants = [(b, k) for b in (True, False) for k in KAPPAS]
     names = [variant_name(b, k) for b, k in variants]
@@ -224,10 +280,29 @@ def main(argv=None) -> int:
     (out / "gesture_table.md").write_text("\n".join(table_lines(results, names, ns)) + "\n")
     (out / "gesture_table.json").write_text(json.dumps(summary(results), indent=1) + "\n")
     print(f"wrote {out / 'gesture_table.md'}, {out / 'gesture_table.json'}, {out / 'gesture_pr.png'}")
+    return 0
+
+
+def shipped(ns, work: Path) -> int:
+    """``--shipped``: train (cached) and score the shipped forest; ``--ship`` copies it."""
+    bags = {name: make_bag(work, name) for name in SHIPPED_TRAIN + EVAL + NEAR}
+    model, scores = work / "forest_shipped.npz", work / "scores_shipped.json"
+    if not model.exists():
+        train_variant(ns, bags, True, 0.15, model, {}, SHIPPED_TRAIN)
+    if scores.exists():
+        r = json.loads(scores.read_text())
+    else:
+        r = score_shipped(model, bags)
+        scores.write_text(json.dumps(r))
+    out = Path(ns.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "gesture_shipped.md").write_text("\n".join(shipped_lines(r)) + "\n")
+    (out / "gesture_shipped.json").write_text(json.dumps(r, indent=1) + "\n")
+    print(f"wrote {out / 'gesture_shipped.md'}, {out / 'gesture_shipped.json'}")
     if ns.ship:
         target = ROOT / "hmocap_ros" / "data" / "gesture_forest.npz"
-        shutil.copyfile(default["forest"], target)
-        print(f"shipped {default['forest']} -> {target}")
+        shutil.copyfile(model, target)
+        print(f"shipped {model} -> {target}")
     return 0
 
 

@@ -42,7 +42,7 @@ from hmocap_ros.gestures.grid_votes import forest_grid_votes, pad_for_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.gestures.trees import Forest
 
-__all__ = ["Detection", "GestureDetector", "node_detections", "parzen_density", "refine_maximum",
+__all__ = ["Detection", "GestureDetector", "gesture_thresholds", "node_detections", "parzen_density", "refine_maximum",
            "smooth_density", "suppress_other_classes"]
 
 
@@ -100,17 +100,28 @@ def refine_maximum(dens: np.ndarray, gy: int, gx: int, reach: int) -> tuple[floa
     return float((w * ys).sum() / w.sum()), float((w * xs).sum() / w.sum())
 
 
+def gesture_thresholds(params: DetectorParams, taught: dict | None = None) -> dict:
+    """(score, volume) thresholds per gesture name: ``min_score`` and ``min_volume``, or for a
+    gesture with a taught threshold ``th`` (sec. 3.4.1) ``th`` and ``th x min_volume / min_score``:
+    the volume test (eq. 3.5) keeps its ratio to the score test, so a taught forest, whose votes
+    cover less of the gesture than the shipped forest's, is held to the same shape of maximum."""
+    ratio = params.min_volume / params.min_score if params.min_score > 0 else 0.0
+    return {str(name): (float(th), float(th) * ratio) for name, th in (taught or {}).items()}
+
+
 def node_detections(candidates: list, params: DetectorParams, thresholds: dict | None = None) -> list:
     """What the ``gesture_detection`` node reports from a frame's candidates (one localized
-    maximum per class, :attr:`GestureDetector.candidates`, found at lower thresholds):
-    those with ``volume >= min_volume`` and a score at least the lowest threshold in use, one
-    per place (:func:`suppress_other_classes`, ``params`` scaled to the camera), then each
-    gesture at its own threshold (``thresholds[name]``, a taught one, else ``min_score``)."""
-    thresholds = thresholds or {}
-    floor = min([params.min_score, *thresholds.values()])
-    kept = suppress_other_classes([d for d in candidates if d.score >= floor and d.volume >= params.min_volume],
+    maximum per class, :attr:`GestureDetector.candidates`, found at lower thresholds): those
+    above the lowest thresholds in use, one per place (:func:`suppress_other_classes`, ``params``
+    scaled to the camera), then each gesture at its own thresholds (:func:`gesture_thresholds`:
+    a taught one from ``thresholds[name]``, else ``min_score`` and ``min_volume``)."""
+    own = gesture_thresholds(params, thresholds)
+    default = (params.min_score, params.min_volume)
+    floor_score = min([default[0]] + [t[0] for t in own.values()])
+    floor_volume = min([default[1]] + [t[1] for t in own.values()])
+    kept = suppress_other_classes([d for d in candidates if d.score >= floor_score and d.volume >= floor_volume],
                                   params.suppression_radius_px_m)
-    return [d for d in kept if d.score >= thresholds.get(d.name, params.min_score)]
+    return [d for d in kept if d.score >= own.get(d.name, default)[0] and d.volume >= own.get(d.name, default)[1]]
 
 
 def suppress_other_classes(detections: list, radius_px_m: float) -> list:

@@ -70,6 +70,22 @@ Design choices where the thesis is vague:
 - **Camera**: the forest learns in the pixels of the camera it sees (its tests are
   pixel*metres at that focal length, ``meta["training"]["focal_px"]``); a forest grown at one
   focal length is not taught with another camera.
+- **Stamps that start over** (a camera or a replay restarting) continue the session: the
+  states' clock is shifted so that the frame follows the last one by one frame period
+  (``restarts`` counts them); the detector's smoothing restarts as in the node.
+- **An empty session** (nothing moved in view: nobody in the room, :mod:`~hmocap_ros.gestures.scene_motion`)
+  is undone at its end: the forest and the averages go back to what they were before the
+  session, no threshold is kept, ``taught`` is false and ``done``'s instruction says why.
+- **The negative phase asks for near misses** (``do_negatives``' instruction: the gesture done
+  wrong, a finger bent, the hand turned, the arm half raised): the thesis asks for "other
+  gestures that should be distinguished"; the near misses of the taught gesture are the
+  poses its detector most needs to refuse, and on-the-fly mining learns them where the forest
+  fires on them.
+- **The threshold's parts** th+ and th- are kept beside it (``meta["gesture_threshold_parts"]``)
+  so that another rho can be applied to a taught forest (``hmocap bench iml`` measures each).
+- **An offline forest** (e.g. the shipped one) is taught a gesture by continuing it online
+  (:meth:`~hmocap_ros.gestures.online_forest.OnlineForest.from_offline`): its leaves open to
+  split statistics when the taught gesture's samples reach them.
 """
 
 from __future__ import annotations
@@ -180,7 +196,7 @@ class TrainerParams:
               "it is undone and teaches nothing.")
     sigma: float = param(0.9, "Weight sigma in (0, 1] of the newest value in the moving averages of th+ and th-.")
     rho: float = param(
-        0.5, "Threshold th = rho th+ + (1 - rho) th-, rho in [0, 1]: higher = fewer false "
+        0.8, "Threshold th = rho th+ + (1 - rho) th-, rho in [0, 1]: higher = fewer false "
              "positives (0.8 for a low false positive rate, sec. 3.4.1).")
     features: FeatureParams = group(FeatureParams, "Tests of a new forest (eq. 3.6).")
     patches: PatchParams = group(PatchParams, "Positive patches around the box centre (sec. 3.2.3).")
