@@ -20,7 +20,7 @@ def _params(**kw) -> TrainerParams:
     return TrainerParams(**base)
 
 
-def _frame(rng: np.random.Generator, h: int = 48, w: int = 64, present: float = 0.85) -> np.ndarray:
+def _frame(rng: np.random.Generator, h: int = 48, w: int = 64, present: float = 0.7) -> np.ndarray:
     """A wall at 3 m with a 'hand' block at 2 m at the box centre (metres) in a fraction ``present``
     of the frames (at random): the wall behind the box shows now and then, as when a user moves."""
     d = np.full((h, w), 3.0, np.float32) + rng.normal(0, 0.003, (h, w)).astype(np.float32)

@@ -144,10 +144,15 @@ call(teach, TeachGesture.Request(gesture="wave", forest_file=new, new_forest=Tru
 call(teach, TeachGesture.Request(gesture="point", forest_file=new, new_forest=True))           # 2: busy
 send(scene.astype(np.uint8), "8UC1")
 send(np.zeros((48, 64, 3), np.uint8), "rgb8")
-send(scene, "16UC1", 20, moving=True)
+for _ in range(200):  # until the session is in update_positive
+    send(scene, "16UC1", 5, moving=True)
+    if any(s.state == "update_positive" for s in states):
+        break
+before = len(states)
 stamp[0] = 1  # the camera starts over
 send(scene, "16UC1", 10, moving=True)
-print("RESTARTED", seen("update_positive"), flush=True)
+spin(1.0)
+print("RESTARTED", [s.state for s in states[before:]][-1:] == ["update_positive"], flush=True)
 spin(2.5)  # the camera stops
 print("STOPPED", seen("idle no depth frame for"), seen("the camera stopped"), flush=True)
 call(cancel, Trigger.Request())                                                                 # 3: nothing to cancel

@@ -189,11 +189,11 @@ class TrainerParams:
         24.0, "Half side of the box in pixels at the reference focal length (> 0): the region where "
               "the user is asked to hold the gesture and where th+ is read.")
     motion_fraction: float = param(
-        0.01, "A frame moved when more than this fraction (in (0, 1)) of its pixels changed depth by "
-              "more than 5 cm (and 3 % of the depth) since the frame before.")
+        0.01, "The scene moved between two frames 0.25 s apart when more than this fraction (in (0, 1)) "
+              "of the pixels changed depth by more than 5 cm (and 3 % of the depth).")
     min_moving: float = param(
-        0.05, "A session in which fewer than this fraction (in [0, 1]) of the frames moved saw nobody: "
-              "it is undone and teaches nothing.")
+        0.05, "A session in which the scene moved in fewer than this fraction (in [0, 1]) of its 0.25-s "
+              "steps saw nobody: it is undone and teaches nothing.")
     sigma: float = param(0.9, "Weight sigma in (0, 1] of the newest value in the moving averages of th+ and th-.")
     rho: float = param(
         0.8, "Threshold th = rho th+ + (1 - rho) th-, rho in [0, 1]: higher = fewer false "
@@ -396,9 +396,10 @@ class Trainer:
 
     # ------------------------------------------------------------------ the session
 
-    def start(self, gesture_name: str, stamp_ns: int, extend: bool = False) -> None:
-        """Begin teaching ``gesture_name`` at ``stamp_ns`` (first round, ``do_gesture``). A gesture
-        the forest knows needs ``extend=True`` (keep teaching it); a new one adds its class."""
+    def start(self, gesture_name: str, stamp_ns: int | None, extend: bool = False) -> None:
+        """Begin teaching ``gesture_name`` at ``stamp_ns`` (first round, ``do_gesture``; None = at
+        the next frame's stamp, when no frame has come yet). A gesture the forest knows needs
+        ``extend=True`` (keep teaching it); a new one adds its class."""
         name = str(gesture_name).strip()
         if not name or name == "background":
             raise ValueError(f"not a gesture name: {gesture_name!r}")
@@ -423,8 +424,8 @@ class Trainer:
         self._rehearsed = tuple(c for c in self.online.class_names[1:] if c != name)
         self.th_pos = self.th_neg = None
         self.round = 1
-        self._last_stamp, self._period = int(stamp_ns), 0
-        self._enter("do_gesture", int(stamp_ns))
+        self._last_stamp, self._period = (None if stamp_ns is None else int(stamp_ns)), 0
+        self._enter("do_gesture", None if stamp_ns is None else int(stamp_ns))
 
     def cancel(self) -> None:
         """Stop the session; the forest is put back as it was when the current round began."""
@@ -445,6 +446,8 @@ class Trainer:
 
     def _advance(self, stamp_ns: int) -> None:
         """Move through the states whose time is over at ``stamp_ns`` (module docstring)."""
+        if self._state_start is None and self.state not in ("idle", "done"):
+            self._state_start = stamp_ns  # started before any frame: the session begins now
         while self.state not in ("idle", "done"):
             end = self._state_start + int(round(self._duration(self.state) * 1e9))
             if stamp_ns < end:
@@ -524,7 +527,7 @@ class Trainer:
         if in_session:
             bg = np.float32(self.online.features.background_depth_m)
             metres = depth_to_metres(depth, self.params.detector.depth_format, float(bg))
-            self._presence.see(metres)
+            self._presence.see(metres, stamp_ns)
         if self.state in LEARNING_STATES:
             dens = self.detector.density[:, :, cls - 1] if self.detector.density is not None else None
             shown, learn = self.rehearsed_now(stamp_ns)

@@ -96,7 +96,7 @@ class TrainerNodeConfig:
         10.0, "A teach request that comes before the first depth/camera_info waits this many seconds "
               "(> 0) for it, then is refused.")
     camera_timeout_s: float = param(
-        3.0, "A session that gets no depth frame for this many seconds (> 0: the camera stopped) is "
+        10.0, "A session that gets no depth frame for this many seconds (> 0: the camera stopped) is "
              "cancelled: the forest goes back to what it was when the round began, nothing is written.")
 
 
@@ -263,7 +263,7 @@ class GestureTrainer(Node):
         path = Path(request.forest_file or self.config.forest_file).expanduser().resolve()
         try:
             trainer = self._trainer_for(path, bool(request.new_forest))
-            stamp = self.stats.last_stamp if self.stats.last_stamp is not None else self.get_clock().now().nanoseconds
+            stamp = self.stats.last_stamp  # None before any frame: the session starts at the first one
             trainer.start(request.gesture, stamp, extend=bool(request.extend))
         except ValueError as err:
             response.success = False
@@ -277,7 +277,7 @@ class GestureTrainer(Node):
                             f"{p.round_s(len(trainer.rehearsed)):g} s and {p.testing_s:g} s of testing"
                             + (f", rehearsing {', '.join(trainer.rehearsed)}" if trainer.rehearsed else ""))
         log.info(response.message)
-        self._publish_state(trainer.status(stamp, *self._image_size()))
+        self._publish_state(trainer.status(stamp or 0, *self._image_size()))
         return response
 
     def _on_cancel(self, _request, response):
@@ -367,6 +367,7 @@ class GestureTrainer(Node):
                             f"'{trainer.gesture}' goes on")
             self._restarts = trainer.restarts
         self.stats.done(time.perf_counter() - t0)
+        self._last_frame_wall = time.monotonic()  # a long first frame (kernels compiling) is no silence
         previous = self.last_status
         self._publish_state(status)
         if self.feedback_pub is not None:
