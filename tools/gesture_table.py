@@ -174,7 +174,8 @@ def score_shipped(model: Path, bags: dict, train: tuple) -> dict:
     :data:`EVAL` and the near-miss bags :data:`NEAR`, and its exact-vote APs; ``train``: the
     names of the bags it was trained on."""
     forest = load_forest(model)
-    r = {"forest": str(model), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
+    shown = model.relative_to(ROOT) if model.is_relative_to(ROOT) else model
+    r = {"forest": str(shown), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
          "train_seconds": forest.meta["training"]["seconds_total"], "train_frames": forest.meta["training"]["n_frames"],
          "train_samples": forest.meta["training"]["n_samples"], "bags": {b: sim_command(b) for b in train}}
     for bag in EVAL + NEAR:
