@@ -222,13 +222,13 @@ def new_gesture(ns, scorer: Scorer, work: Path, log) -> dict:
            "sessions": []}
     trainer = Trainer(shipped, p, np.random.default_rng(ns.seed), focal_px=teacher.focal_px)
     for k in range(1, ns.new_sessions + 1):
-        cpu, n_frames, n_pos = run_sessions(trainer, teacher, g, k, extend=k > 1)
+        cpu = run_sessions(trainer, teacher, g, k, extend=k > 1)[0]  # frames are counted with record=True only
         forest = load_forest(trainer.save(work / f"new_{g}_{k}.forest.npz"))
         same = scorer.score(forest, "same_subject")
         other = scorer.score(forest, "other_people")
         neg = scorer.score(forest, "negatives")["false_detections"]
-        row = {"session": k, "minutes": k * p.session_s() / 60.0, "frames": n_frames, "positive_frames": n_pos,
-               "trainer_cpu_s": cpu, "nodes": trainer.online.n_nodes, "open_leaves": trainer.online.n_open_leaves,
+        row = {"session": k, "minutes": k * p.session_s() / 60.0, "trainer_cpu_s": cpu,
+               "nodes": trainer.online.n_nodes, "open_leaves": trainer.online.n_open_leaves,
                "ap_same_subject": ap(same, g), "found_same_subject": found(same, g),
                "taught_threshold": forest.meta["gesture_thresholds"][g],
                "false_per_minute": neg["per_class"][g]["events_per_minute"],
