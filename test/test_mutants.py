@@ -180,6 +180,34 @@ def startup_shape_estimation_off(mp: pytest.MonkeyPatch) -> None:
     mp.setattr(body_tracker.BodyTracker, "_measure_shape", lambda self, *args: False)
 
 
+def threshold_ignores_rho(mp: pytest.MonkeyPatch) -> None:
+    """The trainer's threshold is th- whatever rho says (th = th-, sec. 3.4.1)."""
+    from hmocap_ros.gestures import trainer
+
+    mp.setattr(trainer, "blend_threshold", lambda th_pos, th_neg, rho: th_neg)
+
+
+def moving_average_one_minus_sigma(mp: pytest.MonkeyPatch) -> None:
+    """The trainer's moving averages weigh the newest value by 1 - sigma instead of sigma."""
+    from hmocap_ros.gestures import trainer
+
+    def moving_average(previous, value, sigma):
+        return float(value) if previous is None else (1.0 - sigma) * float(value) + sigma * previous
+
+    mp.setattr(trainer, "moving_average", moving_average)
+
+
+def negatives_at_random(mp: pytest.MonkeyPatch) -> None:
+    """The trainer's negatives are drawn anywhere in the frame instead of where the forest
+    fires (on-the-fly detection, sec. 3.3.2), as many as the count rule asks."""
+    from hmocap_ros.gestures import trainer
+
+    def hard_negative_pixels(density, grid_depth, depth_m, stride, counts, half_size_px_m, background, rng):
+        return trainer.random_negative_pixels(depth_m, int(counts.sum()), background, rng)
+
+    mp.setattr(trainer, "hard_negative_pixels", hard_negative_pixels)
+
+
 @dataclass(frozen=True)
 class Mutant:
     apply: Callable[[pytest.MonkeyPatch], None]
@@ -221,6 +249,12 @@ MUTANTS = {
     "startup_shape_estimation_off": Mutant(startup_shape_estimation_off, (
         "test_keypoint_first.py::"
         "test_the_tracker_measures_the_shape_of_a_new_track_from_its_keypoints",)),
+    "threshold_ignores_rho": Mutant(threshold_ignores_rho, (
+        "test_gesture_trainer.py::test_threshold_follows_the_scripted_densities",)),
+    "moving_average_one_minus_sigma": Mutant(moving_average_one_minus_sigma, (
+        "test_gesture_trainer.py::test_threshold_follows_the_scripted_densities",)),
+    "negatives_at_random": Mutant(negatives_at_random, (
+        "test_gesture_trainer.py::test_negatives_are_mined_where_the_forest_fires",)),
     "shadow_suppression_off": Mutant(shadow_suppression_off, (
         "test_segmentation.py::test_cast_shadow_is_not_foreground",
         "test_segmentation.py::test_foreground_beats_naive_differencing_with_shadows_and_light_changes")),

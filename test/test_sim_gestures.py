@@ -126,10 +126,14 @@ def test_layouts_keep_the_person_zone_and_corridor_free():
 
 def test_class_list_is_fixed():
     assert gs.GESTURE_CLASSES == ("tee", "pause", "silence", "cross", "ok", "volume_up")
-    assert [gs.class_id(n) for n in gs.GESTURE_CLASSES] == [1, 2, 3, 4, 5, 6]
-    assert set(gs.REFERENCE_POINTS) == set(gs.GESTURE_CLASSES)
-    assert tuple(gs.GESTURES) == gs.GESTURE_CLASSES  # one builder per class, in class-id order
+    assert gs.ALL_GESTURES == gs.GESTURE_CLASSES + gs.NEW_GESTURES == gs.GESTURE_CLASSES + ("thumbs_up", "raised_fist")
+    assert [gs.class_id(n) for n in gs.ALL_GESTURES] == [1, 2, 3, 4, 5, 6, 7, 8]
+    assert set(gs.REFERENCE_POINTS) == set(gs.ALL_GESTURES)
+    assert tuple(gs.GESTURES) == gs.ALL_GESTURES  # one builder per class, in class-id order
     assert tuple(gs.NEGATIVE_BUILDERS) == gs.NEGATIVE_KINDS == tuple(gs.NEGATIVE_WEIGHTS)
+    assert tuple(gs.NEAR_MISS_BUILDERS) == gs.NEAR_MISS_KINDS
+    assert set(gs.NEAR_MISSES.values()) == set(gs.ALL_GESTURES)  # every gesture has near misses
+    assert not set(gs.NEAR_MISS_KINDS) & (set(gs.NEGATIVE_KINDS) | set(gs.ALL_GESTURES))
 
 
 def test_subject_identity_depends_on_the_id_only(model):
@@ -149,7 +153,7 @@ def _solve(model, name, k):
 
 
 @pytest.mark.parametrize("k", [0, 1, 2])
-@pytest.mark.parametrize("name", gs.GESTURE_CLASSES)
+@pytest.mark.parametrize("name", gs.ALL_GESTURES)
 def test_gesture_geometry(model, name, k):
     subj, spec, params, kin, camera = _solve(model, name, k)
     P = lambda n: kin.point(model, n)[0]  # noqa: E731
@@ -190,6 +194,14 @@ def test_gesture_geometry(model, name, k):
         assert abs(d_s[0] @ d_o[0]) < 0.5  # a T: the hands are roughly perpendicular
         assert d_s[0][1] > 0.6 and v_o[0][1] < -0.8  # stem upright, top palm down
         assert (P(f"{s}_hand_tip") - P("sternum"))[2] > 0.1  # in front of the chest
+    elif name == "thumbs_up":
+        thumb = P(f"{s}_thumb_tip") - P(f"{s}_thumb2")
+        assert thumb[1] / np.linalg.norm(thumb) > 0.7  # the thumb points up
+        assert np.linalg.norm(P(f"{s}_index_tip") - P(f"{s}_palm")) < 0.07  # the other fingers curled
+        assert (P(f"{s}_palm") - P("sternum"))[2] > 0.05  # in front of the body
+    elif name == "raised_fist":
+        assert P(f"{s}_palm")[1] > P(f"{s}_shoulder")[1] + 0.2  # raised above the shoulder
+        assert np.linalg.norm(P(f"{s}_hand_tip") - P(f"{s}_palm")) < 0.07  # a fist
     # the annotated point is on the upper body, not behind it
     ref = gs.reference_point(model, kin, name, s)[0]
     assert (ref - P("pelvis"))[2] > -0.08 and np.linalg.norm(ref - P("chest")) < 0.7
@@ -206,6 +218,47 @@ def test_negative_poses_are_not_gestures(model, kind):
     kin = gs.kinematics(model, subj, params)
     for s in gs.SIDES:  # no finger on the lips: silence stays a gesture of its own
         assert np.linalg.norm(kin.point(model, f"{s}_index_tip")[0] - kin.point(model, "mouth")[0]) > 0.03
+
+
+def _near_miss(model, kind, k=0):
+    rng = np.random.default_rng([6, gs.NEAR_MISS_KINDS.index(kind), k])
+    subj = gs.make_subject(model, 9 + k)
+    spec = gs.pose_spec(model, subj, kind, rng, camera_body=np.array([0.0, 1.2, 2.5]))
+    params = gs.solve_spec(model, subj, spec)
+    return spec, gs.kinematics(model, subj, params)
+
+
+@pytest.mark.parametrize("k", [0, 1])
+@pytest.mark.parametrize("kind", gs.NEAR_MISS_KINDS)
+def test_near_misses_are_their_gesture_done_wrong(model, kind, k):
+    """A near miss is background and differs from its gesture in what its table says."""
+    spec, kin = _near_miss(model, kind, k)
+    P = lambda n: kin.point(model, n)[0]  # noqa: E731
+    s, o = spec.side, gs.other(spec.side)
+    assert spec.class_id == 0 and spec.kind == kind
+    gap = lambda a, b: float(np.linalg.norm(P(a) - P(b)))  # noqa: E731
+    d, _, volar = (x[0] for x in gs.hand_axes(model, kin, s))
+    checks = {
+        "tee_apart": gap(f"{s}_hand_tip", f"{o}_palm") > 0.06,
+        "tee_fist": gap(f"{o}_hand_tip", f"{o}_palm") < 0.07,
+        "pause_curled": gap(f"{s}_hand_tip", f"{s}_palm") < 0.08,
+        "pause_sideways": abs(d[1]) < 0.6,
+        "pause_half": P(f"{s}_palm")[1] < P(f"{s}_shoulder")[1] - 0.05,
+        "silence_cheek": gap(f"{s}_index_tip", "mouth") > 0.035,
+        "silence_bent": gap(f"{s}_index_tip", f"{s}_palm") < 0.07,
+        "cross_apart": P("l_wrist")[0] > P("r_wrist")[0] + 0.1,  # each wrist on its own side
+        "cross_one": P(f"{o}_wrist")[1] < P("sternum")[1] - 0.2,  # the other arm down
+        "ok_open": gap(f"{s}_thumb_tip", f"{s}_index_tip") > 0.03,
+        "ok_closed": gap(f"{s}_pinky_tip", f"{s}_palm") < 0.06,
+        "volume_low": gap(f"{s}_palm", f"{s}_ear") > 0.08,
+        "volume_flat": gap(f"{s}_hand_tip", f"{s}_palm") > 0.08,
+        "thumbs_sideways": (P(f"{s}_thumb_tip") - P(f"{s}_thumb2"))[1] / gap(f"{s}_thumb_tip", f"{s}_thumb2") < 0.6,
+        "thumbs_tucked": (P(f"{s}_thumb_tip") - P(f"{s}_palm"))[1] < 0.05,  # not above the fist
+        "raised_fist_half": P(f"{s}_palm")[1] < P(f"{s}_shoulder")[1],
+        "raised_open": gap(f"{s}_hand_tip", f"{s}_palm") > 0.08,
+    }
+    assert set(checks) == set(gs.NEAR_MISS_KINDS)
+    assert checks[kind], kind
 
 
 def test_occluded_reference_is_marked_invalid(model):

@@ -22,8 +22,11 @@ interrupted run resumes where it stopped)::
    forest, boosted kappa = 15 cm, on the test bag).
 
 The default forest (boosted, kappa 15 cm) is the one shipped as
-``hmocap_ros/data/gesture_forest.npz``: ``--ship`` copies it there (``hmocap train gestures``
-on the same three bags with its defaults writes the same file, see GESTURE_FOREST.md).
+``hmocap_ros/data/gesture_forest.npz`` (``hmocap train gestures`` on the same three bags with
+its defaults writes the same file, see GESTURE_FOREST.md). ``--shipped`` scores the shipped
+forest as the node runs it (AP, the frames with a false detection at the node's thresholds, the
+near-miss bags); ``--near-forest`` trains the default variant with the near-miss bag added and
+scores it the same way (``--ship`` copies it to ``hmocap_ros/data/``).
 The defaults are chosen on the validation bag; the test bags are held out for this table.
 """
 
@@ -41,11 +44,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.eval.gesture_eval import evaluate_gestures, plot_pr, read_gesture_bag  # noqa: E402
+from hmocap_ros.eval.gesture_eval import SWEEP_MIN_SCORE, evaluate_gestures, plot_pr, read_gesture_bag  # noqa: E402
+from hmocap_ros.gestures.params import DetectorParams  # noqa: E402
 from hmocap_ros.gestures.forest import train_forest_on_frames  # noqa: E402
 from hmocap_ros.gestures.forest_file import load_forest, save_forest  # noqa: E402
 from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
 from hmocap_ros.sim import gesture_dataset as gd  # noqa: E402
+from hmocap_ros.sim.gesture_set import GESTURE_CLASSES  # noqa: E402
 
 #: name -> ``hmocap sim gestures`` arguments (all 640x480). Short holds in the training bags give
 #: more distinct poses per frame; the validation and test bags hold gestures 5-10 frames.
@@ -56,9 +61,22 @@ BAGS = {
     "val": dict(seed=3001, subjects=8, subject_offset=3100, frames=1200),
     "test": dict(seed=2000, subjects=8, subject_offset=2000, frames=1200),
     "test_close": dict(seed=2001, subjects=8, subject_offset=2100, frames=1200, background="close"),
+    "train_near": dict(seed=1003, subjects=16, subject_offset=1300, frames=3000, hold=(2, 4), near_misses=6),
+    "val_near": dict(seed=3002, subjects=8, subject_offset=3200, frames=600, gestures=(), negatives=0,
+                     near_misses=6, near_of=GESTURE_CLASSES),
+    "test_near": dict(seed=2002, subjects=8, subject_offset=2200, frames=1200, gestures=(), negatives=0,
+                      near_misses=6, near_of=GESTURE_CLASSES),
 }
 TRAIN = ("train1", "train2", "train3")
+#: The near-miss forest: the default variant trained on :data:`TRAIN` and the near-miss bag.
+NEAR_TRAIN = TRAIN + ("train_near",)
+SHIPPED = ROOT / "hmocap_ros" / "data" / "gesture_forest.npz"
 EVAL = ("val", "test", "test_close")
+#: Bags of near misses only (no gesture): scored by the false detections at the node's thresholds.
+NEAR = ("val_near", "test_near")
+#: The variants are scored with the exact vote (every tree walked for an undecided pixel): the
+#: table compares forests, not the detector's speed setting (DetectorParams.vote_reach).
+EXACT = DetectorParams(min_score=SWEEP_MIN_SCORE, min_volume=0.0, vote_reach=1.0)
 KAPPAS = (None, 0.15, 0.30, 0.50)
 DEFAULT = "boosted, kappa 15 cm"
 
@@ -71,6 +89,14 @@ def sim_command(name: str) -> str:
         args.append(f"--hold {kw['hold'][0]} {kw['hold'][1]}")
     if "background" in kw:
         args.append(f"--background {kw['background']}")
+    if "gestures" in kw:
+        args.append("--gestures " + " ".join(kw["gestures"]))
+    if "negatives" in kw:
+        args.append(f"--negatives {kw['negatives']}")
+    if "near_misses" in kw:
+        args.append(f"--near-misses {kw['near_misses']}")
+    if "near_of" in kw:
+        args.append("--near-misses-of " + " ".join(kw["near_of"]))
     return f"hmocap sim gestures {' '.join(args)} --out {name}.mcap"
 
 
@@ -95,22 +121,31 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--only", nargs="*", help="train/score only these variants (names as in the table)")
     p.add_argument("--out-dir", default=str(ROOT / "docs" / "figures"))
-    p.add_argument("--ship", action="store_true", help=f"copy the '{DEFAULT}' forest to hmocap_ros/data/")
+    p.add_argument("--shipped", action="store_true",
+                   help="score only the shipped forest (hmocap_ros/data/gesture_forest.npz) as the node runs it, "
+                        "on the held-out and near-miss bags: docs/figures/gesture_shipped.md and .json")
+    p.add_argument("--near-forest", action="store_true",
+                   help="train and score the default variant on the training bags and the near-miss bag: "
+                        "docs/figures/gesture_near_forest.md and .json")
+    p.add_argument("--ship", action="store_true", help="with --near-forest: copy that forest to hmocap_ros/data/")
     return p
 
 
-def train_variant(ns, bags: dict, boosted: bool, kappa: float | None, model: Path, training: dict) -> None:
-    """Train one variant on the training bags and save it to ``model``; ``training`` holds the
-    training frames once read (shared by the variants)."""
-    if "data" not in training:
-        training["data"], _ = read_training_bags([bags[b] for b in TRAIN])
+def train_variant(ns, bags: dict, boosted: bool, kappa: float | None, model: Path, training: dict,
+                  names: tuple = TRAIN) -> None:
+    """Train one variant on the training bags ``names`` and save it to ``model``; ``training``
+    holds the training frames once read (shared by the variants)."""
+    if training.get("names") != names:
+        training.clear()
+        training["data"], _ = read_training_bags([bags[b] for b in names])
+        training["names"] = names
     train = training["data"]
     params = train_params_for_focal(train.focal_px, n_trees=ns.trees, max_depth=ns.depth, kappa_m=kappa,
                                     boosted=boosted)
     t0 = time.perf_counter()
     forest = train_forest_on_frames(train.depth, train.labels, params, np.random.default_rng(ns.seed),
                                     class_names=train.class_names)
-    forest.meta["training"].update({"focal_px": train.focal_px, "bags": [f"{b}.mcap" for b in TRAIN],
+    forest.meta["training"].update({"focal_px": train.focal_px, "bags": [f"{b}.mcap" for b in names],
                                     "seed": ns.seed})
     save_forest(forest, model)
     print(f"{variant_name(boosted, kappa)}: trained in {time.perf_counter() - t0:.0f} s ({forest.n_nodes} nodes)",
@@ -126,12 +161,56 @@ def score_variant(name: str, model: Path, bags: dict) -> dict:
          "train_frames": forest.meta["training"]["n_frames"]}
     for bag in EVAL:
         data = read_gesture_bag(bags[bag])
-        e = evaluate_gestures(data, forest)
+        e = evaluate_gestures(data, forest, EXACT)
         r[bag] = e
         aps = " ".join(f"{g} {c['ap']:.2f}" for g, c in e["per_class"].items())
         print(f"{name} on {bag}: mean AP {e['mean_ap']:.3f} ({aps})", flush=True)
         del data
     return r
+
+
+def score_shipped(model: Path, bags: dict, train: tuple) -> dict:
+    """A forest as the node runs it (``DetectorParams`` defaults): AP and false detections on
+    :data:`EVAL` and the near-miss bags :data:`NEAR`, and its exact-vote APs; ``train``: the
+    names of the bags it was trained on."""
+    forest = load_forest(model)
+    shown = model.relative_to(ROOT) if model.is_relative_to(ROOT) else model
+    r = {"forest": str(shown), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
+         "train_seconds": forest.meta["training"]["seconds_total"], "train_frames": forest.meta["training"]["n_frames"],
+         "train_samples": forest.meta["training"]["n_samples"], "bags": {b: sim_command(b) for b in train}}
+    for bag in EVAL + NEAR:
+        data = read_gesture_bag(bags[bag])
+        e = evaluate_gestures(data, forest)
+        r[bag] = {"mean_ap": e["mean_ap"], "ap": {g: c["ap"] for g, c in e["per_class"].items()},
+                  "found": {g: [c["found_at_node_thresholds"], c["positives"]] for g, c in e["per_class"].items()},
+                  "false_detections": e["false_detections"], "fps": e["fps"], "command": sim_command(bag)}
+        if bag in EVAL:
+            r[bag]["exact_mean_ap"] = evaluate_gestures(data, forest, EXACT)["mean_ap"]
+        fd = e["false_detections"]
+        print(f"{model.name} on {bag}: mean AP {e['mean_ap']:.3f}, false detections in {100 * fd['per_frame']:.1f} % "
+              f"of the frames", flush=True)
+        del data
+    return r
+
+
+def shipped_lines(r: dict, option: str) -> list[str]:
+    """A forest's tables (docs/figures/gesture_shipped.md, gesture_near_forest.md)."""
+    gestures = list(r["test"]["ap"])
+    lines = [f"<!-- written by tools/gesture_table.py {option}; do not edit -->", "", f"Forest: `{r['forest']}`.", "",
+             "Training: " + ", ".join(f"`{c}`" for c in r["bags"].values())
+             + f" ({r['train_frames']} frames, {r['train_samples']} samples after mining); {r['n_nodes']} nodes, "
+               f"{r['file_bytes'] / 1e6:.2f} MB, {r['train_seconds']:.0f} s of training.", "",
+             "| bag | " + " | ".join(gestures) + " | mean AP | mean AP, exact vote | frames with a false detection |",
+             "|---|" + "---:|" * (len(gestures) + 3)]
+    for bag in EVAL + NEAR:
+        e = r[bag]
+        cells = ([f"{e['ap'][g]:.2f}" for g in gestures] + [f"**{e['mean_ap']:.3f}**", f"{e['exact_mean_ap']:.3f}"]
+                 if bag in EVAL else ["-"] * len(gestures) + ["-", "-"])
+        fd = e["false_detections"]
+        lines.append(f"| {bag} | " + " | ".join(cells) + f" | {100 * fd['per_frame']:.1f} % ({fd['frames']}/"
+                     f"{fd['scored_frames']}) |")
+    lines += ["", "Bags: " + "; ".join(f"{b}: `{r[b]['command']}`" for b in EVAL + NEAR)]
+    return lines
 
 
 def table_lines(results: dict, names: list, ns) -> list[str]:
@@ -174,6 +253,8 @@ def main(argv=None) -> int:
     ns = _parser().parse_args(argv)
     work = Path(ns.workdir)
     work.mkdir(parents=True, exist_ok=True)
+    if ns.shipped or ns.near_forest:
+        return shipped(ns, work)
     bags = {name: make_bag(work, name) for name in TRAIN + EVAL}
     variants = [(b, k) for b in (True, False) for k in KAPPAS]
     names = [variant_name(b, k) for b, k in variants]
@@ -208,10 +289,34 @@ def main(argv=None) -> int:
     (out / "gesture_table.md").write_text("\n".join(table_lines(results, names, ns)) + "\n")
     (out / "gesture_table.json").write_text(json.dumps(summary(results), indent=1) + "\n")
     print(f"wrote {out / 'gesture_table.md'}, {out / 'gesture_table.json'}, {out / 'gesture_pr.png'}")
-    if ns.ship:
-        target = ROOT / "hmocap_ros" / "data" / "gesture_forest.npz"
-        shutil.copyfile(default["forest"], target)
-        print(f"shipped {default['forest']} -> {target}")
+    return 0
+
+
+def shipped(ns, work: Path) -> int:
+    """``--shipped``: score the shipped forest; ``--near-forest``: train (cached) and score the
+    near-miss forest, ``--ship`` copies it to the shipped one."""
+    if ns.shipped:
+        name, option, train, model = "gesture_shipped", "--shipped", TRAIN, SHIPPED
+        scores = work / "scores_in_data.json"
+    else:
+        name, option, train, model = "gesture_near_forest", "--near-forest", NEAR_TRAIN, work / "forest_near.npz"
+        scores = work / "scores_near.json"
+    bags = {b: make_bag(work, b) for b in (() if ns.shipped else NEAR_TRAIN) + EVAL + NEAR}
+    if not model.exists():
+        train_variant(ns, bags, True, 0.15, model, {}, NEAR_TRAIN)
+    if scores.exists() and not ns.shipped:
+        r = json.loads(scores.read_text())
+    else:
+        r = score_shipped(model, bags, train)
+        scores.write_text(json.dumps(r))
+    out = Path(ns.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{name}.md").write_text("\n".join(shipped_lines(r, option)) + "\n")
+    (out / f"{name}.json").write_text(json.dumps(r, indent=1) + "\n")
+    print(f"wrote {out / (name + '.md')}, {out / (name + '.json')}")
+    if ns.ship and ns.near_forest:
+        shutil.copyfile(model, SHIPPED)
+        print(f"shipped {model} -> {SHIPPED}")
     return 0
 
 

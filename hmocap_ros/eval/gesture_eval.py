@@ -18,6 +18,15 @@ everything else is the node's defaults, with the forest's offsets and the pixel 
 rescaled to the bag's focal length (``GestureDetector(..., focal_px=...)``), so one forest
 serves 320x240 and 640x480 cameras.
 
+**False detections** (``false_detections``): what the node would report wrongly at its own
+thresholds (``min_score``, ``min_volume``, and a taught gesture's threshold from the forest
+file), from the same run (:func:`~hmocap_ros.gestures.detection.node_detections` on each
+frame's candidates): a gesture detected in a frame of another gesture or of none, or away from
+the annotated point. Reported as the fraction of scored frames with one, and as events per
+minute (a gesture falsely detected in a frame where it was not in the frame before). On a bag
+without gestures (near misses, everyday motion) every detection is false: the measure of
+near-miss refusal and of the taught thresholds.
+
 Without ground truth (a bag with no ``/ground_truth/gestures``, e.g. a recording of a real
 camera, or ``--no-truth``), :func:`detect_gestures` runs the detector with the node's settings
 (``DetectorParams`` defaults and ``--param`` overrides) over the depth frames of ``--depth-topic``
@@ -36,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from dataclasses import replace
 import json
 import sys
 import time
@@ -46,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from hmocap_ros.gestures.depth_units import implausible_depth
-from hmocap_ros.gestures.detection import GestureDetector
+from hmocap_ros.gestures.detection import GestureDetector, node_detections, suppress_other_classes
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.gestures.trees import Forest
@@ -56,8 +66,8 @@ from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.params import field_overrides, from_flat
 
-__all__ = ["DEFAULT_MODEL", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE",
-           "average_precision", "detect_gestures", "evaluate_gestures", "read_gesture_bag",
+__all__ = ["DEFAULT_MODEL", "DetectorRun", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE",
+           "average_precision", "detect_gestures", "evaluate_gestures", "false_detections", "run_detector", "score_run", "read_gesture_bag",
            "read_gesture_bags", "add_arguments", "main_from_args"]
 
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
@@ -103,10 +113,10 @@ class GestureBag:
 
 
 def _class_names(names_by_id: dict) -> tuple:
-    from hmocap_ros.sim.gesture_set import GESTURE_CLASSES
+    from hmocap_ros.sim.gesture_kinds import ALL_GESTURES, GESTURE_CLASSES
 
     n = max([len(GESTURE_CLASSES)] + list(names_by_id))
-    return ("background",) + tuple(names_by_id.get(c, GESTURE_CLASSES[c - 1] if c <= len(GESTURE_CLASSES)
+    return ("background",) + tuple(names_by_id.get(c, ALL_GESTURES[c - 1] if c <= len(ALL_GESTURES)
                                                     else f"gesture_{c}") for c in range(1, n + 1))
 
 
@@ -203,39 +213,106 @@ def average_precision(scores, correct, n_positives: int) -> tuple[float, np.ndar
     return float(np.sum(envelope * steps)), precision, recall, scores[order]
 
 
-def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams | None = None) -> dict:
-    """Run the detector over ``data`` in order and score it (module docstring); a JSON-able dict."""
+def _minutes(stamps_ns: np.ndarray) -> float:
+    """Minutes a sequence of stamps covers: the frame periods summed, a gap (a cut between rooms,
+    more than twice the median period) counted as one period."""
+    if stamps_ns.size < 2:
+        return 0.0
+    gaps = np.diff(stamps_ns.astype(np.float64))
+    period = float(np.median(gaps))
+    return float(np.minimum(gaps, period).sum() + period) / 60e9 if period > 0 else 0.0
+
+
+def false_detections(records: list, n_frames: int, minutes: float, class_names: tuple) -> dict:
+    """False detections at the node's thresholds from per-frame records ``(frame, class_id,
+    false)`` of the scored frames: frames with at least one, their fraction, and events (a
+    gesture falsely detected in a frame where it was not falsely detected in the frame before:
+    what an application reacting to detections sees) per minute, overall and per gesture."""
+    frames = {f for f, _, bad in records if bad}
+    per_class, events = {}, 0
+    for c, name in enumerate(class_names[1:], start=1):
+        bad = sorted({f for f, cid, b in records if b and cid == c})
+        onsets = sum(1 for k, f in enumerate(bad) if k == 0 or bad[k - 1] != f - 1)
+        events += onsets
+        per_class[name] = {"frames": len(bad), "events": onsets,
+                           "events_per_minute": onsets / minutes if minutes > 0 else 0.0}
+    return {"frames": len(frames), "scored_frames": int(n_frames),
+            "per_frame": len(frames) / n_frames if n_frames else 0.0, "events": events, "minutes": minutes,
+            "events_per_minute": events / minutes if minutes > 0 else 0.0, "per_class": per_class}
+
+
+@dataclass
+class DetectorRun:
+    """The detector run over an annotated bag once (:func:`run_detector`): per frame the
+    localized candidates (:attr:`GestureDetector.candidates`, before suppression) at the run's
+    thresholds; what :func:`score_run` scores at any thresholds at or above them."""
+
+    candidates: list
+    active_params: DetectorParams
+    offset_scale: float
+    seconds: float
+
+
+def run_detector(data: GestureBag, forest: Forest, params: DetectorParams | None = None) -> DetectorRun:
+    """Run the detector (the node's code) over ``data`` in stamp order, at the sweep thresholds
+    (:data:`SWEEP_MIN_SCORE`, no volume test) unless ``params`` are given."""
     if params is None:
         params = DetectorParams(min_score=SWEEP_MIN_SCORE, min_volume=0.0)
     detector = GestureDetector(forest, params, focal_px=data.focal_px)
+    candidates, seconds = [], 0.0
+    for i in range(len(data.labels)):
+        t0 = time.perf_counter()
+        detector.update(data.depth[i], int(data.stamps_ns[i]))
+        seconds += time.perf_counter() - t0
+        candidates.append(list(detector.candidates))
+    return DetectorRun(candidates, detector.active_params, detector.offset_scale, seconds)
+
+
+def score_run(data: GestureBag, forest: Forest, run: DetectorRun, node_params: DetectorParams | None = None,
+              thresholds: dict | None = None) -> dict:
+    """Precision-recall and AP per gesture of a :class:`DetectorRun` (module docstring), and its
+    false detections at ``node_params``' thresholds (default the node's) with the per-gesture
+    ``thresholds`` (default the forest's taught ones, as the node's ``use_taught_thresholds``)."""
+    node_params = node_params if node_params is not None else DetectorParams()
+    swept = run.active_params
+    if node_params.min_score < swept.min_score or node_params.min_volume < swept.min_volume:
+        raise ValueError("the node's thresholds must not be below the run's")
+    taught = ({str(k): float(v) for k, v in forest.meta.get("gesture_thresholds", {}).items()}
+              if thresholds is None else dict(thresholds))
     tolerance = TOLERANCE_PX_640 * data.width / REFERENCE_WIDTH
     n_gestures = forest.n_classes - 1
     scores = [[] for _ in range(n_gestures)]
     correct = [[] for _ in range(n_gestures)]
     positives = np.zeros(n_gestures, int)
-    seconds = 0.0
-    for i in range(len(data.labels)):
-        t0 = time.perf_counter()
-        detections = detector.update(data.depth[i], int(data.stamps_ns[i]))
-        seconds += time.perf_counter() - t0
+    found = np.zeros(n_gestures, int)
+    at_node = []
+    scaled = replace(swept, min_score=node_params.min_score, min_volume=node_params.min_volume)
+
+    def hit(det, label) -> bool:
+        return bool(label is not None and det.class_id == label[0]
+                    and np.hypot(det.u - label[1], det.v - label[2]) <= tolerance)
+
+    for i, candidates in enumerate(run.candidates):
         if not data.visible[i]:
             continue
         label = data.labels[i]
         if label is not None and 1 <= label[0] <= n_gestures:
             positives[label[0] - 1] += 1
-        for det in detections:
-            hit = (label is not None and det.class_id == label[0]
-                   and np.hypot(det.u - label[1], det.v - label[2]) <= tolerance)
+        for det in suppress_other_classes(candidates, swept.suppression_radius_px_m):
             scores[det.class_id - 1].append(det.score)
-            correct[det.class_id - 1].append(bool(hit))
+            correct[det.class_id - 1].append(hit(det, label))
+        reported = node_detections(candidates, scaled, taught)
+        at_node += [(i, d.class_id, not hit(d, label)) for d in reported]
+        if label is not None and 1 <= label[0] <= n_gestures and any(hit(d, label) for d in reported):
+            found[label[0] - 1] += 1
     per_class = {}
     for k in range(n_gestures):
-        ap, precision, recall, thresholds = average_precision(scores[k], correct[k], int(positives[k]))
+        ap, precision, recall, score_steps = average_precision(scores[k], correct[k], int(positives[k]))
         per_class[forest.class_names[k + 1]] = {
             "ap": ap, "positives": int(positives[k]), "detections": len(scores[k]),
-            "true_positives": int(np.sum(correct[k])),
+            "true_positives": int(np.sum(correct[k])), "found_at_node_thresholds": int(found[k]),
             "pr": {"precision": precision.round(4).tolist(), "recall": recall.round(4).tolist(),
-                   "score": np.round(thresholds, 4).tolist()},
+                   "score": np.round(score_steps, 4).tolist()},
         }
     aps = [c["ap"] for c in per_class.values() if c["positives"] > 0]
     n = len(data.labels)
@@ -246,15 +323,32 @@ def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams |
         "image_size": [data.width, data.height],
         "focal_px": data.focal_px,
         "model_focal_px": forest.training_focal_px,
-        "offset_scale": detector.offset_scale,
+        "offset_scale": run.offset_scale,
         "criterion": f"correct class and location within {tolerance:g} px "
                      f"(10 px at 640x480, scaled by width {data.width}/640)",
         "tolerance_px": tolerance,
         "per_class": per_class,
         "mean_ap": float(np.mean(aps)) if aps else 0.0,
-        "fps": n / seconds if seconds > 0 else 0.0,
-        "detector_params": dataclasses.asdict(detector.active_params),
+        "false_detections": false_detections(at_node, int(data.visible.sum()), _minutes(data.stamps_ns),
+                                             forest.class_names),
+        "node_thresholds": {"min_score": node_params.min_score, "min_volume": node_params.min_volume,
+                            "taught": taught},
+        "fps": n / run.seconds if run.seconds > 0 else 0.0,
+        "detector_params": dataclasses.asdict(swept),
     }
+
+
+def evaluate_gestures(data: GestureBag, forest: Forest, params: DetectorParams | None = None,
+                      node_params: DetectorParams | None = None) -> dict:
+    """Run the detector over ``data`` in order and score it (module docstring); a JSON-able dict.
+
+    ``node_params`` (default :class:`DetectorParams`' defaults, the node's): the thresholds at
+    which ``false_detections`` counts what the ``gesture_detection`` node would report wrongly
+    (:func:`~hmocap_ros.gestures.detection.node_detections`, with the forest's taught thresholds
+    as the node's ``use_taught_thresholds``): a detection of a gesture in a frame of another or
+    of none, or away from the annotated point; ``found_at_node_thresholds`` per gesture counts
+    the frames whose gesture the node would report where it is."""
+    return score_run(data, forest, run_detector(data, forest, params), node_params)
 
 
 def _info_topic(depth_topic: str) -> str:
@@ -455,7 +549,7 @@ def main_from_args(ns) -> int:
     params = None
     if overrides:
         params = from_flat(DetectorParams, {"min_score": SWEEP_MIN_SCORE, "min_volume": 0.0, **overrides})
-    result = evaluate_gestures(data, forest, params)
+    result = evaluate_gestures(data, forest, params, node_params)
     result["model"] = str(ns.model)
     Path(ns.json).write_text(json.dumps(result, indent=1) + "\n")
     if ns.plot:
@@ -465,4 +559,8 @@ def main_from_args(ns) -> int:
               f"{c['detections']} detections)")
     print(f"mean AP {result['mean_ap']:.3f} over {result['scored_frames']} scored frames "
           f"({result['criterion']}); {result['fps']:.1f} frames/s")
+    fd = result["false_detections"]
+    print(f"false detections at the node's thresholds: {fd['frames']} of {fd['scored_frames']} frames "
+          f"({100 * fd['per_frame']:.1f} %), {fd['events']} events in {fd['minutes']:.1f} min "
+          f"({fd['events_per_minute']:.2f} per minute)")
     return 0

@@ -4,7 +4,10 @@ Per frame ``I_t`` (:meth:`GestureDetector.update`):
 
 1. The forest is evaluated on a grid of every ``stride``-th pixel with valid depth; a grid
    pixel votes for gesture class ``c > 0`` when ``p(c | I_t, x)`` (eq. 3.1) beats background and
-   every other class (ties go to background) (:mod:`~hmocap_ros.gestures.grid_votes`).
+   every other class (ties go to background) (:mod:`~hmocap_ros.gestures.grid_votes`). A pixel
+   whose background lead after some trees is more than ``vote_reach`` x the trees left stops
+   there and votes background (a design choice for speed, not in the thesis: most of the grid
+   is wall and floor, decided by the first trees).
 2. The vote image of each class is turned into a density ``p(c | I_t)`` by a Parzen estimator
    with a Gaussian kernel (``parzen_sigma_px``): the blurred 0/1 vote image, i.e. the kernel-
    weighted fraction of grid pixels around ``x`` that vote for ``c`` (a pseudo-probability in
@@ -39,8 +42,8 @@ from hmocap_ros.gestures.grid_votes import forest_grid_votes, pad_for_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.gestures.trees import Forest
 
-__all__ = ["Detection", "GestureDetector", "parzen_density", "refine_maximum", "smooth_density",
-           "suppress_other_classes"]
+__all__ = ["Detection", "GestureDetector", "gesture_thresholds", "node_detections", "parzen_density", "refine_maximum",
+           "smooth_density", "suppress_other_classes"]
 
 
 @dataclass(frozen=True)
@@ -97,6 +100,30 @@ def refine_maximum(dens: np.ndarray, gy: int, gx: int, reach: int) -> tuple[floa
     return float((w * ys).sum() / w.sum()), float((w * xs).sum() / w.sum())
 
 
+def gesture_thresholds(params: DetectorParams, taught: dict | None = None) -> dict:
+    """(score, volume) thresholds per gesture name: ``min_score`` and ``min_volume``, or for a
+    gesture with a taught threshold ``th`` (sec. 3.4.1) ``th`` and ``th x min_volume / min_score``:
+    the volume test (eq. 3.5) keeps its ratio to the score test, so a taught forest, whose votes
+    cover less of the gesture than the shipped forest's, is held to the same shape of maximum."""
+    ratio = params.min_volume / params.min_score if params.min_score > 0 else 0.0
+    return {str(name): (float(th), float(th) * ratio) for name, th in (taught or {}).items()}
+
+
+def node_detections(candidates: list, params: DetectorParams, thresholds: dict | None = None) -> list:
+    """What the ``gesture_detection`` node reports from a frame's candidates (one localized
+    maximum per class, :attr:`GestureDetector.candidates`, found at lower thresholds): those
+    above the lowest thresholds in use, one per place (:func:`suppress_other_classes`, ``params``
+    scaled to the camera), then each gesture at its own thresholds (:func:`gesture_thresholds`:
+    a taught one from ``thresholds[name]``, else ``min_score`` and ``min_volume``)."""
+    own = gesture_thresholds(params, thresholds)
+    default = (params.min_score, params.min_volume)
+    floor_score = min([default[0]] + [t[0] for t in own.values()])
+    floor_volume = min([default[1]] + [t[1] for t in own.values()])
+    kept = suppress_other_classes([d for d in candidates if d.score >= floor_score and d.volume >= floor_volume],
+                                  params.suppression_radius_px_m)
+    return [d for d in kept if d.score >= own.get(d.name, default)[0] and d.volume >= own.get(d.name, default)[1]]
+
+
 def suppress_other_classes(detections: list, radius_px_m: float) -> list:
     """Best score first; drops a detection within ``radius_px_m / depth`` pixels of a better one
     of another class (the votes of one hand shape spill over to similar classes nearby)."""
@@ -111,7 +138,8 @@ class GestureDetector:
     """Gesture localization on a stream of depth frames of one camera (thesis sec. 3.2.4).
 
     ``update(depth, stamp_ns)`` takes a raw depth image (unit and invalid value per
-    ``params``) and returns the detections of that frame; between calls it keeps the
+    ``params``) and returns the detections of that frame (``candidates``: the same before the
+    suppression of step 6, for :func:`node_detections`); between calls it keeps the
     temporally smoothed densities (eq. 3.4). ``density`` (gh, gw, C-1) is that state and
     :meth:`probability_image` the full-resolution debug map.
 
@@ -178,6 +206,7 @@ class GestureDetector:
         self._shape: tuple | None = None
         self._last_stamp: int | None = None
         self._padded: np.ndarray | None = None
+        self.candidates: list = []
 
     @property
     def grid_offset(self) -> int:
@@ -197,11 +226,12 @@ class GestureDetector:
         self._last_stamp = stamp_ns
 
         self._padded = pad_for_forest(depth_m, self._flat, self._padded)
-        self.class_map, self.grid_depth = forest_grid_votes(self._flat, self._padded, p.stride)
+        self.class_map, self.grid_depth = forest_grid_votes(self._flat, self._padded, p.stride, p.vote_reach)
         n_gestures = self.forest.n_classes - 1
         votes = (self.class_map[:, :, None] == np.arange(1, n_gestures + 1, dtype=np.int8)).astype(np.float32)
         current = parzen_density(votes, p.parzen_sigma_px / p.stride)
         self.density = smooth_density(self.density, current, p.alpha)
+        self.candidates = []
         if self.density.size == 0:  # an image smaller than the grid offset
             return []
 
@@ -210,6 +240,7 @@ class GestureDetector:
             det = self._localize(k + 1, stamp_ns)
             if det is not None:
                 detections.append(det)
+        self.candidates = detections
         return suppress_other_classes(detections, p.suppression_radius_px_m)
 
     def _localize(self, class_id: int, stamp_ns: int) -> Detection | None:

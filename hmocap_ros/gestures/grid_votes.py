@@ -99,9 +99,10 @@ def _add_tree_votes(padded, px, py, active, n_active, root, nodes, links, proba,
 
 
 @nb.njit(inline="always")
-def _undecided(acc, active, n_active, remaining):
+def _undecided(acc, active, n_active, reach):
     """Keep in ``active`` (compacted in place) the pixels whose background sum does not lead
-    every gesture class by more than the ``remaining`` trees could give; returns their number."""
+    every gesture class by more than ``reach`` (what the remaining trees are taken to be able
+    to give a gesture over background); returns their number."""
     n_classes = acc.shape[1]
     m = 0
     for i in range(n_active):
@@ -109,7 +110,7 @@ def _undecided(acc, active, n_active, remaining):
         best = acc[p, 1]
         for c in range(2, n_classes):
             best = max(best, acc[p, c])
-        if acc[p, 0] - best <= remaining + np.float32(1e-3):  # margin for rounding
+        if acc[p, 0] - best <= reach + np.float32(1e-3):  # margin for rounding
             active[m] = p
             m += 1
     return m
@@ -117,14 +118,15 @@ def _undecided(acc, active, n_active, remaining):
 
 @nb.njit(cache=True, nogil=True)
 def _grid_votes(padded, stride, offset, nodes, links, proba, roots, max_depth, clipped, kappa, background,
-                early_exit, class_map, grid_depth, proba_out):
+                vote_reach, class_map, grid_depth, proba_out):
     """Forest votes on the stride grid of ``padded`` (the metres image with a 1-pixel frame).
 
     Trees outer, pixels inner (one tree's records stay in cache while the grid walks it),
-    ``_BATCH`` pixels interleaved. With ``early_exit``, from the middle tree on, a pixel whose
-    background sum leads every gesture class by more than the trees left could give is dropped:
-    it can only vote background (exact, not an approximation). ``proba_out`` (gh, gw, C), unless
-    empty, receives eq. 3.1 at every grid pixel (complete only without ``early_exit``).
+    ``_BATCH`` pixels interleaved. With ``vote_reach`` > 0, after each tree a pixel whose
+    background sum leads every gesture class by more than ``vote_reach`` times the number of
+    trees left is dropped: it votes background (:func:`forest_grid_votes`). ``proba_out``
+    (gh, gw, C), unless empty, receives eq. 3.1 at every grid pixel (complete only with
+    ``vote_reach`` 0, which drops nothing).
     """
     gh, gw = class_map.shape
     n_classes = proba.shape[1]
@@ -141,8 +143,8 @@ def _grid_votes(padded, stride, offset, nodes, links, proba, roots, max_depth, c
         _add_tree_votes(padded, px, py, active, n_active, roots[t], nodes, links, proba, max_depth, clipped,
                         kappa, acc)
         remaining = np.float32(n_trees - t - 1)
-        if early_exit and remaining < n_trees / 2:
-            n_active = _undecided(acc, active, n_active, remaining)
+        if vote_reach > 0.0:
+            n_active = _undecided(acc, active, n_active, np.float32(vote_reach) * remaining)
     for p in range(n):
         best = 0
         for c in range(1, n_classes):
@@ -179,19 +181,29 @@ def pad_for_forest(depth_m: np.ndarray, flat: FlatForest, out: np.ndarray | None
     return out
 
 
-def forest_grid_votes(flat: FlatForest, padded: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray]:
+def forest_grid_votes(flat: FlatForest, padded: np.ndarray, stride: int,
+                      vote_reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel forest votes (sec. 3.2.4) on the stride grid of a metres image.
 
     ``padded``: a ``depth_to_metres`` image with the 1-pixel frame of :func:`pad_for_forest`.
     Returns ``class_map`` (gh, gw) int8: -1 invalid depth, 0 background, ``c`` a vote for class
     ``c``; and ``grid_depth`` (gh, gw) float32.
+
+    ``vote_reach`` in (0, 1]: after each tree, a pixel whose background sum leads every gesture
+    class by more than ``vote_reach`` x the trees left is decided (background) and walks no
+    further tree. With 1 (a tree gives a class at most 1) it is exact: such a pixel can only
+    vote background. Below 1 it is a bound on what the trees left are taken to give a gesture
+    over background: background pixels of a trained forest stop after a few trees (most of the
+    grid is wall and floor), at the risk of dropping a pixel the last trees would have turned.
     """
+    if not 0.0 < vote_reach <= 1.0:
+        raise ValueError(f"vote_reach must be in (0, 1], got {vote_reach}")
     padded = np.ascontiguousarray(padded, dtype=np.float32)
     gh, gw, offset = grid_shape(padded.shape[0] - 2, padded.shape[1] - 2, stride)
     class_map = np.empty((gh, gw), np.int8)
     grid_depth = np.empty((gh, gw), np.float32)
     _grid_votes(padded, stride, offset, flat.nodes, flat.links, flat.proba, flat.roots, flat.max_depth,
-                flat.clipped, flat.kappa, flat.background, True, class_map, grid_depth,
+                flat.clipped, flat.kappa, flat.background, float(vote_reach), class_map, grid_depth,
                 np.zeros((0, 0, flat.n_classes), np.float32))
     return class_map, grid_depth
 
@@ -206,6 +218,6 @@ def forest_grid_proba(flat: FlatForest, padded: np.ndarray, stride: int) -> np.n
     gh, gw, offset = grid_shape(padded.shape[0] - 2, padded.shape[1] - 2, stride)
     out = np.empty((gh, gw, flat.n_classes), np.float32)
     _grid_votes(padded, stride, offset, flat.nodes, flat.links, flat.proba, flat.roots, flat.max_depth,
-                flat.clipped, flat.kappa, flat.background, False, np.empty((gh, gw), np.int8),
+                flat.clipped, flat.kappa, flat.background, 0.0, np.empty((gh, gw), np.int8),
                 np.empty((gh, gw), np.float32), out)
     return out

@@ -38,13 +38,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from hmocap_ros.gestures.depth_features import check_stack, stack_metres
 from hmocap_ros.gestures.hard_negatives import frame_negatives
-from hmocap_ros.gestures.online_statistics import best_splits, route_and_count
+from hmocap_ros.gestures.online_statistics import best_splits, reached_leaves, route_and_count
 from hmocap_ros.gestures.params import FeatureParams, OnlineParams, PatchParams
 from hmocap_ros.gestures.patches import collect_samples, frame_labels
 from hmocap_ros.gestures.trees import FlatForest, Forest, PendingTests, Tree
@@ -151,14 +151,48 @@ class OnlineForest:
             raise ValueError(f"sample classes must be in [0, {len(self.class_names) - 1}]")
         self.seen += np.bincount(label, minlength=self.seen.size)
         weights = bagging_weights(rng, label.size, self.params.poisson_lambda, self.params.n_trees)
-        touched = np.zeros(self.slot_node.shape[0], np.bool_)
         f = self.features
+        if self.n_dormant:
+            self._wake(frames, s_frame, s_x, s_y, label, weights, rng)
+        touched = np.zeros(self.slot_node.shape[0], np.bool_)
         route_and_count(check_stack(frames), np.ascontiguousarray(s_frame, np.int32),
                         np.ascontiguousarray(s_x, np.int32), np.ascontiguousarray(s_y, np.int32), label, weights,
                         self.roots, self.feature, self.threshold, self.left, self.right, self.counts,
                         self.node_slot, self.slot_feature, self.slot_threshold, self.slot_counts, f.clipped,
                         f.kappa_m, f.background_depth_m, f.border, touched)
         return self.split_leaves(self.slot_node[np.flatnonzero(touched)], rng)
+
+    @property
+    def dormant(self) -> np.ndarray:
+        """Node ids of the dormant leaves: leaves above ``max_depth`` without candidate tests (the
+        leaves of an offline forest continued online, :meth:`from_offline`)."""
+        n = self.n_nodes
+        return np.flatnonzero((self.left[:n] < 0) & (self.node_slot[:n] < 0) & (self.depth[:n] < self.params.max_depth))
+
+    @property
+    def n_dormant(self) -> int:
+        if not hasattr(self, "_n_dormant"):
+            self._n_dormant = int(self.dormant.size)
+        return self._n_dormant
+
+    def _wake(self, frames, s_frame, s_x, s_y, label, weights, rng: np.random.Generator) -> None:
+        """Give the dormant leaves that a gesture sample of the batch reaches candidate tests (they
+        collect split statistics from this batch on)."""
+        gesture = np.flatnonzero(label > 0)
+        if gesture.size == 0:
+            return
+        f = self.features
+        leaves = np.empty((self.params.n_trees, gesture.size), np.int32)
+        reached_leaves(check_stack(frames), np.ascontiguousarray(np.asarray(s_frame)[gesture], np.int32),
+                       np.ascontiguousarray(np.asarray(s_x)[gesture], np.int32),
+                       np.ascontiguousarray(np.asarray(s_y)[gesture], np.int32),
+                       np.ascontiguousarray(weights[:, gesture]), self.roots, self.feature, self.threshold, self.left,
+                       self.right, f.clipped, f.kappa_m, f.background_depth_m, f.border, leaves)
+        reached = np.unique(leaves[leaves >= 0])
+        wake = reached[(self.node_slot[reached] < 0) & (self.depth[reached] < self.params.max_depth)]
+        if wake.size:
+            self._open(wake.astype(np.int64), rng)
+            self._n_dormant -= int(wake.size)
 
     def split_leaves(self, nodes, rng: np.random.Generator) -> int:
         """Alg. 6 ``shouldSplit`` on the open leaves among ``nodes``: each that has seen more
@@ -266,6 +300,22 @@ class OnlineForest:
         meta = dict(self.meta)
         meta["online"] = dict(meta.get("online", {}), **self._state_meta())
         return Forest(trees, self.class_names, self.features, "online", meta)
+
+    @classmethod
+    def from_offline(cls, forest: Forest, params: OnlineParams) -> "OnlineForest":
+        """Continue an offline ``forest`` (sec. 3.2, e.g. the shipped one) online: its trees,
+        tests and leaf counts as they are, every leaf above ``params.max_depth`` *dormant*: it
+        gets candidate tests (alg. 6) only when a sample of a gesture reaches it, so the trees
+        grow where a taught gesture lands and elsewhere keep their offline structure (only
+        their counts move); the open leaves' statistics stay as few as the taught gesture needs."""
+        if forest.kind != "offline":
+            raise ValueError(f"from_offline takes an offline forest, got a {forest.kind} one")
+        if len(forest.trees) != params.n_trees:
+            params = replace(params, n_trees=len(forest.trees))
+        trees = [Tree(t.feature, t.threshold, t.left, t.right, t.counts, t.depth) for t in forest.trees]
+        meta = dict(forest.meta)
+        meta["online"] = {"params": asdict(params), "seen": [0] * forest.n_classes, "from_offline": True}
+        return cls.from_forest(Forest(trees, forest.class_names, forest.features, "online", meta), params)
 
     @classmethod
     def from_forest(cls, forest: Forest, params: OnlineParams | None = None) -> "OnlineForest":

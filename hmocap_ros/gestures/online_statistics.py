@@ -32,7 +32,7 @@ import numpy as np
 from hmocap_ros.gestures.depth_features import pixel_metres, test_value
 from hmocap_ros.gestures.trees import descend
 
-__all__ = ["best_splits", "route_and_count", "split_decision"]
+__all__ = ["best_splits", "reached_leaves", "route_and_count", "split_decision"]
 
 
 @nb.njit(inline="always")
@@ -80,6 +80,24 @@ def route_and_count(frames, s_frame, s_x, s_y, s_label, weights, roots, feature,
                                    slot_feature[slot, k, 2], slot_feature[slot, k, 3], clipped, kappa,
                                    background, border)
                 slot_counts[slot, k, np.int64(f >= slot_threshold[slot, k]), c] += wf
+
+
+@nb.njit(cache=True, nogil=True)
+def reached_leaves(frames, s_frame, s_x, s_y, weights, roots, feature, threshold, left, right, clipped, kappa,
+                   background, border, out):
+    """``findLeaf`` only: ``out[t, i]`` the leaf of tree ``t`` sample ``i`` reaches (-1 where its
+    weight is 0), as :func:`route_and_count` would route it."""
+    kappa = np.float32(kappa)
+    background = np.float32(background)
+    for i in range(s_frame.shape[0]):
+        img = frames[s_frame[i]]
+        d = pixel_metres(img[s_y[i], s_x[i]], background)
+        x = np.float64(s_x[i])
+        y = np.float64(s_y[i])
+        inv_d = 1.0 / np.float64(d)
+        for t in range(roots.shape[0]):
+            out[t, i] = -1 if weights[t, i] == 0 else descend(
+                img, x, y, d, inv_d, roots[t], feature, threshold, left, right, clipped, kappa, background, border)
 
 
 @nb.njit(inline="always")

@@ -225,6 +225,11 @@ class DetectorParams:
     stride: int = param(
         4, "Grid step in pixels (1 to 64): the forest is evaluated at every stride-th pixel of "
            "every stride-th row (4 = 160x120 votes at 640x480).")
+    vote_reach: float = param(
+        0.5, "In (0, 1]: after each tree, a grid pixel whose background sum leads every gesture by "
+             "more than this times the trees left stops and votes background. 1 is exact (a tree "
+             "gives a class at most 1); lower is faster (wall and floor pixels stop after a few "
+             "trees) at the risk of dropping a vote the last trees would have made.")
     parzen_sigma_px: float = param(
         6.0, "Standard deviation (pixels, >= 0) of the Gaussian Parzen kernel over the vote "
              "image; 0 = no smoothing.")
@@ -258,6 +263,7 @@ class DetectorParams:
         _check([(self.depth_unit_m >= 0.0, "depth_unit_m must be >= 0"),
                 (0.0 < self.min_depth_m < self.max_depth_m, "need 0 < min_depth_m < max_depth_m"),
                 (1 <= self.stride <= 64, "stride must be in [1, 64]"),
+                (0.0 < self.vote_reach <= 1.0, "vote_reach must be in (0, 1]"),
                 (self.parzen_sigma_px >= 0.0, "parzen_sigma_px must be >= 0"),
                 (0.0 < self.alpha <= 1.0, "alpha must be in (0, 1]"),
                 (self.volume_radius_px_m > 0.0, "volume_radius_px_m must be > 0"),

@@ -70,6 +70,22 @@ Design choices where the thesis is vague:
 - **Camera**: the forest learns in the pixels of the camera it sees (its tests are
   pixel*metres at that focal length, ``meta["training"]["focal_px"]``); a forest grown at one
   focal length is not taught with another camera.
+- **Stamps that start over** (a camera or a replay restarting) continue the session: the
+  states' clock is shifted so that the frame follows the last one by one frame period
+  (``restarts`` counts them); the detector's smoothing restarts as in the node.
+- **An empty session** (nothing moved in view: nobody in the room, :mod:`~hmocap_ros.gestures.scene_motion`)
+  is undone at its end: the forest and the averages go back to what they were before the
+  session, no threshold is kept, ``taught`` is false and ``done``'s instruction says why.
+- **The negative phase asks for near misses** (``do_negatives``' instruction: the gesture done
+  wrong, a finger bent, the hand turned, the arm half raised): the thesis asks for "other
+  gestures that should be distinguished"; the near misses of the taught gesture are the
+  poses its detector most needs to refuse, and on-the-fly mining learns them where the forest
+  fires on them.
+- **The threshold's parts** th+ and th- are kept beside it (``meta["gesture_threshold_parts"]``)
+  so that another rho can be applied to a taught forest (``hmocap bench iml`` measures each).
+- **An offline forest** (e.g. the shipped one) is taught a gesture by continuing it online
+  (:meth:`~hmocap_ros.gestures.online_forest.OnlineForest.from_offline`): its leaves open to
+  split statistics when the taught gesture's samples reach them.
 """
 
 from __future__ import annotations
@@ -100,6 +116,7 @@ from hmocap_ros.gestures.params import (
     PatchParams,
 )
 from hmocap_ros.gestures.patches import collect_samples
+from hmocap_ros.gestures.scene_motion import SceneMotion
 from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
 from hmocap_ros.params import group, param
 
@@ -118,10 +135,13 @@ INSTRUCTIONS = {
     "update_positive": "Keep '{g}' in the box and vary your pose a little.",
     "release": "Release the gesture and wait.",
     "rehearse": "Show '{r}' (a gesture the room knows) in the box.",
-    "do_negatives": "Move around and do other things (not '{g}', nor the room's other gestures).",
+    "do_negatives": "Move around and do other things: '{g}' done wrong (a finger bent, the hand turned, the arm "
+                    "half raised), other poses; not '{g}', nor the room's other gestures.",
     "testing": "Testing: do '{g}' anywhere and check that it is found.",
     "done": "'{g}' is taught.",
 }
+#: The instruction of ``done`` after a session that saw nobody in the box (module docstring).
+NOBODY = "'{g}' was not taught: nothing moved in view; the forest is as it was before the session."
 
 
 @dataclass(frozen=True)
@@ -168,9 +188,15 @@ class TrainerParams:
     box_half_size_px: float = param(
         24.0, "Half side of the box in pixels at the reference focal length (> 0): the region where "
               "the user is asked to hold the gesture and where th+ is read.")
+    motion_fraction: float = param(
+        0.01, "The scene moved between two frames 0.25 s apart when more than this fraction (in (0, 1)) "
+              "of the pixels changed depth by more than 5 cm (and 3 % of the depth).")
+    min_moving: float = param(
+        0.05, "A session in which the scene moved in fewer than this fraction (in [0, 1]) of its 0.25-s "
+              "steps saw nobody: it is undone and teaches nothing.")
     sigma: float = param(0.9, "Weight sigma in (0, 1] of the newest value in the moving averages of th+ and th-.")
     rho: float = param(
-        0.5, "Threshold th = rho th+ + (1 - rho) th-, rho in [0, 1]: higher = fewer false "
+        0.8, "Threshold th = rho th+ + (1 - rho) th-, rho in [0, 1]: higher = fewer false "
              "positives (0.8 for a low false positive rate, sec. 3.4.1).")
     features: FeatureParams = group(FeatureParams, "Tests of a new forest (eq. 3.6).")
     patches: PatchParams = group(PatchParams, "Positive patches around the box centre (sec. 3.2.3).")
@@ -184,6 +210,8 @@ class TrainerParams:
                   (self.testing_s >= 0 and self.rehearse_s >= 0, "testing_s and rehearse_s must be >= 0"),
                   (0 < self.box_u < 1 and 0 < self.box_v < 1, "box_u and box_v must be in (0, 1)"),
                   (self.box_half_size_px > 0, "box_half_size_px must be > 0"),
+                  (0 < self.motion_fraction < 1 and 0 <= self.min_moving <= 1,
+                   "need motion_fraction in (0, 1) and min_moving in [0, 1]"),
                   (0 < self.sigma <= 1, "sigma must be in (0, 1]"),
                   (0 <= self.rho <= 1, "rho must be in [0, 1]")]
         for ok, message in checks:
@@ -280,7 +308,9 @@ class Trainer:
     """The interactive trainer (module docstring).
 
     ``forest_or_path``: an :class:`OnlineForest`, an online :class:`Forest`, the path of a forest
-    file (kept growing where it stopped), or None / a path that does not exist (a new forest
+    file (kept growing where it stopped), an offline :class:`Forest` (continued online,
+    :meth:`OnlineForest.from_offline`: e.g. the shipped forest taught one more gesture), or
+    None / a path that does not exist (a new forest
     from ``params.features`` and ``params.online`` at the first :meth:`start`). ``focal_px``: the
     camera's focal length; None = the forest's training focal length (required for a new forest).
     ``record``: keep the frames learnt from with their annotation in :attr:`recording` (module
@@ -294,11 +324,8 @@ class Trainer:
         forest = forest_or_path
         if isinstance(forest, (str, Path)):
             forest = load_forest(forest) if Path(forest).exists() else None
-        if isinstance(forest, Forest):
-            forest = OnlineForest.from_forest(forest)
-        if forest is not None and not isinstance(forest, OnlineForest):
-            raise TypeError("forest_or_path must be an OnlineForest, an online Forest, a path or None")
-        self.online: OnlineForest | None = forest
+        if forest is not None and not isinstance(forest, (Forest, OnlineForest)):
+            raise TypeError("forest_or_path must be an OnlineForest, a Forest, a path or None")
         trained = None
         if forest is not None:
             trained = forest.meta.get("training", {}).get("focal_px")
@@ -309,6 +336,10 @@ class Trainer:
         self.focal_px = float(focal_px if focal_px is not None else trained)
         scaled = OnlineTrainParams(features=self.params.features, patches=self.params.patches,
                                    online=self.params.online).for_focal(self.focal_px)
+        if isinstance(forest, Forest):
+            forest = (OnlineForest.from_offline(forest, scaled.online) if forest.kind == "offline"
+                      else OnlineForest.from_forest(forest))
+        self.online: OnlineForest | None = forest
         self._new_params = scaled
         self.patches = scaled.patches
         self.state = "idle"
@@ -320,6 +351,12 @@ class Trainer:
         self.th_pos: float | None = None
         self.th_neg: float | None = None
         self.detector: GestureDetector | None = None
+        self.taught = False
+        self.restarts = 0
+        self._last_stamp: int | None = None
+        self._period = 0
+        self._session_snapshot = None
+        self._presence: SceneMotion | None = None
         self.record = bool(record)
         self.recording: list[RecordedFrame] = []
         if self.online is not None:
@@ -359,9 +396,10 @@ class Trainer:
 
     # ------------------------------------------------------------------ the session
 
-    def start(self, gesture_name: str, stamp_ns: int, extend: bool = False) -> None:
-        """Begin teaching ``gesture_name`` at ``stamp_ns`` (first round, ``do_gesture``). A gesture
-        the forest knows needs ``extend=True`` (keep teaching it); a new one adds its class."""
+    def start(self, gesture_name: str, stamp_ns: int | None, extend: bool = False) -> None:
+        """Begin teaching ``gesture_name`` at ``stamp_ns`` (first round, ``do_gesture``; None = at
+        the next frame's stamp, when no frame has come yet). A gesture the forest knows needs
+        ``extend=True`` (keep teaching it); a new one adds its class."""
         name = str(gesture_name).strip()
         if not name or name == "background":
             raise ValueError(f"not a gesture name: {gesture_name!r}")
@@ -371,6 +409,10 @@ class Trainer:
         if name in known and not extend:
             raise ValueError(f"the forest already knows '{name}' (extend=True to keep teaching it)")
         self._snapshot = (copy.deepcopy(self.online), self.th_pos, self.th_neg)
+        self._session_snapshot = self._snapshot
+        self._presence = SceneMotion(self.params.features.background_depth_m, self.params.motion_fraction,
+                                     self.params.min_moving)
+        self.taught = False
         if self.online is None:
             p = self._new_params
             meta = {"training": {"method": "interactive", "focal_px": self.focal_px}}
@@ -382,7 +424,8 @@ class Trainer:
         self._rehearsed = tuple(c for c in self.online.class_names[1:] if c != name)
         self.th_pos = self.th_neg = None
         self.round = 1
-        self._enter("do_gesture", int(stamp_ns))
+        self._last_stamp, self._period = (None if stamp_ns is None else int(stamp_ns)), 0
+        self._enter("do_gesture", None if stamp_ns is None else int(stamp_ns))
 
     def cancel(self) -> None:
         """Stop the session; the forest is put back as it was when the current round began."""
@@ -403,6 +446,8 @@ class Trainer:
 
     def _advance(self, stamp_ns: int) -> None:
         """Move through the states whose time is over at ``stamp_ns`` (module docstring)."""
+        if self._state_start is None and self.state not in ("idle", "done"):
+            self._state_start = stamp_ns  # started before any frame: the session begins now
         while self.state not in ("idle", "done"):
             end = self._state_start + int(round(self._duration(self.state) * 1e9))
             if stamp_ns < end:
@@ -417,8 +462,8 @@ class Trainer:
                 nxt = "done"
             else:
                 nxt = _ROUND[_ROUND.index(self.state) + 1]
-            if self.state == "do_negatives" and nxt == "testing":
-                self._finish_round()
+            if self.state == "do_negatives" and nxt == "testing" and not self._finish_session():
+                nxt = "done"
             self._enter(nxt, end)
 
     @property
@@ -438,10 +483,24 @@ class Trainer:
         slot = min(int(t // self.params.rehearse_s), len(self._rehearsed) - 1)
         return self._rehearsed[slot], t - slot * self.params.rehearse_s >= self.params.rehearse_s / 3.0
 
-    def _finish_round(self) -> None:
+    def _finish_session(self) -> bool:
+        """End of the last round: keep the threshold (and its parts th+, th-), or, when the
+        session saw nobody in the box, put the forest back as it was before the session.
+        Returns whether the gesture was taught."""
+        if not self._presence.somebody:
+            forest, self.th_pos, self.th_neg = self._session_snapshot
+            self.online = forest
+            if self.online is not None:
+                self._refresh_detector()
+            else:
+                self.detector = None
+            return False
         th = self.threshold
         if th is not None:
             self.online.meta.setdefault("gesture_thresholds", {})[self.gesture] = th
+            self.online.meta.setdefault("gesture_threshold_parts", {})[self.gesture] = [self.th_pos, self.th_neg]
+        self.taught = True
+        return True
 
     def box(self, width: int, height: int) -> tuple:
         """(u, v, half side) of the box in pixels for an image ``width`` x ``height``."""
@@ -455,8 +514,7 @@ class Trainer:
         depth = np.asarray(depth_m)
         if depth.ndim != 2:
             raise ValueError(f"depth must be a 2-D image, got shape {depth.shape}")
-        if self._state_start is not None and stamp_ns < self._state_start:
-            raise ValueError("frame stamps went back in time")
+        self._follow_stamps(stamp_ns)
         self._advance(stamp_ns)
         h, w = depth.shape
         box = self.box(w, h)
@@ -465,9 +523,12 @@ class Trainer:
         cls = self.online.class_names.index(self.gesture) if self.gesture in self.online.class_names else 0
         detections = tuple(self.detector.update(depth, stamp_ns))
         samples = 0
-        if self.state in LEARNING_STATES:
+        in_session = self.state not in ("idle", "done")
+        if in_session:
             bg = np.float32(self.online.features.background_depth_m)
             metres = depth_to_metres(depth, self.params.detector.depth_format, float(bg))
+            self._presence.see(metres, stamp_ns)
+        if self.state in LEARNING_STATES:
             dens = self.detector.density[:, :, cls - 1] if self.detector.density is not None else None
             shown, learn = self.rehearsed_now(stamp_ns)
             if self.state == "update_positive" or learn:
@@ -492,6 +553,19 @@ class Trainer:
                 self._refresh_detector()
             samples = int(labels.size)
         return self._status(stamp_ns, box, self._shown(detections, cls), samples)
+
+    def _follow_stamps(self, stamp_ns: int) -> None:
+        """Stamps that go back in time (a camera or a replay that starts over) continue the
+        session: the states' clock is shifted so that the frame comes one frame period after
+        the last one (``restarts`` counts them)."""
+        if self._last_stamp is not None and stamp_ns < self._last_stamp:
+            shift = stamp_ns - self._last_stamp - self._period
+            if self._state_start is not None:
+                self._state_start += shift
+            self.restarts += 1
+        elif self._last_stamp is not None and stamp_ns > self._last_stamp:
+            self._period = stamp_ns - self._last_stamp
+        self._last_stamp = stamp_ns
 
     def _keep(self, metres: np.ndarray, stamp_ns: int, gesture: str, box: tuple) -> None:
         """Append the frame to :attr:`recording` as uint16 millimetres (invalid = 0)."""
@@ -544,8 +618,10 @@ class Trainer:
         detection = mine[0] if mine else (detections[0] if detections else None)
         known = tuple(self.online.class_names[1:]) if self.online is not None else ()
         shown = self.rehearsed_now(stamp_ns)[0]
+        text = NOBODY if self.state == "done" and self._presence is not None and not self.taught \
+            else INSTRUCTIONS[self.state]
         return TrainerStatus(self.state, self.gesture, self.round, self.params.rounds, left, self.threshold,
-                             INSTRUCTIONS[self.state].format(g=self.gesture, r=shown), box, detection, detections,
+                             text.format(g=self.gesture, r=shown), box, detection, detections,
                              stamp_ns, known, samples,
                              self.params.progress(self.state, self.round, left, len(self._rehearsed)), shown)
 

@@ -50,6 +50,7 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from hmocap_ros.camera_model import PinholeCamera
 from hmocap_ros.gestures.depth_units import implausible_depth
+from hmocap_ros.gestures.detection import gesture_thresholds, node_detections
 from hmocap_ros.gestures.file_watch import FileWatch
 from hmocap_ros.gestures.gesture_messages import gesture_array, probability_image
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
@@ -75,7 +76,8 @@ class GestureNodeConfig:
                                        "without a restart.")
     use_taught_thresholds: bool = param(True, "A gesture taught by gesture_trainer is detected at the threshold "
                                               "the trainer computed for it (sec. 3.4.1, kept in the forest file) "
-                                              "instead of min_score.")
+                                              "instead of min_score, and at that threshold times min_volume / "
+                                              "min_score instead of min_volume.")
 
 
 class GestureDetection(Node):
@@ -117,8 +119,10 @@ class GestureDetection(Node):
             forest = load_forest(path)
             taught = {str(k): float(v) for k, v in forest.meta.get("gesture_thresholds", {}).items()
                       if self.config.use_taught_thresholds}
-            detector = GestureDetector(forest, replace(self.params, min_score=min([self.params.min_score,
-                                                                                   *taught.values()])))
+            own = gesture_thresholds(self.params, taught).values()
+            detector = GestureDetector(forest, replace(
+                self.params, min_score=min([self.params.min_score] + [t[0] for t in own]),
+                min_volume=min([self.params.min_volume] + [t[1] for t in own])))
             detector.update(np.full((8, 8), 2000, np.uint16), 0)  # compile the numba kernels now
             detector.reset()
         except (ForestFileError, OSError, ValueError) as err:
@@ -192,8 +196,10 @@ class GestureDetection(Node):
         stamp = stamp_to_ns(msg.header.stamp)
         t0 = time.perf_counter()
         try:
-            detections = [d for d in self.detector.update(depth, stamp)
-                          if d.score >= self.thresholds.get(d.name, self.params.min_score)]
+            self.detector.update(depth, stamp)
+            detections = node_detections(self.detector.candidates,
+                                         replace(self.detector.active_params, min_score=self.params.min_score,
+                                                 min_volume=self.params.min_volume), self.thresholds)
         except ValueError as err:
             log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
             return

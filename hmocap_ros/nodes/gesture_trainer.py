@@ -33,27 +33,35 @@ Publications:
   or the lag exceeds ``max_lag_s``.
 
 Parameters: ``forest_file``, ``save_when_taught``, ``publish_feedback``, ``queue_depth``,
-``image_reliability``, ``diagnostics_period``, ``max_lag_s``, ``seed`` and every field of
+``image_reliability``, ``diagnostics_period``, ``max_lag_s``, ``seed``, ``camera_info_timeout_s``,
+``camera_timeout_s`` and every field of
 :class:`~hmocap_ros.gestures.trainer.TrainerParams` (``gesture_trainer --help``).
 
 Bad input is logged (throttled) and the node keeps running: a wrong encoding, data shorter
-than its step, stamps that go back in time, a teach request for a forest file that does not
-exist (or exists, for a new forest), that is not an online forest or was grown at another
-focal length, a gesture name the forest knows (without ``extend``), a new forest before any
-camera_info. A request while a session runs is refused (cancel first).
+than its step, a teach request for a forest file that does not exist (or exists, for a new
+forest), that cannot be read or was grown at another focal length, a gesture name the forest
+knows (without ``extend``). A request while a session runs is refused (cancel first). A request
+before the first camera_info waits for it (``camera_info_timeout_s``), then is refused. Stamps
+that go back in time (a camera or replay starting over) continue the session. A session that
+gets no frame for ``camera_timeout_s`` (the camera stopped) is cancelled; one in which nothing
+moved in view (nobody in the room) ends undone: in both cases the forest file is not written,
+and the state's instruction says why. An offline forest file (e.g. the shipped forest) is
+continued online: the taught gesture joins its classes.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from hmocap_interfaces.msg import Gesture, TrainerState
 from hmocap_interfaces.srv import TeachGesture
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
+from rclpy.task import Future
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
@@ -84,6 +92,12 @@ class TrainerNodeConfig:
     max_lag_s: float = param(0.5, "Diagnostics warn when processing is more than this many seconds behind "
                                   "the stream.")
     seed: int = param(0, "Seed of the trainer's random draws (candidate tests, bagging, samples).")
+    camera_info_timeout_s: float = param(
+        10.0, "A teach request that comes before the first depth/camera_info waits this many seconds "
+              "(> 0) for it, then is refused.")
+    camera_timeout_s: float = param(
+        10.0, "A session that gets no depth frame for this many seconds (> 0: the camera stopped) is "
+             "cancelled: the forest goes back to what it was when the round began, nothing is written.")
 
 
 @dataclass
@@ -161,7 +175,17 @@ class GestureTrainer(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
         self.create_subscription(CameraInfo, "depth/camera_info", self._on_info, image)
         self.create_subscription(Image, "depth/image_raw", self._on_depth, image)
-        self.create_service(TeachGesture, "gesture_trainer/teach", self._on_teach)
+        self._info_waiters: list = []
+        self._teach_waiting = False
+        self._last_frame_wall: float | None = None
+        self._restarts = 0
+        if self.config.camera_info_timeout_s <= 0 or self.config.camera_timeout_s <= 0:
+            raise ValueError("camera_info_timeout_s and camera_timeout_s must be > 0")
+        self.create_timer(min(0.5, self.config.camera_timeout_s / 2), self._check_camera)
+        # its own callback group: a request waiting for camera_info must not hold the group of the
+        # subscriptions and timers that end the wait
+        self.create_service(TeachGesture, "gesture_trainer/teach", self._on_teach,
+                            callback_group=MutuallyExclusiveCallbackGroup())
         self.create_service(Trigger, "gesture_trainer/cancel", self._on_cancel)
         self.create_service(Trigger, "gesture_trainer/save", self._on_save)
         if self.config.diagnostics_period > 0:
@@ -191,28 +215,55 @@ class GestureTrainer(Node):
             forest = load_forest(path)
         except (ForestFileError, OSError) as err:
             raise ValueError(f"cannot use the forest file {path}: {err}") from err
-        if forest.kind != "online":
-            raise ValueError(f"{path} holds an {forest.kind} forest; only an online forest keeps growing")
-        if focal is None:
-            self.get_logger().warning("no depth/camera_info yet: teaching at the forest's training camera")
         trainer = Trainer(forest, self.params, rng, focal_px=focal)
         state = forest.meta.get("online", {}).get("rng_state")
         if state:
             trainer.rng.bit_generator.state = state
         return trainer
 
-    def _on_teach(self, request, response):
+    async def _camera_info(self) -> bool:
+        """Wait (without blocking the node) for the first depth/camera_info, at most
+        ``camera_info_timeout_s``; whether one came."""
+        if self.camera is not None:
+            return True
+        future = Future()
+        self._info_waiters.append(future)
+
+        def give_up():
+            if not future.done():
+                future.set_result(False)
+
+        timer = self.create_timer(self.config.camera_info_timeout_s, give_up)
+        try:
+            return bool(await future)
+        finally:
+            timer.cancel()
+            self.destroy_timer(timer)
+
+    async def _on_teach(self, request, response):
         log = self.get_logger()
-        if self.trainer is not None and self.trainer.state not in ("idle", "done"):
+        busy = self._teach_waiting or (self.trainer is not None and self.trainer.state not in ("idle", "done"))
+        if busy:
             response.success = False
-            response.message = (f"already teaching '{self.trainer.gesture}' (state {self.trainer.state}): "
-                                f"cancel first")
+            response.message = ("another teach request is waiting for depth/camera_info" if self._teach_waiting else
+                                f"already teaching '{self.trainer.gesture}' (state {self.trainer.state}): cancel first")
             log.error(response.message)
+            return response
+        self._teach_waiting = True
+        try:
+            has_camera = await self._camera_info()
+        finally:
+            self._teach_waiting = False
+        if not has_camera:
+            response.success = False
+            response.message = (f"no depth/camera_info within {self.config.camera_info_timeout_s:g} s: is the "
+                                f"depth camera running? (the forest learns at the camera's focal length)")
+            log.error(f"teach '{request.gesture}': {response.message}")
             return response
         path = Path(request.forest_file or self.config.forest_file).expanduser().resolve()
         try:
             trainer = self._trainer_for(path, bool(request.new_forest))
-            stamp = self.stats.last_stamp if self.stats.last_stamp is not None else self.get_clock().now().nanoseconds
+            stamp = self.stats.last_stamp  # None before any frame: the session starts at the first one
             trainer.start(request.gesture, stamp, extend=bool(request.extend))
         except ValueError as err:
             response.success = False
@@ -226,7 +277,7 @@ class GestureTrainer(Node):
                             f"{p.round_s(len(trainer.rehearsed)):g} s and {p.testing_s:g} s of testing"
                             + (f", rehearsing {', '.join(trainer.rehearsed)}" if trainer.rehearsed else ""))
         log.info(response.message)
-        self._publish_state(trainer.status(stamp, *self._image_size()))
+        self._publish_state(trainer.status(stamp or 0, *self._image_size()))
         return response
 
     def _on_cancel(self, _request, response):
@@ -268,6 +319,27 @@ class GestureTrainer(Node):
 
     def _on_info(self, msg: CameraInfo) -> None:
         self.camera = depth_camera_from_info(msg, self.camera, self.get_logger())
+        if self.camera is not None:
+            for future in self._info_waiters:
+                if not future.done():
+                    future.set_result(True)
+            self._info_waiters.clear()
+
+    def _check_camera(self) -> None:
+        """Cancel a session whose camera stopped (no frame for ``camera_timeout_s``)."""
+        trainer = self.trainer
+        if trainer is None or trainer.state in ("idle", "done") or self._last_frame_wall is None:
+            return
+        silent = time.monotonic() - self._last_frame_wall
+        if silent < self.config.camera_timeout_s:
+            return
+        gesture, rnd = trainer.gesture, trainer.round
+        trainer.cancel()
+        reason = (f"no depth frame for {silent:.1f} s (the camera stopped): teaching '{gesture}' cancelled in "
+                  f"round {rnd}; the forest is as it was when the round began, nothing written")
+        self.get_logger().error(reason)
+        status = trainer.status(self.stats.last_stamp or 0, *self._image_size())
+        self._publish_state(replace(status, instruction=reason))
 
     def _on_depth(self, msg: Image, info) -> None:
         log = self.get_logger()
@@ -277,6 +349,7 @@ class GestureTrainer(Node):
         depth = depth_from_msg(msg, DEPTH_ENCODINGS, log)
         if depth is None:
             return
+        self._last_frame_wall = time.monotonic()
         self.frame_id = msg.header.frame_id
         t0 = time.perf_counter()
         trainer = self.trainer
@@ -289,7 +362,12 @@ class GestureTrainer(Node):
             except ValueError as err:
                 log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
                 return
+            if trainer.restarts != self._restarts and trainer.state not in ("idle", "done"):
+                log.warning(f"depth/image_raw: stamps went back in time (the camera started over); teaching "
+                            f"'{trainer.gesture}' goes on")
+            self._restarts = trainer.restarts
         self.stats.done(time.perf_counter() - t0)
+        self._last_frame_wall = time.monotonic()  # a long first frame (kernels compiling) is no silence
         previous = self.last_status
         self._publish_state(status)
         if self.feedback_pub is not None:
@@ -297,7 +375,9 @@ class GestureTrainer(Node):
         if previous is not None and previous.state != status.state:
             log.info(f"'{status.gesture}': {status.state}" + (f" (round {status.round}/{status.rounds})"
                                                               if status.round else ""))
-            if status.state == "done":
+            if status.state == "done" and not trainer.taught:
+                log.error(status.instruction + " Nothing written.")
+            elif status.state == "done":
                 th = trainer.thresholds.get(status.gesture)
                 log.info(f"'{status.gesture}' is taught" + (f", threshold {th:.3f}" if th is not None else ""))
                 if self.config.save_when_taught:

@@ -4,7 +4,7 @@ The user of :class:`~hmocap_ros.sim.gesture_teacher.GestureTeacher` (a person in
 room of the gesture simulator) in a closed loop with a running ``gesture_trainer`` node: it
 subscribes ``gesture_trainer/state`` (hmocap_interfaces/TrainerState) and publishes, frame by
 frame, the depth image of what the last state asks (the gesture held in the box, releasing,
-everyday motions and unknown gestures as negatives) on ``depth/image_raw`` (16UC1 mm) with
+everyday motions, near misses of the taught gesture and unknown gestures as negatives) on ``depth/image_raw`` (16UC1 mm) with
 ``depth/camera_info``, stamped ``1 / fps`` apart. A real user in front of a real depth
 camera replaces it one for one.
 
@@ -15,7 +15,7 @@ without waiting. With ``--teach GESTURE`` it asks the trainer to teach that gest
 (``gesture_trainer/teach``) once the trainer answers its frames, follows the session to its
 end and, with ``--hold-after S``, then holds the gesture in the box for S more seconds (for a
 detector to find it). Exit status 2 with one line when the trainer refuses the request or
-does not answer.
+does not answer, or when the session ends without teaching (nothing moved in view).
 """
 
 from __future__ import annotations
@@ -154,6 +154,9 @@ def main_from_args(ns: argparse.Namespace) -> int:
             if msg.state != shown:
                 shown = msg.state
                 log.info(f"{msg.state} '{msg.gesture}' round {msg.round}/{msg.rounds}: {msg.instruction}")
+            if ns.teach and msg.gesture == ns.teach and msg.state == "done" and "not taught" in msg.instruction:
+                print(f"hmocap sim teacher: {msg.instruction}", file=sys.stderr)
+                return 2
             if ns.teach and msg.gesture == ns.teach and msg.state == "done":
                 done_at = published
                 status = SimpleNamespace(state="testing", gesture=ns.teach, box=status.box,

@@ -62,8 +62,9 @@ def select_sheet_frames(records: list, per_class: int) -> dict:
 
 
 def write_contact_sheet(bag: Path, records: list, path: Path, per_class: int = 4) -> None:
-    """Read the chosen frames back from the bag and write the PNG: rows = the six classes
-    then background, columns = frames (:func:`select_sheet_frames`)."""
+    """Read the chosen frames back from the bag and write the PNG: rows = the six classes (and
+    the taught gestures the bag holds) then background, columns = frames
+    (:func:`select_sheet_frames`)."""
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.conversions import image_to_numpy
 
@@ -81,7 +82,9 @@ def write_contact_sheet(bag: Path, records: list, path: Path, per_class: int = 4
     columns = max([len(v) for v in chosen.values()] + [1])
     blank = np.zeros((TILE[1], TILE[0], 3), np.uint8)
     rows = []
-    for cid in list(range(1, len(gs.GESTURE_CLASSES) + 1)) + [0]:
+    present = {r["class_id"] for r in records}
+    extra = [gs.class_id(g) for g in gs.NEW_GESTURES if gs.class_id(g) in present]
+    for cid in list(range(1, len(gs.GESTURE_CLASSES) + 1)) + extra + [0]:
         row = [tiles[i] for i in chosen.get(cid, [])]
         rows.append(np.hstack(row + [blank] * (columns - len(row))))
     sheet = np.vstack(rows)

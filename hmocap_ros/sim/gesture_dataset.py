@@ -148,9 +148,14 @@ class _Scene:
     rng: np.random.Generator
 
     @classmethod
-    def make(cls, model, seed: int, layout_id: int, width: int, height: int, background: str) -> _Scene:
-        layout = make_layout(np.random.default_rng([seed, _STREAM_LAYOUT, layout_id]),
-                             layout_id, width, height, background=background)
+    def make(cls, model, seed: int, layout_id: int, width: int, height: int, background: str,
+             room: int | None = None) -> _Scene:
+        if room is None:
+            layout = make_layout(np.random.default_rng([seed, _STREAM_LAYOUT, layout_id]),
+                                 layout_id, width, height, background=background)
+        else:  # the simulated teacher's room (gesture_teacher.GestureTeacher, its seed, layout 0)
+            layout = make_layout(np.random.default_rng([room, _STREAM_LAYOUT, 0]), layout_id, width, height,
+                                 n_bystanders=0, background=background)
         rng = np.random.default_rng([seed, _STREAM_LAYOUT, layout_id, 1])
         # bystanders get identities >= 10^6, never a subject's
         people = [Actor(gs.make_subject(model, int(rng.integers(10**6, 10**9))))
@@ -243,12 +248,24 @@ class Summary:
 def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int = 200,
              width: int = 640, height: int = 480, subject_offset: int = 0, fps: float = 10.0,
              contact: bool = True, progress: bool = True, per_class: int = 4,
-             hold: tuple = HOLD_FRAMES, background: str = "room") -> Summary:
-    """Render and write the bag, its labels JSON and (optionally) its contact sheet."""
+             hold: tuple = HOLD_FRAMES, background: str = "room", gestures: tuple = gs.GESTURE_CLASSES,
+             negatives: int = NEGATIVES_PER_BLOCK, near_misses: int = 0, near_of: tuple | None = None,
+             room: int | None = None) -> Summary:
+    """Render and write the bag, its labels JSON and (optionally) its contact sheet.
+
+    ``gestures`` (default the six classes), ``negatives`` and ``near_misses`` (of the gestures
+    ``near_of``, default ``gestures``): the takes of each shuffled block
+    (:func:`~hmocap_ros.sim.gesture_takes.take_schedule`); ``room``: every take in
+    the room of the simulated teacher of that seed instead of a room per few takes."""
     if subjects < 1 or frames < 1 or width < 16 or height < 16 or fps <= 0:
         raise ValueError("subjects and frames must be >= 1, the image at least 16x16, fps > 0")
     if not 1 <= hold[0] <= hold[1]:
         raise ValueError(f"hold frames must satisfy 1 <= min <= max, got {hold}")
+    unknown = [g for g in tuple(gestures) + tuple(near_of or ()) if g not in gs.ALL_GESTURES]
+    if unknown:
+        raise ValueError(f"unknown gesture(s) {', '.join(unknown)}; choose among {', '.join(gs.ALL_GESTURES)}")
+    if negatives < 0 or near_misses < 0:
+        raise ValueError("negatives and near misses per block must be >= 0")
     from tqdm import tqdm
 
     t0 = time.perf_counter()
@@ -257,7 +274,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
     model = load_body_model("hands")
     rng = np.random.default_rng([seed, _STREAM_POSES])
     noise_rng = np.random.default_rng([seed, _STREAM_NOISE])
-    schedule = take_schedule(rng)
+    schedule = take_schedule(rng, tuple(gestures), negatives, near_misses, near_of)
     splits = np.diff(np.linspace(0, frames, subjects + 1).round().astype(int))
     layouts_info, subjects_info = {}, {}
     take = 0
@@ -274,7 +291,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
             while done < n_frames:
                 if takes_here >= TAKES_PER_LAYOUT:
                     layout_id += 1
-                    scene = _Scene.make(model, seed, layout_id, width, height, background)
+                    scene = _Scene.make(model, seed, layout_id, width, height, background, room)
                     layouts_info[str(layout_id)] = scene.info()
                     actor.params = None
                     takes_here = 0
@@ -286,14 +303,15 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
                 takes_here += 1
     bar.close()
     records = writer.records
-    per_cls = {name: sum(r["class_id"] == i for r in records)
-               for i, name in enumerate(("background",) + gs.GESTURE_CLASSES)}
+    classes = gs.GESTURE_CLASSES + tuple(g for g in gs.NEW_GESTURES if g in gestures)
+    per_cls = {name: sum(r["class_id"] == (gs.class_id(name) if name in gs.ALL_GESTURES else 0) for r in records)
+               for name in ("background",) + classes}
     cam = scene.layout.camera
     cam_info = {"frame_id": cam.frame_id, "width": width, "height": height,
                 "K": np.round(cam.K, 6).tolist(), "depth_unit": "mm", "invalid": 0}
     labels = {"format": LABELS_FORMAT, "bag": out.name, "seed": seed, "subject_offset": subject_offset,
-              "fps": fps, "background": background, "classes": {str(i + 1): n for i, n in enumerate(gs.GESTURE_CLASSES)},
-              "reference_points": gs.REFERENCE_POINTS, "camera": cam_info,
+              "fps": fps, "background": background, "classes": {str(gs.class_id(n)): n for n in classes},
+              "reference_points": {n: gs.REFERENCE_POINTS[n] for n in classes}, "camera": cam_info,
               "subjects": subjects_info, "layouts": layouts_info, "counts": per_cls, "frames": records}
     labels_path.write_text(json.dumps(labels, indent=1) + "\n")
     if contact:
@@ -317,6 +335,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"frames per take, drawn in [MIN, MAX] (default {HOLD_FRAMES[0]} {HOLD_FRAMES[1]})")
     parser.add_argument("--background", choices=BACKGROUNDS, default="room",
                         help="room: back wall 0.4-2.3 m behind the person (default); close: 0.15-0.85 m")
+    parser.add_argument("--gestures", nargs="*", default=list(gs.GESTURE_CLASSES), metavar="NAME",
+                        help=f"gestures held in each block of takes (default the six: {' '.join(gs.GESTURE_CLASSES)}; "
+                             f"also {' '.join(gs.NEW_GESTURES)}; none for a bag without gestures)")
+    parser.add_argument("--negatives", type=int, default=NEGATIVES_PER_BLOCK,
+                        help=f"everyday negative takes per block (default {NEGATIVES_PER_BLOCK})")
+    parser.add_argument("--near-misses", type=int, default=0,
+                        help="near-miss takes per block, drawn among the near misses of --near-misses-of "
+                             "(default 0)")
+    parser.add_argument("--near-misses-of", nargs="+", default=None, metavar="NAME",
+                        help="the gestures whose near misses are drawn (default: --gestures)")
+    parser.add_argument("--room", type=int, default=None, metavar="SEED",
+                        help="every take in the room of the simulated teacher of this seed "
+                             "(hmocap sim teacher --seed SEED): the same room as a teaching session")
     parser.add_argument("--no-contact-sheet", action="store_true", help="do not write BAG.contact.png")
     parser.add_argument("--force", action="store_true", help="overwrite the bag and its side files")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -336,7 +367,9 @@ def main_from_args(ns) -> int:
         s = generate(out, seed=ns.seed, subjects=ns.subjects, frames=ns.frames, width=ns.width,
                      height=ns.height, subject_offset=ns.subject_offset, fps=ns.fps,
                      contact=not ns.no_contact_sheet, progress=not ns.quiet, hold=tuple(ns.hold),
-                     background=ns.background)
+                     background=ns.background, gestures=tuple(ns.gestures), negatives=ns.negatives,
+                     near_misses=ns.near_misses,
+                     near_of=None if ns.near_misses_of is None else tuple(ns.near_misses_of), room=ns.room)
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

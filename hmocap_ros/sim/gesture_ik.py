@@ -14,7 +14,7 @@ import numpy as np
 
 from hmocap_ros.body.skeleton import clip_pose, pose_to_local_rotations
 from hmocap_ros.sim.gesture_body import Kinematics, Subject, hand_axes, kinematics, unit
-from hmocap_ros.sim.gesture_kinds import GESTURE_CLASSES, class_id
+from hmocap_ros.sim.gesture_kinds import ALL_GESTURES, class_id
 
 RESTARTS = 4
 RESTART_ERROR_M = 0.02
@@ -148,7 +148,7 @@ class PoseSpec:
 
     @property
     def class_id(self) -> int:
-        return class_id(self.kind) if self.kind in GESTURE_CLASSES else 0
+        return class_id(self.kind) if self.kind in ALL_GESTURES else 0
 
 
 def ground(model, subject: Subject, params: np.ndarray) -> np.ndarray:

@@ -16,7 +16,14 @@ The six gesture classes of thesis fig. 3.4 / table 3.2, in the fixed order of
                    palm turned 30-60 deg from the camera so the ring faces it
  6    volume_up    hand cupped behind the ear, palm forwards ("Audio" / "Vol   palm centre
                    up" in the thesis)
+ 7    thumbs_up    a fist in front of the body, palm towards the midline,      palm centre
+                   the thumb pointing up
+ 8    raised_fist  a fist raised above the shoulder, forearm upright           palm centre
 ====  ===========  ==========================================================  ===========================
+
+Classes 7 and 8 (:data:`NEW_GESTURES`) are gestures to teach: they are rendered only when a bag
+or the simulated teacher asks for them, never in a default bag, so the shipped forest (trained
+on the six) has never seen them.
 
 Tee is the hand "time out" T of the thesis' dataset (fig. 3.3), not arms spread in a T:
 its annotation is the point where the fingertips of the vertical hand meet the palm of the
@@ -25,9 +32,11 @@ moves with the pose); the simulator projects it to get the pixel (u, v) and take
 position from the rendered surface at that pixel (``gesture_dataset``).
 
 Negative (non-gesture) poses, :data:`NEGATIVE_KINDS`: idle standing, walking, random arm
-poses and near misses of the gestures (arms folded, chin on the fist, phone at the ear,
-pointing, scratching the head, hands on the hips, hands clasped, waving with the hand
-sideways).
+poses and everyday poses close to the gestures (arms folded, chin on the fist, phone at the
+ear, pointing, scratching the head, hands on the hips, hands clasped, waving with the hand
+sideways). Near misses, :data:`NEAR_MISSES` (``gesture_near_misses``): each gesture done
+slightly wrong (a finger bent, the ring open, the hand turned, the arm half raised), also
+background.
 
 Every pose is built on the full DoF set (wrists, forearm twist, clavicles, 20 finger DoF
 per hand) by a small damped least-squares inverse kinematics over the arm and finger DoFs
@@ -44,8 +53,8 @@ with :func:`place` (body yaw, position on the floor); anything that should face 
 This module gathers the gesture set's public names; the code lives in ``gesture_kinds``
 (names, class ids), ``gesture_body`` (subjects, kinematics), ``gesture_ik`` (tasks, solver,
 :class:`PoseSpec`), ``gesture_pose`` (base pose, hand presets, placement), ``gesture_specs``
-(:data:`GESTURES`: the six classes' builders and reference points) and
-``gesture_negatives`` (:data:`NEGATIVE_BUILDERS`).
+(:data:`GESTURES`: the classes' builders and reference points), ``gesture_negatives``
+(:data:`NEGATIVE_BUILDERS`) and ``gesture_near_misses`` (:data:`NEAR_MISS_BUILDERS`).
 
 Frames are the body model's (``skeleton.py``): metres, +Y up, the body faces +Z, +X is the
 person's left; sides are ``"l"`` and ``"r"`` (the person's left and right).
@@ -83,12 +92,18 @@ from hmocap_ros.sim.gesture_ik import (
     solve_spec,
 )
 from hmocap_ros.sim.gesture_kinds import (
+    ALL_GESTURES,
     GESTURE_CLASSES,
+    NEAR_MISS_KINDS,
+    NEAR_MISSES,
     NEGATIVE_KINDS,
     NEGATIVE_WEIGHTS,
+    NEW_GESTURES,
     REFERENCE_POINTS,
     class_id,
+    near_misses_of,
 )
+from hmocap_ros.sim.gesture_near_misses import NEAR_MISS_BUILDERS, near_miss_spec
 from hmocap_ros.sim.gesture_negatives import NEGATIVE_BUILDERS, negative_spec
 from hmocap_ros.sim.gesture_pose import (
     ARM_DOFS,
@@ -116,6 +131,7 @@ from hmocap_ros.sim.gesture_specs import (
 )
 
 __all__ = [
+    "ALL_GESTURES",
     "ARM_DOFS",
     "ARM_PRIOR",
     "FINGER_NAMES",
@@ -124,9 +140,13 @@ __all__ = [
     "GESTURE_CLASSES",
     "HAND_PRESETS",
     "LEFT",
+    "NEAR_MISSES",
+    "NEAR_MISS_BUILDERS",
+    "NEAR_MISS_KINDS",
     "NEGATIVE_BUILDERS",
     "NEGATIVE_KINDS",
     "NEGATIVE_WEIGHTS",
+    "NEW_GESTURES",
     "REFERENCE_POINTS",
     "RESTARTS",
     "RESTART_ERROR_M",
@@ -155,6 +175,8 @@ __all__ = [
     "kinematics",
     "lateral",
     "make_subject",
+    "near_miss_spec",
+    "near_misses_of",
     "negative_spec",
     "other",
     "place",
@@ -172,7 +194,10 @@ __all__ = [
 
 
 def pose_spec(model, subject: Subject, kind: str, rng: np.random.Generator, **kwargs) -> PoseSpec:
-    """:func:`gesture_spec` for a gesture class, :func:`negative_spec` otherwise."""
-    if kind in GESTURE_CLASSES:
+    """:func:`gesture_spec` for a gesture, :func:`near_miss_spec` for a near miss,
+    :func:`negative_spec` otherwise."""
+    if kind in ALL_GESTURES:
         return gesture_spec(model, subject, kind, rng, **kwargs)
+    if kind in NEAR_MISSES:
+        return near_miss_spec(model, subject, kind, rng, **kwargs)
     return negative_spec(model, subject, kind, rng, **kwargs)

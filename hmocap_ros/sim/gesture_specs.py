@@ -1,5 +1,6 @@
-"""The six gesture classes of thesis fig. 3.4 / table 3.2 as pose builders, with the point
-each one is annotated at: :data:`GESTURES` maps a class name to a :class:`GestureKind`.
+"""The gestures as pose builders, with the point each one is annotated at: :data:`GESTURES`
+maps a class name to a :class:`GestureKind` (the six classes of thesis fig. 3.4 / table 3.2,
+then the two gestures to teach, :data:`~hmocap_ros.sim.gesture_kinds.NEW_GESTURES`).
 
 A builder draws a random instance of its gesture from a :class:`PoseContext` (the base pose,
 the main hand, the camera position in the body frame) and returns the IK stages
@@ -24,7 +25,7 @@ from hmocap_ros.sim.gesture_body import (
     unit,
 )
 from hmocap_ros.sim.gesture_ik import PoseSpec, Task
-from hmocap_ros.sim.gesture_kinds import GESTURE_CLASSES
+from hmocap_ros.sim.gesture_kinds import ALL_GESTURES
 from hmocap_ros.sim.gesture_pose import (
     PoseContext,
     arm_dofs,
@@ -151,6 +152,37 @@ def _volume_up(c: PoseContext) -> list:
              arm_prior(s))]
 
 
+def _thumbs_up(c: PoseContext) -> list:
+    """A fist in front of the body, palm towards the midline, the thumb pointing up."""
+    model, p, pt, rng, u = c.model, c.params, c.pt, c.rng, c.rng.uniform
+    s, lat, med = c.side, c.lateral, c.medial
+    set_hand(model, p, s, "thumb", rng, 3.0)
+    target = pt(f"{s}_shoulder") + lat * u(-0.12, 0.08) + UP * u(-0.28, 0.02) + FORWARD * u(0.25, 0.40)
+    d = random_tilt(unit(FORWARD + med * u(0.0, 0.5)), rng, 10)
+    volar = perpendicular_unit(unit(med - UP * u(0.0, 0.3)), d)
+    return [(arm_dofs(s), [Task("point", f"{s}_palm", target),
+                           Task("axis", f"{s}_d", d, weight=0.15),
+                           Task("axis", f"{s}_volar", volar, weight=0.15),
+                           Task("dir", f"{s}_thumb2", random_tilt(UP, rng, 12), b=f"{s}_thumb_tip", weight=0.4),
+                           elbow_hint(pt, s, u(0.8, 1.0), u(0.2, 0.5), u(0.0, 0.3), 0.15)],
+             arm_prior(s))]
+
+
+def _raised_fist(c: PoseContext) -> list:
+    """A fist raised above the shoulder, forearm upright."""
+    model, p, pt, rng, u = c.model, c.params, c.pt, c.rng, c.rng.uniform
+    s, lat = c.side, c.lateral
+    set_hand(model, p, s, "fist", rng, 3.0)
+    target = pt(f"{s}_shoulder") + lat * u(0.0, 0.2) + UP * u(0.3, 0.5) + FORWARD * u(0.05, 0.25)
+    volar = random_tilt(unit(camera_direction(c.camera_body, target) - lat * u(0.0, 1.0)), rng, 15)
+    d = perpendicular_unit(random_tilt(UP, rng, 10), volar)
+    return [(arm_dofs(s), [Task("point", f"{s}_palm", target),
+                           Task("axis", f"{s}_volar", volar, weight=0.15),
+                           Task("axis", f"{s}_d", d, weight=0.15),
+                           elbow_hint(pt, s, u(0.0, 0.4), u(0.2, 0.6), u(0.6, 1.0), 0.15)],
+             arm_prior(s))]
+
+
 # ---------------------------------------------------------------------------------------
 # Reference points and the body parts that may be seen at them
 # ---------------------------------------------------------------------------------------
@@ -229,7 +261,7 @@ class GestureKind:
     parts: Callable
 
 
-#: The gesture classes by name, in class-id order (:data:`GESTURE_CLASSES`).
+#: The gestures by name, in class-id order (:data:`~hmocap_ros.sim.gesture_kinds.ALL_GESTURES`).
 GESTURES = {
     "tee": GestureKind(_tee, _hand_contact, _both_hands),
     "pause": GestureKind(_pause, _palm_centre, _one_hand),
@@ -237,6 +269,8 @@ GESTURES = {
     "cross": GestureKind(_cross, _crossing, _forearms),
     "ok": GestureKind(_ok, _palm_centre, _one_hand),
     "volume_up": GestureKind(_volume_up, _palm_centre, _one_hand),
+    "thumbs_up": GestureKind(_thumbs_up, _palm_centre, _one_hand),
+    "raised_fist": GestureKind(_raised_fist, _palm_centre, _one_hand),
 }
 
 
@@ -248,8 +282,8 @@ def gesture_spec(model, subject: Subject, name: str, rng: np.random.Generator, *
     :func:`~hmocap_ros.sim.gesture_pose.world_to_body`), so the palm of pause/ok faces the
     camera and the head turns to it; side: "l"/"r" or random.
     """
-    if name not in GESTURE_CLASSES:
-        raise ValueError(f"unknown gesture {name!r}; choose one of {GESTURE_CLASSES}")
+    if name not in ALL_GESTURES:
+        raise ValueError(f"unknown gesture {name!r}; choose one of {ALL_GESTURES}")
     c = start_pose(model, subject, rng, camera_body, side)
     return PoseSpec(name, c.side, c.params, GESTURES[name].build(c))
 

@@ -52,12 +52,22 @@ def lerp_pose(model, a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
     return out
 
 
-def take_schedule(rng: np.random.Generator):
-    """Endless take kinds: shuffled blocks of the six gestures plus negatives."""
+def take_schedule(rng: np.random.Generator, gestures=gs.GESTURE_CLASSES, negatives: int = NEGATIVES_PER_BLOCK,
+                  near_misses: int = 0, near_of=None):
+    """Endless take kinds: shuffled blocks of ``gestures`` (default the six classes) plus
+    ``negatives`` everyday negatives (drawn by :data:`NEGATIVE_WEIGHTS`) and ``near_misses``
+    near misses of ``near_of`` (default ``gestures``; uniform among their kinds)."""
     kinds = list(gs.NEGATIVE_WEIGHTS)
     w = np.array([gs.NEGATIVE_WEIGHTS[k] for k in kinds])
+    near = gs.near_misses_of(gestures if near_of is None else near_of)
+    if near_misses and not near:
+        raise ValueError("near misses need gestures to miss")
+    if not gestures and not negatives and not near_misses:
+        raise ValueError("a take schedule needs gestures, negatives or near misses")
     while True:
-        block = list(gs.GESTURE_CLASSES) + [str(k) for k in rng.choice(kinds, NEGATIVES_PER_BLOCK, p=w / w.sum())]
+        block = list(gestures) + [str(k) for k in rng.choice(kinds, negatives, p=w / w.sum())]
+        if near_misses:
+            block += [str(k) for k in rng.choice(near, near_misses)]
         yield from (block[i] for i in rng.permutation(len(block)))
 
 
@@ -99,7 +109,7 @@ def _held_poses(model, subj: gs.Subject, kind: str, layout: Layout, rng, n: int)
     spec = gs.pose_spec(model, subj, kind, rng, camera_body=camera_body)
     # only the gestures need their targets met exactly (restarts cost time)
     a = gs.solve_spec(model, subj, gs.jitter_spec(spec, rng, model=model),
-                      restarts=None if kind in gs.GESTURE_CLASSES else 0)
+                      restarts=None if kind in gs.ALL_GESTURES else 0)
     b = gs.solve_spec(model, subj, gs.jitter_spec(spec, rng, model=model), start=a, iterations=15,
                       restarts=0)
     sway = rng.normal(0.0, 0.01, (2, 3))
@@ -108,7 +118,7 @@ def _held_poses(model, subj: gs.Subject, kind: str, layout: Layout, rng, n: int)
         t = i / max(n - 1, 1)
         dx, dz, dyaw = (1 - t) * sway[0] + t * sway[1]
         poses.append(gs.place(model, lerp_pose(model, a, b, t), x + dx, z + dz, yaw + dyaw))
-    side = spec.side if (kind in gs.GESTURE_CLASSES or spec.stages) else ""
+    side = spec.side if (kind in gs.ALL_GESTURES or spec.stages) else ""
     return poses, side
 
 
@@ -127,7 +137,7 @@ def take_frames(model, actor: Actor, kind: str, layout: Layout, rng, take: int,
         for i in range(m):
             frames.append(FrameState(lerp_pose(model, actor.params, poses[0], (i + 1) / (m + 1)),
                                      "transition", kind, side, take))
-    phase = "hold" if kind in gs.GESTURE_CLASSES else "negative"
+    phase = "hold" if kind in gs.ALL_GESTURES else "negative"
     frames += [FrameState(p, phase, kind, side, take) for p in poses]
     return frames
 

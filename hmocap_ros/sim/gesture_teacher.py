@@ -11,8 +11,10 @@ asks:
   ``VARIATION_S``);
 - ``rehearse``: holds the known gesture the status names (``rehearsed``) in the box, as above;
 - ``release``: blends back to standing;
-- ``do_negatives``: takes of everyday motions (:data:`~hmocap_ros.sim.gesture_set.NEGATIVE_KINDS`)
-  and of the simulator's gestures the forest does not know, as the bag simulator draws them
+- ``do_negatives``: takes of near misses of the taught gesture (a third of them:
+  :data:`~hmocap_ros.sim.gesture_set.NEAR_MISSES`, what the instruction asks for), of everyday
+  motions (:data:`~hmocap_ros.sim.gesture_set.NEGATIVE_KINDS`) and of the simulator's gestures
+  the forest does not know, as the bag simulator draws them
   (:func:`~hmocap_ros.sim.gesture_takes.take_frames`, poses at 10 fps blended to the
   frame rate);
 - ``idle`` and ``done``: stands.
@@ -41,10 +43,13 @@ from hmocap_ros.sim import gesture_set as gs
 from hmocap_ros.sim.depth_scene import make_layout, render_depth
 from hmocap_ros.sim.gesture_takes import MAX_YAW_DEG, Actor, bystander_pose, facing_yaw, lerp_pose, take_frames
 
-__all__ = ["START_NS", "VARIATION_S", "GestureTeacher", "run_session", "write_recording_bag"]
+__all__ = ["NEAR_MISS_SHARE", "START_NS", "VARIATION_S", "GestureTeacher", "run_session", "write_recording_bag"]
 
 START_NS = 1_700_000_000_000_000_000
 VARIATION_S = 1.0
+#: Share of the negative takes that are near misses of the taught gesture (the trainer asks for
+#: them: "'{g}' done wrong").
+NEAR_MISS_SHARE = 1.0 / 3.0
 _BLEND_S = 0.3
 
 
@@ -73,6 +78,8 @@ class GestureTeacher:
         self.held = None               # (a, b, x, z, yaw, side, frames) of the held gesture
         self.frames_in_mode = 0
         self.actor.params = self._standing()
+        #: False: the user has left the room (the camera sees it empty), e.g. for an empty session.
+        self.present = True
 
     @property
     def next_stamp(self) -> int:
@@ -128,10 +135,16 @@ class GestureTeacher:
         pose = gs.place(self.model, lerp_pose(self.model, a, b, t), x, z, yaw)
         return self._in_box(pose, g, side, status.box)
 
-    def _negative_take(self, known) -> list:
-        """Poses of one negative take at the frame rate (10 fps takes blended)."""
-        kinds = [k for k in gs.NEGATIVE_KINDS] + [g for g in gs.GESTURE_CLASSES if g not in known]
-        kind = str(kinds[int(self.rng.integers(len(kinds)))])
+    def _negative_take(self, known, taught: str) -> list:
+        """Poses of one negative take at the frame rate (10 fps takes blended): a near miss of the
+        taught gesture (one take in :data:`NEAR_MISS_SHARE`, when the simulator has them), else
+        an everyday motion or a gesture the forest does not know."""
+        near = gs.near_misses_of((taught,))
+        if near and self.rng.random() < NEAR_MISS_SHARE:
+            kind = str(near[int(self.rng.integers(len(near)))])
+        else:
+            kinds = [k for k in gs.NEGATIVE_KINDS] + [g for g in gs.ALL_GESTURES if g not in known]
+            kind = str(kinds[int(self.rng.integers(len(kinds)))])
         states = take_frames(self.model, self.actor, kind, self.layout, self.rng, 0, (8, 12))
         k = max(1, int(round(self.fps / 10.0)))
         poses, prev = [], self.actor.params
@@ -173,7 +186,7 @@ class GestureTeacher:
             return self._held_pose(status)
         if mode == "negatives":
             known = set(status.known_gestures) | {g}
-            self.queue = self._negative_take(known)
+            self.queue = self._negative_take(known, g)
             return self.queue.pop(0)
         return self.actor.params
 
@@ -184,7 +197,8 @@ class GestureTeacher:
         self.actor.params = self._pose_for(status)
         meshes = [(self.layout.vertices, self.layout.faces)]
         meshes += [(p.vertices(self.model), self.model.faces) for p in self.people]
-        meshes.append((self.actor.vertices(self.model), self.model.faces))
+        if self.present:
+            meshes.append((self.actor.vertices(self.model), self.model.faces))
         render = render_depth(self.camera, meshes, self.noise_rng)
         stamp = START_NS + self.index * self.period
         self.index += 1
@@ -214,7 +228,7 @@ def write_recording_bag(path, recording, camera) -> int:
     """Write a trainer's recorded frames (:class:`~hmocap_ros.gestures.trainer.RecordedFrame`)
     seen by ``camera`` (a :class:`~hmocap_ros.sim.depth_scene` camera) as an annotated bag:
     ``/depth/image_raw`` (16UC1 mm), ``/depth/camera_info`` and ``/ground_truth/gestures`` (the
-    frame's gesture at the box centre, with the simulator's class id, :data:`GESTURE_CLASSES`;
+    frame's gesture at the box centre, with the simulator's class id, :data:`ALL_GESTURES`;
     a name it does not have gets the next free id in order of appearance). Returns the number of
     frames written."""
     factory = RosbagsFactory()
@@ -226,9 +240,9 @@ def write_recording_bag(path, recording, camera) -> int:
             gestures = []
             if f.gesture:
                 if f.gesture not in ids:
-                    ids[f.gesture] = (gs.class_id(f.gesture) if f.gesture in gs.GESTURE_CLASSES
-                                      else len(gs.GESTURE_CLASSES) + 1 + sum(
-                                          g not in gs.GESTURE_CLASSES for g in ids))
+                    ids[f.gesture] = (gs.class_id(f.gesture) if f.gesture in gs.ALL_GESTURES
+                                      else len(gs.ALL_GESTURES) + 1 + sum(
+                                          g not in gs.ALL_GESTURES for g in ids))
                 gestures.append(factory.make(
                     "hmocap_interfaces/msg/Gesture", name=f.gesture, class_id=ids[f.gesture], score=1.0, volume=1.0,
                     u=float(f.u), v=float(f.v), position=factory.make("geometry_msgs/msg/Point", x=0.0, y=0.0, z=0.0),
