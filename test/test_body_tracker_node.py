@@ -335,11 +335,15 @@ def test_a_tracker_slower_than_the_cameras_skips_sets_and_keeps_its_latency_boun
     assert list(every["stamps"]) == frames and every["skipped_total"][-1] == 0
     assert live["skipped_total"][-1] > 0 and len(live["stamps"]) < len(frames)
     # the cumulative count is the sum of the per-message counts, and with the sets tracked
-    # it accounts for every frame set up to the last one tracked
+    # it accounts for every frame set between the first and the last one tracked; on a loaded
+    # machine a set before the first one tracked may be counted too (it came incomplete, its
+    # mask dropped from a subscription's queue), never more than the frames there were
     assert np.array_equal(np.cumsum(live["skipped_since"]), live["skipped_total"])
     first = frames.index(int(live["stamps"][0]))
     last = frames.index(int(live["stamps"][-1]))
-    assert live["skipped_total"][-1] == (last - first + 1) - len(live["stamps"])
+    between = (last - first + 1) - len(live["stamps"])
+    assert between <= live["skipped_total"][-1] <= (last + 1) - len(live["stamps"]), \
+        (live["skipped_total"][-1], between, first)
     # bounded: each set within the processing of the one before and its own (plus slack for
     # a loaded machine); the last set tracked is one of the last frames
     previous = np.concatenate([[0.0], live["seconds"][:-1]])

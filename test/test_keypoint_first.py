@@ -287,3 +287,36 @@ def test_joints_without_keypoints_keep_their_prediction_with_a_low_confidence(mo
     assert np.linalg.norm(res.joints[knees] - before, axis=1).max() < 0.03
     confidence = res.confidence
     assert confidence[knees].max() < 0.1 and confidence[model.joint_index("pelvis")] > 0.5
+
+
+def test_kf_hpf_waits_for_keypoints_to_start_before_the_silhouette_start_up(model, rig,
+                                                                           arms_scene):
+    """Given a keypoint detector's frame sets without keypoints, a new track waits up to
+    KEYPOINT_START_WAIT_S of stamps for keypoints (no silhouette start-up, which costs
+    seconds per frame), then starts from the silhouettes; without a detector (None) the
+    silhouette start-up runs at once."""
+    from hmocap_ros.tracking.body_tracker import KEYPOINT_START_WAIT_S
+
+    params, masks = arms_scene
+    settings = {"method": "kf-hpf", "filter.particles": 60, "startup.particles": 30,
+                "startup.frames": 1, "startup.min_foreground": 30, "keypoints.shape_frames": 0}
+    tracker = BodyTracker(model, rig, from_flat(TrackerParams, settings), np.random.default_rng(0))
+    period = 40_000_000
+    waited = int(KEYPOINT_START_WAIT_S * 1e9) // period
+    for f in range(waited):
+        res = tracker.update(list(masks), STAMP0 + f * period, Detections.empty("keypoints"))
+        assert res.state == "searching" and not res.has_pose and res.timings["hull"] == 0
+    res = tracker.update(list(masks), STAMP0 + waited * period, Detections.empty("keypoints"))
+    assert res.state != "searching" and res.timings["hull"] > 0
+    # keypoints that come while it waits start the track at once
+    tracker.reset()
+    fit = landmark_fit(model)
+    rest = apply_shape(model, None)
+    tracker.update(list(masks), STAMP0, Detections.empty("keypoints"))
+    res = tracker.update(list(masks), STAMP0 + period,
+                         keypoints(fit, params, rest, np.random.default_rng(3), noise=0.005))
+    assert res.state == "tracking" and res.has_pose and res.timings["hull"] == 0
+    # no detector: the silhouette start-up at once
+    fresh = BodyTracker(model, rig, from_flat(TrackerParams, settings), np.random.default_rng(0))
+    res = fresh.update(list(masks), STAMP0, None)
+    assert res.state != "searching" and res.timings["hull"] > 0

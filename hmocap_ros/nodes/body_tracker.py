@@ -88,8 +88,9 @@ tracked, in stamp order: for bag replays that must answer every frame (also rais
 ``queue_depth`` so the subscriptions keep every mask).
 
 Live with ``kf-hpf`` (the default method): the extremity node also takes the newest frame set
-when it falls behind, so some sets never get detections; while detections keep coming (within
-a second), such a set is skipped (and counted) rather than tracked on the silhouettes alone,
+when it falls behind, so some sets never get detections; while that node is there and its
+detections keep coming (within 5 s, or its first within 5 s of the first frame set), such a
+set is skipped (and counted) rather than tracked on the silhouettes alone,
 so the poses come at the keypoints' rate, each within ``budget_ms`` (the keypoint fit at once,
 the filter on the uncertain blocks with the particles the budget pays; docs/tracking.md sec.
 2.5).
@@ -145,10 +146,12 @@ from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 NODE_NAME = "body_tracker"
 #: the synchroniser's key (and topic) of the extremity detections
 DETECTIONS = "extremities"
-#: live kf-hpf skips a frame set without detections while detections came this recently (the
-#: extremity node takes the newest set when it falls behind); longer without any, the frame
-#: sets are tracked on the silhouettes
-KEYPOINTS_ALIVE_NS = 1_000_000_000
+#: live kf-hpf skips a frame set without detections while the extremity topic has a publisher
+#: and detections came this recently, or none yet since the first frame set this recently (the
+#: extremity node starts later than the masks, and takes the newest set when it falls behind:
+#: its latency reaches 2.5 s on a loaded 2-core machine); longer without any, the frame sets are
+#: tracked on the silhouettes
+KEYPOINTS_ALIVE_NS = 5_000_000_000
 #: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, keep last 100)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -207,6 +210,7 @@ class BodyTrackerNode(Node):
         self.queue = FrameSetQueue(self.config.latest_only)
         self.last_input_ns = 0   # steady time of the last mask or detections received
         self.last_detections_ns = -KEYPOINTS_ALIVE_NS  # ... of the last detections received
+        self.first_set_ns: int | None = None  # ... of the first frame set taken
         self.idle_since_ns = 0   # steady time the last frame set was done
         self.skipped_total = 0
         self.skipped_unreported = 0  # skipped since the last diagnostics message
@@ -329,6 +333,7 @@ class BodyTrackerNode(Node):
             f"start over")
         self.queue = FrameSetQueue(self.config.latest_only)
         self.tracker.reset(forget_shape=False)
+        self.first_set_ns = None
 
     def _idle_clock_ns(self) -> int:
         """Steady time the node has not spent processing (the synchroniser's arrival clock)."""
@@ -373,10 +378,15 @@ class BodyTrackerNode(Node):
                 mask = None
             masks.append(mask)
         detections = items.get(DETECTIONS)
+        now = time.monotonic_ns()
+        if self.first_set_ns is None:
+            self.first_set_ns = now
         if (detections is None and self.config.latest_only and self.keypoint_first
-                and time.monotonic_ns() - self.last_detections_ns < KEYPOINTS_ALIVE_NS):
-            # live, the extremity node took a newer set than this one: track the sets it
-            # answers, at its rate, rather than this one on the silhouettes alone
+                and now - max(self.last_detections_ns, self.first_set_ns) < KEYPOINTS_ALIVE_NS
+                and self.count_publishers(DETECTIONS) > 0):
+            # live, the extremity node took a newer set than this one or has not answered
+            # yet: track the sets it answers, at its rate, rather than this one on the
+            # silhouettes alone (a silhouette start-up takes seconds)
             self.skipped_total += 1
             self.skipped_unreported += 1
             return

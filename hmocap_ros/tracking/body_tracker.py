@@ -97,6 +97,11 @@ UNSEEN_SPREAD = 0.15
 #: Most frame periods between two processed frame sets that the motion model accounts for
 #: (velocity extrapolation and diffusion; module docstring).
 MAX_ELAPSED_PERIODS = 4
+#: seconds (of frame stamps, a person in view) kf-hpf given a keypoint detector's frame sets
+#: waits for keypoints that start a track before it starts one from the silhouettes (sec. 2.3):
+#: the detector's region needs a few frames to find a person who just came in, and a silhouette
+#: start-up costs seconds of CPU per frame, which a live tracker cannot spend
+KEYPOINT_START_WAIT_S = 2.0
 
 
 def working_scale(cameras, width: int) -> float:
@@ -188,6 +193,7 @@ class BodyTracker:
         self._startup: StartUp | None = None
         self._bad_frames = 0
         self._absent_frames = 0
+        self._keypoints_awaited_since: int | None = None
         self.research.reset()
         if self.driven is not None:
             self.driven.reset()
@@ -281,9 +287,15 @@ class BodyTracker:
             fit = self._start_from_keypoints(detections, exclude)
             timings["fit"] = time.perf_counter() - t0
             if fit is not None:
+                self._keypoints_awaited_since = None
                 return self._result(stamp_ns, obs, t_start, timings, self._fit_cost(obs),
                                     extremities=self._keypoint_assigned(fit, detections),
                                     spread=self._fit_spread(fit))
+            if detections is not None:
+                if self._keypoints_awaited_since is None:
+                    self._keypoints_awaited_since = stamp_ns
+                if stamp_ns - self._keypoints_awaited_since < KEYPOINT_START_WAIT_S * 1e9:
+                    return self._result(stamp_ns, obs, t_start, timings)
         if self.state.looking:
             t0 = time.perf_counter()
             started = self._start(masks, obs, stamp_ns, exclude)
@@ -597,6 +609,7 @@ class BodyTracker:
 
     def _person_absent(self) -> None:
         self._absent_frames += 1
+        self._keypoints_awaited_since = None
         forget = self._absent_frames >= self.params.lost.forget_shape_frames
         if self.state != TrackerState.SEARCHING or forget:
             self.reset(forget_shape=forget)
