@@ -55,6 +55,11 @@ __all__ = [
     "rig_to_msg",
     "rig_from_msg",
     "CAMERA_RIG_TYPE",
+    "FlowList",
+    "RigDumper",
+    "matrix_entry",
+    "read_matrix_entry",
+    "read_vector_entry",
 ]
 
 #: ROS type name of the rig message.
@@ -164,7 +169,7 @@ def camera_arrays(cameras) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
 # --------------------------------------------------------------------------------------------
 
 
-def _matrix(entry: Any, where: str, field: str, rows: int | None, cols: int | None) -> np.ndarray:
+def read_matrix_entry(entry: Any, where: str, field: str, rows: int | None, cols: int | None) -> np.ndarray:
     """Parse ``{rows, cols, data}`` into a ``(rows, cols)`` float array, checking the sizes."""
     if not isinstance(entry, dict) or not {"rows", "cols", "data"} <= set(entry):
         raise RigError(f"{where}: field {field!r} must be a mapping with rows, cols and data")
@@ -185,7 +190,9 @@ def _matrix(entry: Any, where: str, field: str, rows: int | None, cols: int | No
     return data.reshape(r, c)
 
 
-def _vector(entry: Any, where: str, field: str, size: int) -> np.ndarray:
+def read_vector_entry(entry: Any, where: str, field: str, size: int) -> np.ndarray:
+    """Parse a list of ``size`` finite numbers into a float array; RigError naming ``where``
+    and ``field`` otherwise."""
     try:
         vector = np.asarray(entry, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
@@ -217,21 +224,21 @@ def _camera_from_dict(entry: Any, index: int, source: str) -> PinholeCamera:
     model = entry["distortion_model"]
     if model not in DISTORTION_MODELS:
         raise RigError(f"{where}: field 'distortion_model' must be one of {', '.join(DISTORTION_MODELS)}, got {model!r}")
-    K = _matrix(entry["camera_matrix"], where, "camera_matrix", 3, 3)
-    D = _matrix(entry["distortion_coefficients"], where, "distortion_coefficients", 1, None).reshape(-1)
+    K = read_matrix_entry(entry["camera_matrix"], where, "camera_matrix", 3, 3)
+    D = read_matrix_entry(entry["distortion_coefficients"], where, "distortion_coefficients", 1, None).reshape(-1)
     if D.size > DISTORTION_MODELS[model]:
         raise RigError(f"{where}: field 'distortion_coefficients' has {D.size} values, {model} takes {DISTORTION_MODELS[model]}")
     rect = None
     if entry.get("rectification_matrix") is not None:
-        rect = _matrix(entry["rectification_matrix"], where, "rectification_matrix", 3, 3)
+        rect = read_matrix_entry(entry["rectification_matrix"], where, "rectification_matrix", 3, 3)
     proj = None
     if entry.get("projection_matrix") is not None:
-        proj = _matrix(entry["projection_matrix"], where, "projection_matrix", 3, 4)
+        proj = read_matrix_entry(entry["projection_matrix"], where, "projection_matrix", 3, 4)
     pose = entry["pose"]
     if not isinstance(pose, dict) or set(pose) != {"position", "orientation"}:
         raise RigError(f"{where}: field 'pose' must be a mapping with exactly position and orientation")
-    position = _vector(pose["position"], where, "pose.position", 3)
-    orientation = _vector(pose["orientation"], where, "pose.orientation", 4)
+    position = read_vector_entry(pose["position"], where, "pose.position", 3)
+    orientation = read_vector_entry(pose["orientation"], where, "pose.orientation", 4)
     norm = float(np.linalg.norm(orientation))
     if abs(norm - 1.0) > 1e-3:
         raise RigError(f"{where}: field 'pose.orientation' is not a unit quaternion (x, y, z, w): norm {norm:.6g}")
@@ -273,20 +280,22 @@ def rig_from_dict(data: Any, source: str = "<rig>") -> Rig:
     return Rig(frame_id, cameras)
 
 
-class _Flow(list):
+class FlowList(list):
     """A list dumped in YAML flow style (``[1, 2, 3]``)."""
 
 
-class _RigDumper(yaml.SafeDumper):
-    pass
+class RigDumper(yaml.SafeDumper):
+    """The YAML dumper of rig files: :class:`FlowList` values in flow style."""
 
 
-_RigDumper.add_representer(_Flow, lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True))
+RigDumper.add_representer(FlowList, lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True))
 
 
-def _matrix_dict(array: np.ndarray) -> dict:
+def matrix_entry(array: np.ndarray) -> dict:
+    """An array as the ``{rows, cols, data}`` mapping of a rig file (the inverse of
+    :func:`read_matrix_entry`)."""
     array = np.atleast_2d(np.asarray(array, dtype=np.float64))
-    return {"rows": int(array.shape[0]), "cols": int(array.shape[1]), "data": _Flow(float(x) for x in array.ravel())}
+    return {"rows": int(array.shape[0]), "cols": int(array.shape[1]), "data": FlowList(float(x) for x in array.ravel())}
 
 
 def rig_to_dict(rig: Rig) -> dict:
@@ -298,14 +307,14 @@ def rig_to_dict(rig: Rig) -> dict:
             "frame_id": camera.frame_id,
             "image_width": camera.width,
             "image_height": camera.height,
-            "camera_matrix": _matrix_dict(camera.K),
+            "camera_matrix": matrix_entry(camera.K),
             "distortion_model": camera.distortion_model,
-            "distortion_coefficients": _matrix_dict(camera.D[None, :]),
-            "rectification_matrix": _matrix_dict(camera.rectification),
-            "projection_matrix": _matrix_dict(camera.projection),
+            "distortion_coefficients": matrix_entry(camera.D[None, :]),
+            "rectification_matrix": matrix_entry(camera.rectification),
+            "projection_matrix": matrix_entry(camera.projection),
             "pose": {
-                "position": _Flow(float(x) for x in camera.position),
-                "orientation": _Flow(float(x) for x in camera.pose_quaternion()),
+                "position": FlowList(float(x) for x in camera.position),
+                "orientation": FlowList(float(x) for x in camera.pose_quaternion()),
             },
         })
     return {"frame_id": rig.frame_id, "cameras": cameras}
@@ -331,7 +340,7 @@ def save_rig(rig: Rig, path: str | Path, header: str | None = None) -> None:
     ``header`` is written first as ``#`` comment lines.
     """
     lines = [] if header is None else [f"# {line}".rstrip() for line in header.splitlines()]
-    body = yaml.dump(rig_to_dict(rig), Dumper=_RigDumper, sort_keys=False, default_flow_style=False, width=120)
+    body = yaml.dump(rig_to_dict(rig), Dumper=RigDumper, sort_keys=False, default_flow_style=False, width=120)
     Path(path).write_text("\n".join(lines + [body]))
 
 

@@ -25,8 +25,8 @@ from hmocap_ros.render.reference import silhouette_reference
 from hmocap_ros.sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARAMS,
                                                           AnthropometryEstimator, Hypothesis,
-                                                          EstimationParams, shape_from_state,
-                                                          shape_to_state)
+                                                          shape_from_state, shape_to_state)
+from hmocap_ros.tracking.params import EstimationParams
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
 from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, SWEEP_DECAY, body_sigma0,
                                              clip_body_pose, make_schedule, schedule_for)
@@ -40,7 +40,7 @@ from hmocap_ros.tracking.params import (FilterParams, ResearchParams, StartupPar
                                         WeightingParams)
 from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
 from hmocap_ros.tracking.startup import StartUp
-from hmocap_ros.tracking.visual_hull import Hull, carve, room_bounds, visual_hull
+from hmocap_ros.detection.visual_hull import Hull, carve, room_bounds, visual_hull
 
 ROOT = Path(__file__).resolve().parents[1]
 CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"

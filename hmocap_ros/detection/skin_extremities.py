@@ -14,7 +14,7 @@ Per frame set:
    centre pixel only). The z-buffer is kept at a cell of about one projected voxel, so the
    carved shell has no holes that let its back show through.
 3. **Probability surface** (eq. 2.17): ``Prob(q) = sum_c eta_c(q) T(proj_c(q))`` with ``T`` the
-   per-pixel skin map of each view (``segmentation.skin``; maps of any resolution).
+   per-pixel skin map of each view (``detection.skin``; maps of any resolution).
 4. **Filtering** (eq. 2.18): ``Q' = {q : Prob(q) >= Gamma}``, clustered by distance tolerance
    ``theta_tol`` (connected components of a kd-tree radius graph, as in Rusu's Euclidean
    clustering [100]) and kept when their size lies in ``[theta_min, theta_max]``.
@@ -42,7 +42,7 @@ from scipy.spatial import cKDTree
 from hmocap_ros.camera_model import Projection, project_points
 from hmocap_ros.params import param
 from hmocap_ros.rig import camera_arrays
-from hmocap_ros.tracking.visual_hull import carve, coarse_people, room_bounds
+from hmocap_ros.detection.visual_hull import carve, coarse_people, room_bounds
 
 __all__ = ["SkinExtremityParams", "SkinCandidates", "SkinExtremityDetector", "surface_points",
            "visibility", "extremity_probability", "cluster_candidates"]

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from hmocap_ros.render.projection import _dist8, _project_one, distortion_valid_r2
-from hmocap_ros.render.silhouette import (_fill_silhouette, binary_observed, clip_boxes,
+from hmocap_ros.render.projection import distortion8, project_one_view, distortion_valid_r2
+from hmocap_ros.render.silhouette import (fill_silhouette, binary_observed, clip_boxes,
                                           count_xor_and_clear, observed_counts)
 
 __all__ = ["xor_counts_from_vertices"]
@@ -35,8 +35,8 @@ def _fused_body(verts, K, R, t, d, near, max_r2, faces, observed, rects, observe
     for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
         b = i // n_views
         m = i % n_views
-        _project_one(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
-        x0, y0, x1, y1 = _fill_silhouette(
+        project_one_view(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
+        x0, y0, x1, y1 = fill_silhouette(
             buf, uv, faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3], front_only)
         rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
         out[b, m] = observed_in_rect[m] + rendered - 2 * both
@@ -96,7 +96,7 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     if dist is None:
         d = np.zeros((n_views, 8))
     else:
-        d = np.stack([_dist8(x) for x in np.asarray(dist, dtype=np.float64).reshape(n_views, -1)])
+        d = np.stack([distortion8(x) for x in np.asarray(dist, dtype=np.float64).reshape(n_views, -1)])
     if max_r2 is None:
         max_r2 = np.array([distortion_valid_r2(x) for x in d])
     max_r2 = np.ascontiguousarray(max_r2, dtype=np.float64)

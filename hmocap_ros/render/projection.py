@@ -15,7 +15,9 @@ import numba as nb
 import numpy as np
 
 
-def _dist8(dist) -> np.ndarray:
+def distortion8(dist) -> np.ndarray:
+    """OpenCV distortion coefficients (none, 4, 5 or 8) as the 8 of the rational model
+    (k1, k2, p1, p2, k3, k4, k5, k6), zeros where not given."""
     d = np.zeros(8, dtype=np.float64)
     if dist is not None:
         dist = np.asarray(dist, dtype=np.float64).ravel()
@@ -28,7 +30,7 @@ def _dist8(dist) -> np.ndarray:
 def distortion_valid_r2(dist, r_max: float = 4.0) -> float:
     """Largest squared normalised radius ``r^2`` up to which the radial distortion
     ``r -> r * radial(r)`` increases monotonically (inf when it does up to ``r_max``)."""
-    d = _dist8(dist)
+    d = distortion8(dist)
     r = np.linspace(0.0, r_max, 8001)
     r2 = r * r
     radial = ((1 + d[0] * r2 + d[1] * r2**2 + d[4] * r2**3)
@@ -41,7 +43,10 @@ def distortion_valid_r2(dist, r_max: float = 4.0) -> float:
 
 
 @nb.njit(cache=True, nogil=True)
-def _project_one(p, K, R, t, d, near, max_r2, uv, z):
+def project_one_view(p, K, R, t, d, near, max_r2, uv, z):
+    """numba kernel: points ``p`` (N, 3) into one camera (``d``: :func:`distortion8`), pixels
+    into ``uv`` (N, 2) and depths into ``z`` (N,); NaN pixels at depth <= ``near`` or beyond
+    the squared normalised radius ``max_r2`` (module docstring)."""
     for i in range(p.shape[0]):
         X = p[i, 0]
         Y = p[i, 1]
@@ -76,7 +81,7 @@ def _project_batch_kernel(points, K, R, t, d, near, max_r2, uv, z):
     for i in nb.prange(n_poses * n_views):
         b = i // n_views
         m = i % n_views
-        _project_one(points[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv[b, m], z[b, m])
+        project_one_view(points[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv[b, m], z[b, m])
 
 
 def project_points(points: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
@@ -119,7 +124,7 @@ def project_batch(points: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarra
     if dist is None:
         d = np.zeros((n_views, 8))
     else:
-        d = np.stack([_dist8(x) for x in np.asarray(dist, dtype=np.float64).reshape(n_views, -1)])
+        d = np.stack([distortion8(x) for x in np.asarray(dist, dtype=np.float64).reshape(n_views, -1)])
     max_r2 = np.array([distortion_valid_r2(x) for x in d])
     if scale != 1.0:
         # Pixel centres at integer coordinates: u' = (u + 0.5) s - 0.5.
