@@ -20,7 +20,8 @@ from hmocap_ros.body import (BodyShape, entity_sizes, local_rotations_to_pose,
                              rest_pose)
 from hmocap_ros.params import (field_overrides, flat_fields, flat_record, from_flat,
                                replace_dotted)
-from hmocap_ros.render import project_batch, render_silhouettes
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.render import render_silhouettes
 from hmocap_ros.render.reference import silhouette_reference
 from hmocap_ros.sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARAMS,
@@ -960,7 +961,7 @@ def test_cameras_of_different_sizes_are_tracked_together(model, rig):
     """A rig whose views differ in size (one camera at half the others' resolution): the views
     are stacked padded, each projects with its own intrinsics, and the tracker follows the
     person as on the same-size rig."""
-    from hmocap_ros.rig import Rig
+    from hmocap_ros.geometry.rig import Rig
 
     mixed = Rig(rig.frame_id, tuple(c.scaled(0.5) if i == 2 else c for i, c in enumerate(rig)))
     shape = subject_shape()

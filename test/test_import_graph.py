@@ -7,7 +7,8 @@ file, inside a function, under ``TYPE_CHECKING``), and fails, naming them, on
 - a folder cycle: top-level subpackages of ``hmocap_ros`` (``detection``, ``tracking``, ...; a
   top-level module such as ``rig`` is a node of its own) that import one another;
 - a cross-module private import: ``from module import _name`` or ``module._name`` through an
-  imported module, where the module is another module of the package.
+  imported module, where the module is another module of the package;
+- ``geometry/`` importing anything else of the package (it is the bottom layer).
 
 An import names the most specific module of the package that exists: ``from a.b import c`` is an
 edge to ``a/b/c.py`` when that file exists, else to ``a/b.py`` or ``a/b/__init__.py``. A package's
@@ -227,6 +228,14 @@ def test_no_private_import_across_modules():
     _, private = import_graph()
     assert not private, "private names taken from another module:\n" + "\n".join(
         f"  {importer} takes {source}.{name}" for importer, source, name in private)
+
+
+def test_geometry_imports_nothing_of_the_package():
+    """Camera geometry is the bottom layer: calibration, rendering, TF and tracking use it."""
+    graph, _ = import_graph()
+    above = sorted(t for m, ts in graph.items() if folder_of(m) == "hmocap_ros.geometry"
+                   for t in ts if folder_of(t) != "hmocap_ros.geometry")
+    assert not above, f"hmocap_ros.geometry imports {above}"
 
 
 def test_the_walk_sees_cycles_and_private_names():

@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hmocap_ros.camera_model import look_at, project_points
+from hmocap_ros.geometry import look_at, project_points
 from hmocap_ros.detection.keypoint_detector import foreground_box, previous_pixels
 from hmocap_ros.detection.params import KeypointParams
 from hmocap_ros.detection.keypoint_roi import box_roi, skeleton_roi

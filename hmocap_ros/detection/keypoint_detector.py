@@ -48,7 +48,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from hmocap_ros.camera_model import project_points
+from hmocap_ros.geometry import project_points
 from hmocap_ros.detection.keypoint_network import PoseLandmarkNetwork, ViewLandmarks
 from hmocap_ros.detection.keypoint_roi import Roi, box_roi, landmarks_roi, skeleton_roi
 from hmocap_ros.detection.keypoint_triangulation import Keypoints3D, triangulate_views
@@ -126,7 +126,7 @@ class KeypointDetector:
     """Per view the landmark network on its tracked crop, then robust triangulation (module
     docstring).
 
-    ``cameras``: the rig's cameras (a :class:`~hmocap_ros.rig.Rig` or a list); ``model_path``:
+    ``cameras``: the rig's cameras (a :class:`~hmocap_ros.geometry.rig.Rig` or a list); ``model_path``:
     the landmark model, ``detector_path`` the pose detector's (default: the shipped ones;
     :class:`~.tflite_model.ModelFileError` when one is missing or corrupt).
     :attr:`last_timings` holds the seconds per stage of the last :meth:`detect`: ``roi``,

@@ -27,7 +27,7 @@ a keypoint is triangulated from the views that agree:
    (``e_v < tau``, in front of the camera) are triangulated together, twice, and the final
    point is the DLT of the views that agree with it: only those of weight
    ``confident_visibility`` or more when there are ``min_views`` of them. Triangulation is
-   :func:`hmocap_ros.camera_model.triangulate`.
+   :func:`hmocap_ros.geometry.triangulate`.
 4. **Body points** (design choices where the thesis, sec. 2.5, leaves the detector open; each
    matches the end-effector or joint of the tracker's body model, measured on simulated
    recordings): ``hand`` is the mean of the index and pinky landmarks (the knuckles: the
@@ -54,7 +54,7 @@ from typing import Sequence
 
 import numpy as np
 
-from hmocap_ros.camera_model import ROOM_UP, project_points, reprojection_errors, triangulate
+from hmocap_ros.geometry import ROOM_UP, project_points, reprojection_errors, triangulate
 from hmocap_ros.detection.keypoint_network import NUM_LANDMARKS, ViewLandmarks
 
 __all__ = ["KEYPOINT_LABELS", "COMPOSITION", "MIRROR", "TRIANGULATED_POINTS", "Keypoints3D", "view_keypoints",

@@ -39,9 +39,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from hmocap_ros.camera_model import Projection, project_points
+from hmocap_ros.geometry import Projection, project_points
 from hmocap_ros.params import param
-from hmocap_ros.rig import camera_arrays
+from hmocap_ros.geometry.rig import camera_arrays
 from hmocap_ros.detection.visual_hull import carve, coarse_people, room_bounds
 
 __all__ = ["SkinExtremityParams", "SkinCandidates", "SkinExtremityDetector", "surface_points",
@@ -116,7 +116,7 @@ def visibility(points: np.ndarray, normals: np.ndarray, cameras: Sequence, voxel
     A point is visible in a camera when it is in its image and no other surface point lies in
     front of it (z-buffer with cells of about one projected voxel; ``depth_tolerance`` voxels
     of slack). ``views`` (M,) bool leaves cameras out (missing views). ``proj``: the points'
-    :func:`~hmocap_ros.camera_model.project_points` in ``cameras``, if already computed.
+    :func:`~hmocap_ros.geometry.project_points` in ``cameras``, if already computed.
     """
     M, S = len(cameras), len(points)
     if S == 0:

@@ -186,7 +186,8 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     from hmocap_ros.io.bag_writer import LATCHED, whole_bag
     from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.io.msg_factory import RosbagsFactory
-    from hmocap_ros.rig import RigError, load_rig, rig_from_msg
+    from hmocap_ros.geometry.rig import RigError, load_rig
+    from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.segmentation import ForegroundParams, background_models
     from hmocap_ros.tracking.params import TrackerParams
     from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids

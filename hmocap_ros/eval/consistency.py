@@ -167,7 +167,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                        progress=None) -> dict:
     """The checks of the module docstring for ``bag`` and a tracked body's ``motion``
     (:class:`~hmocap_ros.export.motion.BodyMotion`)."""
-    from hmocap_ros.camera_projection import project_points
+    from hmocap_ros.geometry.projection import project_points
     from hmocap_ros.detection.params import KeypointParams
     from hmocap_ros.detection.keypoint_triangulation import (TRIANGULATED_POINTS, triangulate_views,
                                                              view_keypoints)
@@ -175,7 +175,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.render import render_silhouettes
-    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.segmentation import ForegroundParams, background_models
     from hmocap_ros.segmentation.person_masks import PersonMasks
 

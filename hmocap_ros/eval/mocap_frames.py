@@ -202,7 +202,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     """
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
-    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.segmentation import ForegroundParams, background_models
 
     out = sys.stderr if out is None else out

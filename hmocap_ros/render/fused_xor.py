@@ -5,7 +5,7 @@ every view and counts the pixels where the model silhouette and the foreground d
 :func:`hmocap_ros.render.xor_counts` takes projected vertices; at the thesis' budget
 (3,500 particles x 4 views x 1,202 vertices) the projected array alone is about 130 MB,
 written once and read back. Here each (particle, view) is projected into a small per-thread
-buffer and rasterised at once, with the same projection (:mod:`hmocap_ros.render.projection`,
+buffer and rasterised at once, with the same projection (:mod:`hmocap_ros.geometry.projection`,
 OpenCV distortion) and the same coverage rule (:mod:`hmocap_ros.render.silhouette`), so the
 counts are identical to ``xor_counts(project_batch(...))``.
 """
@@ -14,7 +14,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from hmocap_ros.render.projection import distortion8, project_one_view, distortion_valid_r2
+from hmocap_ros.geometry.distortion import coefficients8, monotonic_radius2
+from hmocap_ros.geometry.projection import project_one_view
 from hmocap_ros.render.silhouette import (fill_silhouette, binary_observed, clip_boxes,
                                           count_xor_and_clear, observed_counts)
 
@@ -74,7 +75,7 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     Cameras: ``K, R (M, 3, 3)``, ``t (M, 3)``, ``dist (M, k)`` OpenCV coefficients or None, at
     the masks' resolution. ``faces``, ``boxes`` and ``front_only`` as in
     :func:`hmocap_ros.render.xor_counts`. ``max_r2`` (M,): the cameras'
-    :func:`~hmocap_ros.render.projection.distortion_valid_r2`, if the caller keeps them.
+    :func:`~hmocap_ros.geometry.distortion.monotonic_radius2`, if the caller keeps them.
     Parallel over poses x views (serial below :data:`PARALLEL_MIN_ITEMS` pairs).
     """
     verts = np.asarray(verts)
@@ -96,9 +97,9 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     if dist is None:
         d = np.zeros((n_views, 8))
     else:
-        d = np.stack([distortion8(x) for x in np.asarray(dist, dtype=np.float64).reshape(n_views, -1)])
+        d = coefficients8(np.asarray(dist, dtype=np.float64).reshape(n_views, -1))
     if max_r2 is None:
-        max_r2 = np.array([distortion_valid_r2(x) for x in d])
+        max_r2 = np.array([monotonic_radius2(x) for x in d])
     max_r2 = np.ascontiguousarray(max_r2, dtype=np.float64)
     obs01 = binary_observed(observed)
     _, height, width = obs01.shape

@@ -22,7 +22,7 @@ Output, next to each other (``BAG`` = ``--out``, e.g. ``run.mcap``):
   (latched ``hmocap_interfaces/BodyShape``). Every message of a frame has the same
   ``header.stamp`` and is logged at it; room-frame data has frame id ``room``, images the
   camera's optical frame id.
-- ``<stem>_rig.yaml``: the rig (``hmocap_ros.rig.load_rig`` format).
+- ``<stem>_rig.yaml``: the rig (``hmocap_ros.geometry.rig.load_rig`` format).
 - ``<stem>.contact.png``: a contact sheet (all views of a few frames, ground-truth skeleton
   projected, silhouette outlined).
 

@@ -202,7 +202,7 @@ def random_streams(seed: int) -> tuple:
 def subject_in_room(config: MocapSimConfig, rng_room, rng_shape, rng_place) -> tuple:
     """``(rig, room, tracking model, subject shape, placed motion)`` of a recording."""
     from hmocap_ros.body import load_body_model, sample_shape
-    from hmocap_ros.rig import load_rig
+    from hmocap_ros.geometry.rig import load_rig
     from hmocap_ros.sim.room import build_room
 
     fps = float(config.fps)

@@ -30,7 +30,8 @@ import numpy as np
 
 from functools import lru_cache
 
-from hmocap_ros.render.projection import project_one_view, distortion_valid_r2
+from hmocap_ros.geometry.distortion import coefficients8, monotonic_radius2
+from hmocap_ros.geometry.projection import project_one_view
 
 __all__ = ["LAYER_ANCHORS", "LAYER_PARTS", "box_corners", "chain_lengths", "layer_boxes",
            "layer_vertex_indices", "part_boxes_3d", "reach_box"]
@@ -112,7 +113,7 @@ def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 @lru_cache(maxsize=64)
 def _valid_r2(dist: tuple) -> float:
-    return distortion_valid_r2(np.array(dist))
+    return monotonic_radius2(coefficients8(np.array(dist, dtype=np.float64)))
 
 
 def layer_boxes(lo: np.ndarray, hi: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,

@@ -45,8 +45,8 @@ def _load(path: Path):
 
 
 def _camera(path: Path, data) -> ForeignCamera:
-    from hmocap_ros.camera_model import quaternion_to_matrix
-    from hmocap_ros.rig import RigError, read_matrix_entry, read_vector_entry
+    from hmocap_ros.geometry import quaternion_to_matrix
+    from hmocap_ros.geometry.rig import RigError, read_matrix_entry, read_vector_entry
 
     name = str(data.get("camera_name") or path.stem)
     where = f"{path}: camera {name!r}"
@@ -91,7 +91,7 @@ def write_ros(calibration: ForeignCalibration, path: str | Path) -> list[Path]:
     """One ``<name>.yaml`` per camera in the folder ``path`` (module docstring); returns the
     files written."""
     from hmocap_ros.io.tf import rotation_to_quaternion
-    from hmocap_ros.rig import FlowList, matrix_entry, RigDumper
+    from hmocap_ros.geometry.rig import FlowList, matrix_entry, RigDumper
 
     folder = Path(path)
     folder.mkdir(parents=True, exist_ok=True)
