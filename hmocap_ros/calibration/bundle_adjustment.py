@@ -19,9 +19,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from hmocap_ros.geometry.rotations import matrix_to_rotvec, rotvec_to_matrix
 from hmocap_ros.calibration.observations import Observations
 from hmocap_ros.geometry.distortion import distort_xy
+from hmocap_ros.geometry.rotations import matrix_to_rotvec, rotvec_to_matrix
 
 __all__ = ["BundleResult", "project_observations", "bundle_adjust"]
 
