@@ -19,7 +19,7 @@ import numpy as np
 
 def rig_errors(estimated, truth) -> tuple[np.ndarray, np.ndarray]:
     """Per camera of ``estimated``: centre error (mm) and orientation error (degrees)."""
-    from hmocap_ros.calibration.geometry import rotation_angle_deg
+    from hmocap_ros.geometry.rotations import rotation_angle_deg
 
     centre = np.array([np.linalg.norm(c.position - truth[c.name].position) * 1000 for c in estimated])
     angle = np.array([float(rotation_angle_deg(c.R, truth[c.name].R)) for c in estimated])
@@ -27,7 +27,7 @@ def rig_errors(estimated, truth) -> tuple[np.ndarray, np.ndarray]:
 
 
 def main() -> int:
-    from hmocap_ros.rig import load_rig
+    from hmocap_ros.geometry.rig import load_rig
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cameras", type=int, nargs="+", default=[4, 6])

@@ -18,10 +18,12 @@ import time
 import numba
 import numpy as np
 
+from hmocap_ros.geometry.pinhole_camera import look_at_pose
+from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import (DirectionalLight, Lighting, Material, PointLight,
                                concatenate_meshes, face_range_mask, grid_quad, kinect_depth,
-                               look_at, project_batch, rasterize, render_shadow_map,
-                               render_silhouettes, shade, vertex_normals, xor_counts)
+                               rasterize, render_shadow_map, render_silhouettes, shade,
+                               vertex_normals, xor_counts)
 from hmocap_ros.render.sensor import add_sensor_noise, downsample
 
 DEFAULT_MESH = "tracking"
@@ -36,7 +38,7 @@ def rig(width: int, height: int, n_views: int = 4):
     target = (sx / 2, 0.8, sz / 2)
     f = 0.65 * width
     K = np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
-    Rs, ts = zip(*(look_at(c, target) for c in corners))
+    Rs, ts = zip(*(look_at_pose(c, target) for c in corners))
     dist = np.tile([-0.12, 0.03, 0.0, 0.0, 0.0], (n_views, 1))
     return np.stack([K] * n_views), np.stack(Rs), np.stack(ts), dist
 

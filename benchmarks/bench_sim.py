@@ -28,6 +28,7 @@ import numpy as np
 
 from hmocap_ros.body import load_body_model, sample_shape
 from hmocap_ros.sim import mocap_dataset as md
+from hmocap_ros.sim import mocap_subject as ms
 from hmocap_ros.sim.appearance import dress, sample_appearance
 from hmocap_ros.sim.mocap_render import FrameState, MocapRenderer, RenderOptions
 from hmocap_ros.sim.room import build_room
@@ -39,10 +40,10 @@ def subject_frames(n: int, rig, room, rng):
     full = load_body_model("hands", "full")
     shape = sample_shape(rng)
     look = dress(full, sample_appearance(rng))
-    motion = md._motion_window(md._retargeted(md.DEFAULT_BVH, tracking, shape, 25.0), 3.0,
+    motion = ms.motion_window(ms.retargeted_motion(md.DEFAULT_BVH, tracking, shape, 25.0), 3.0,
                                n / 25.0, 25.0)
-    motion = md._place(motion, rig, room, rng, md._shaped_skeleton(tracking, shape))
-    perf = md._performer(motion, tracking, full, shape, look)
+    motion = ms.place_subject(motion, rig, room, rng, ms.shaped_skeleton(tracking, shape))
+    perf = ms.make_performer(motion, tracking, full, shape, look)
     verts = full.forward(perf.full_params, shape).vertices
     return [look.with_hair(v, full.faces) for v in verts], full.faces, look
 

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from hmocap_ros.segmentation.skin import skin_probability
+from hmocap_ros.detection.skin import skin_probability
 
 
 def main() -> None:

@@ -42,8 +42,9 @@ from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.tracking.body_tracker import working_scale
 from hmocap_ros.eval.mocap_eval import tracker_overrides
 from hmocap_ros.params import from_flat
-from hmocap_ros.render import project_batch, render_silhouettes
-from hmocap_ros.rig import load_rig
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.render import render_silhouettes
+from hmocap_ros.geometry.rig import load_rig
 from hmocap_ros.sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.body_tracker import BodyTracker
 from hmocap_ros.tracking.methods import METHODS, method_names

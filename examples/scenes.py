@@ -36,8 +36,9 @@ import numpy as np
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
+from hmocap_ros.geometry.rotations import quaternion_to_matrix
 from hmocap_ros.io.tf import (DEFAULT_FIXED_FRAME, TF_MESSAGE_TYPE, TF_STATIC_TOPIC, FrameTransform, Y_UP_TO_Z_UP,
-                              frame_transform, quaternion_to_rotation, tf_message)
+                              frame_transform, tf_message)
 
 DATA = Path(__file__).resolve().parents[1] / "hmocap_ros" / "data"
 DEPTH_BAG = DATA / "demo" / "gestures_depth.mcap"
@@ -68,7 +69,7 @@ def depth_camera_transform() -> FrameTransform:
     """``room`` -> ``depth_optical_frame`` of the scene: the recording's layout pose, shifted."""
     layout = json.loads(DEPTH_LABELS.read_text())["layouts"][DEPTH_LAYOUT]
     position = np.asarray(layout["camera_position"]) + DEPTH_CAMERA_SHIFT
-    rotation = quaternion_to_rotation(layout["camera_quaternion_xyzw"])
+    rotation = quaternion_to_matrix(layout["camera_quaternion_xyzw"], tolerance=None)
     return frame_transform(ROOM, "depth_optical_frame", rotation, position)
 
 

@@ -49,7 +49,7 @@ DDS_PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROF
 
 def _rig_cameras(rig_file: str) -> list:
     """Camera names of the rig file, in rig order."""
-    from hmocap_ros.rig import RigError, load_rig
+    from hmocap_ros.geometry.rig import RigError, load_rig
 
     try:
         return list(load_rig(rig_file).names)

@@ -74,7 +74,7 @@ def rig():
     """The cameras of ``config/rig_example.yaml`` at half resolution (320x240)."""
     from pathlib import Path
 
-    from hmocap_ros.rig import Rig, load_rig
+    from hmocap_ros.geometry.rig import Rig, load_rig
 
     full = load_rig(Path(__file__).resolve().parents[1] / "config" / "rig_example.yaml")
     return Rig(full.frame_id, tuple(c.scaled(0.5) for c in full))

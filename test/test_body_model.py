@@ -15,7 +15,8 @@ from hmocap_ros.body import (ENTITY_NAMES, TABLE_2_1, BodyShape, apply_shape, en
                              forward_kinematics, load_body_model, local_rotations_to_pose,
                              pose_to_local_rotations, read_body_model, rest_pose, sample_pose,
                              sample_shape, shape_log_prior, skin_vertices, skinning_matrices)
-from hmocap_ros.body.rotations import axis_angle_matrix, rotvec_to_matrix
+from hmocap_ros.body.rotations import axis_angle_matrix
+from hmocap_ros.geometry.rotations import rotvec_to_matrix
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "hmocap_ros" / "data"
@@ -90,8 +91,9 @@ def test_coarse_tracking_mesh_is_the_same_body(tracking):
     """The tracker's optional coarse mesh: 1,000 triangles on the joints, end sites,
     landmarks and DoFs of the 2,400-triangle body, and at the working resolution (160x120)
     the same silhouette up to a sliver along its outline."""
-    from hmocap_ros.render import project_batch, render_silhouettes
-    from hmocap_ros.rig import camera_arrays, load_rig
+    from hmocap_ros.geometry.projection import project_batch
+    from hmocap_ros.render import render_silhouettes
+    from hmocap_ros.geometry.rig import camera_arrays, load_rig
 
     coarse = tracking.with_mesh("tracking_coarse")
     assert coarse.name == "tracking_coarse" and len(coarse.faces) == 1000

@@ -382,7 +382,8 @@ from sensor_msgs.msg import Image
 from hmocap_interfaces.msg import CameraRig
 from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory
-from hmocap_ros.rig import load_rig, rig_to_msg
+from hmocap_ros.geometry.rig import load_rig
+from hmocap_ros.io.rig_messages import rig_to_msg
 rclpy.init()
 node = rclpy.create_node("bad_masks")
 f = RclpyFactory()

@@ -20,13 +20,14 @@ from hmocap_ros.body import (BodyShape, entity_sizes, local_rotations_to_pose,
                              rest_pose)
 from hmocap_ros.params import (field_overrides, flat_fields, flat_record, from_flat,
                                replace_dotted)
-from hmocap_ros.render import project_batch, render_silhouettes
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.render import render_silhouettes
 from hmocap_ros.render.reference import silhouette_reference
 from hmocap_ros.sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARAMS,
                                                           AnthropometryEstimator, Hypothesis,
-                                                          EstimationParams, shape_from_state,
-                                                          shape_to_state)
+                                                          shape_from_state, shape_to_state)
+from hmocap_ros.tracking.params import EstimationParams
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
 from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, SWEEP_DECAY, body_sigma0,
                                              clip_body_pose, make_schedule, schedule_for)
@@ -40,7 +41,7 @@ from hmocap_ros.tracking.params import (FilterParams, ResearchParams, StartupPar
                                         WeightingParams)
 from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
 from hmocap_ros.tracking.startup import StartUp
-from hmocap_ros.tracking.visual_hull import Hull, carve, room_bounds, visual_hull
+from hmocap_ros.detection.visual_hull import Hull, carve, room_bounds, visual_hull
 
 ROOT = Path(__file__).resolve().parents[1]
 CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"
@@ -960,7 +961,7 @@ def test_cameras_of_different_sizes_are_tracked_together(model, rig):
     """A rig whose views differ in size (one camera at half the others' resolution): the views
     are stacked padded, each projects with its own intrinsics, and the tracker follows the
     person as on the same-size rig."""
-    from hmocap_ros.rig import Rig
+    from hmocap_ros.geometry.rig import Rig
 
     mixed = Rig(rig.frame_id, tuple(c.scaled(0.5) if i == 2 else c for i, c in enumerate(rig)))
     shape = subject_shape()

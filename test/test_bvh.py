@@ -266,13 +266,13 @@ def test_kabsch_and_swing_recover_rotations():
     u, v = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     v[0] = -u[0]  # opposite directions: a half turn
     r = rt.swing(u, v)
-    np.testing.assert_allclose(np.einsum("fij,fj->fi", r, rt._unit(u)), rt._unit(v), atol=1e-10)
+    np.testing.assert_allclose(np.einsum("fij,fj->fi", r, rt.unit_vectors(u)), rt.unit_vectors(v), atol=1e-10)
     np.testing.assert_allclose(np.linalg.det(r), 1.0, atol=1e-10)
 
 
 @pytest.mark.parametrize("up", [(0, 0, 1), (0, 0, -1), (1, 0, 0), (0, -1, 0), (0, 1, 0)])
 def test_up_axis_rotation_puts_up_on_plus_y(up):
-    r = rt._up_axis_rotation(np.array(up, float) + 0.1)
+    r = rt.up_axis_rotation(np.array(up, float) + 0.1)
     np.testing.assert_allclose(r @ np.array(up, float), [0, 1, 0], atol=1e-12)
     np.testing.assert_allclose(np.linalg.det(r), 1.0)
 
@@ -294,7 +294,7 @@ def test_retarget_keeps_body_bone_lengths_and_bvh_directions(name, body):
     rot = motion.local_rotations
     identity = np.broadcast_to(np.eye(3), rot.shape)
     np.testing.assert_allclose(rot @ np.swapaxes(rot, -1, -2), identity, atol=1e-9)
-    positions, _ = rt._fk(rot, motion.root_translation, rest, parents)
+    positions, _ = rt.joint_forward_kinematics(rot, motion.root_translation, rest, parents)
     child = np.flatnonzero(parents >= 0)
     lengths = np.linalg.norm(positions[:, child] - positions[:, parents[child]], axis=-1)
     rest_lengths = np.linalg.norm(rest[child] - rest[parents[child]], axis=-1)
@@ -313,14 +313,14 @@ def test_retarget_torso_twist_follows_the_bvh(name):
     """Kabsch joints: the pelvis's left axis follows the BVH hip line, the head's the eye line."""
     bvh, motion = retargeted(name, synthetic_body())
     body = synthetic_body()
-    _, glob = rt._fk(motion.local_rotations, motion.root_translation, body["body_rest_joints"],
+    _, glob = rt.joint_forward_kinematics(motion.local_rotations, motion.root_translation, body["body_rest_joints"],
                      body["body_parents"])
     pose = bvh_mod.forward_kinematics(bvh, frames=motion.source_frames)
     marks = rt.FAMILY_LANDMARKS[motion.family]
 
     def line(a, b):
-        v = rt._bvh_point(bvh, pose, marks[a]) - rt._bvh_point(bvh, pose, marks[b])
-        return rt._unit(v @ motion.bvh_to_body.T)
+        v = rt.bvh_point(bvh, pose, marks[a]) - rt.bvh_point(bvh, pose, marks[b])
+        return rt.unit_vectors(v @ motion.bvh_to_body.T)
 
     def angle(u, v):
         return np.degrees(np.arccos(np.clip(np.einsum("fi,fi->f", u, v), -1, 1)))
@@ -335,8 +335,8 @@ def test_retarget_torso_twist_follows_the_bvh(name):
 def test_retarget_feet_on_the_floor(name, body):
     _, motion = retargeted(name, body)
     rest, parents = body["body_rest_joints"], body["body_parents"]
-    positions, glob = rt._fk(motion.local_rotations, motion.root_translation, rest, parents)
-    sites = rt._fk_end_sites(positions, glob, rest, body["end_sites_rest"],
+    positions, glob = rt.joint_forward_kinematics(motion.local_rotations, motion.root_translation, rest, parents)
+    sites = rt.end_site_forward_kinematics(positions, glob, rest, body["end_sites_rest"],
                              body["end_site_parents"])
     feet = [body["joint_names"].index(n) for n in ("l_ankle", "r_ankle")]
     toes = [body["end_site_names"].index(n) for n in ("l_toe", "r_toe")]
@@ -390,9 +390,9 @@ def test_place_in_room(anchor):
     assert rt.heading_of(placed) == pytest.approx(np.pi / 2)
     np.testing.assert_allclose(pelvis[:, 1], motion.root_translation[:, 1])
     # same pose up to a rigid motion about the vertical: joint heights are unchanged
-    before, _ = rt._fk(motion.local_rotations, motion.root_translation,
+    before, _ = rt.joint_forward_kinematics(motion.local_rotations, motion.root_translation,
                        body["body_rest_joints"], body["body_parents"])
-    after, _ = rt._fk(placed.local_rotations, placed.root_translation,
+    after, _ = rt.joint_forward_kinematics(placed.local_rotations, placed.root_translation,
                       body["body_rest_joints"], body["body_parents"])
     np.testing.assert_allclose(after[..., 1], before[..., 1], atol=1e-9)
     step_before = np.linalg.norm(np.diff(before, axis=0), axis=-1)
@@ -406,7 +406,7 @@ def test_motion_drives_the_body_kinematics():
 
     body = synthetic_body()
     _, motion = retargeted("002_01.bvh", body)
-    ours, _ = rt._fk(motion.local_rotations, motion.root_translation, body["body_rest_joints"],
+    ours, _ = rt.joint_forward_kinematics(motion.local_rotations, motion.root_translation, body["body_rest_joints"],
                      body["body_parents"])
     _, theirs = kinematics.forward_kinematics(motion.local_rotations, motion.root_translation,
                                               body["body_rest_joints"], body["body_parents"])

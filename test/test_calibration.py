@@ -10,12 +10,12 @@ import pytest
 
 from hmocap_ros.calibration.board import BoardSpec
 from hmocap_ros.calibration.bundle_adjustment import bundle_adjust
-from hmocap_ros.calibration.geometry import rotation_angle_deg, rotation_matrices
+from hmocap_ros.geometry.rotations import rotation_angle_deg, rotvec_to_matrix
 from hmocap_ros.calibration.observations import Observations
 from hmocap_ros.calibration.pipeline import calibrate_rig
 from hmocap_ros.calibration.room_frame import FLOOR_ROTATION
 from hmocap_ros.cli import main as hmocap
-from hmocap_ros.rig import load_rig
+from hmocap_ros.geometry.rig import load_rig
 from hmocap_ros.sim.calibration_path import board_poses
 from hmocap_ros.sim.mocap_rig import make_rig
 
@@ -50,10 +50,10 @@ def test_bundle_adjustment_recovers_perturbed_rig():
     t_w = t - np.einsum("kij,j->ki", R_w, t[0])
     Rb = np.einsum("ij,pjk->pik", R[0], R_board)
     tb = t_board @ R[0].T + t[0]
-    R0 = rotation_matrices(rng.normal(0, 0.02, (3, 3))) @ R_w
+    R0 = rotvec_to_matrix(rng.normal(0, 0.02, (3, 3))) @ R_w
     R0[0] = np.eye(3)
     t0 = t_w + np.r_[[[0, 0, 0]], rng.normal(0, 0.05, (2, 3))]
-    Rb0 = rotation_matrices(rng.normal(0, 0.02, (len(Rb), 3))) @ Rb
+    Rb0 = rotvec_to_matrix(rng.normal(0, 0.02, (len(Rb), 3))) @ Rb
     tb0 = tb + rng.normal(0, 0.05, tb.shape)
     result = bundle_adjust(obs, spec.corner_points(), 0, R0, t0, Rb0, tb0, K, D[:, :5])
     assert result.n_dropped == 0
@@ -197,7 +197,7 @@ def test_camera_never_seeing_the_board(session, tmp_path, capsys):
 
 
 def test_session_rendered_in_the_cameras_of_a_given_rig(tmp_path):
-    from hmocap_ros.rig import save_rig
+    from hmocap_ros.geometry.rig import save_rig
 
     given = make_rig(2, 160, 120)
     save_rig(given, tmp_path / "given.yaml")

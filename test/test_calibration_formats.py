@@ -14,9 +14,9 @@ from hmocap_ros.calibration.formats import (FORMATS, CalibrationFormatError, det
                                             load_calibration_rig, read_calibration,
                                             save_calibration_rig)
 from hmocap_ros.calibration.formats.world_frame import guess_up, up_rotation
-from hmocap_ros.camera_model import PinholeCamera, look_at
+from hmocap_ros.geometry import PinholeCamera, look_at
 from hmocap_ros.cli import main
-from hmocap_ros.rig import Rig, load_rig
+from hmocap_ros.geometry.rig import Rig, load_rig
 
 DATA = Path(__file__).parent / "data" / "calibration"
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,10 +1,10 @@
-"""Tests of hmocap_ros.camera_model against OpenCV and synthetic scenes with known geometry."""
+"""Tests of hmocap_ros.geometry against OpenCV and synthetic scenes with known geometry."""
 
 import cv2
 import numpy as np
 import pytest
 
-from hmocap_ros.camera_model import (
+from hmocap_ros.geometry import (
     ROOM_UP,
     PinholeCamera,
     distort_normalized,

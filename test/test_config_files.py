@@ -208,7 +208,7 @@ def _run_launch_file(monkeypatch, path: Path, **arguments):
 def test_launch_file_runs_the_pipeline_from_a_rig_file(monkeypatch, tmp_path):
     """The rig's camera names reach foreground_segmentation and its path camera_rig_publisher;
     the namespace, the gesture node's depth remaps and sim time follow the arguments."""
-    from hmocap_ros.rig import Rig, load_rig, save_rig
+    from hmocap_ros.geometry.rig import Rig, load_rig, save_rig
 
     example = load_rig(ROOT / "config" / "rig_example.yaml")
     rig_file = tmp_path / "two_cameras.yaml"

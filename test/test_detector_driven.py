@@ -12,15 +12,17 @@ import pytest
 
 from hmocap_ros.body import rest_pose
 from hmocap_ros.params import from_flat
-from hmocap_ros.render import project_batch, render_silhouettes
-from hmocap_ros.segmentation.skin import skin_probability
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.render import render_silhouettes
+from hmocap_ros.detection.skin import skin_probability
 from hmocap_ros.sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.detection.skin_extremities import (SkinExtremityDetector, SkinExtremityParams,
                                                    surface_points, visibility)
-from hmocap_ros.tracking.detection_assignment import (MAX_DISTANCE, classify, detection_cost,
+from hmocap_ros.detection.greedy_assignment import classify
+from hmocap_ros.tracking.detection_assignment import (MAX_DISTANCE, detection_cost,
                                                       reacquire_hands)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 

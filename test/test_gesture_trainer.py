@@ -191,7 +191,7 @@ def test_recording_keeps_the_learnt_frames_and_their_annotation(tmp_path):
     assert rec[0].depth_mm.dtype == np.uint16
     assert np.array_equal(rec[3].depth_mm, np.rint(frames[13] * 1000).astype(np.uint16))
 
-    from hmocap_ros.pinhole_camera import PinholeCamera
+    from hmocap_ros.geometry.pinhole_camera import PinholeCamera
 
     camera = PinholeCamera.from_camera_info({"width": 64, "height": 48, "K": [[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]],
                                              "D": [0.0] * 5, "distortion_model": "plumb_bob", "frame_id": "depth"},

@@ -19,7 +19,8 @@ from hmocap_ros.body.pose_points import PosePoints
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.detection.detections import Detections
 from hmocap_ros.params import from_flat
-from hmocap_ros.render import project_batch, render_silhouettes
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.render import render_silhouettes
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.keypoint_anthropometry import MEASURES, KeypointShape

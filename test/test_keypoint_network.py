@@ -19,7 +19,7 @@ import re
 import numpy as np
 import pytest
 
-from hmocap_ros.camera_model import project_points
+from hmocap_ros.geometry import project_points
 from hmocap_ros.detection import (DEFAULT_MODEL, KeypointDetector, KeypointParams, ModelFileError,
                                   PoseDetector, PoseLandmarkNetwork, Roi, box_roi, foreground_box)
 from hmocap_ros.detection.keypoint_network import LANDMARK_NAMES, refine_from_heatmap

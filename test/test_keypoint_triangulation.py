@@ -11,8 +11,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hmocap_ros.camera_model import look_at, project_points
-from hmocap_ros.detection.keypoint_detector import KeypointParams, foreground_box, previous_pixels
+from hmocap_ros.geometry import look_at, project_points
+from hmocap_ros.detection.keypoint_detector import foreground_box, previous_pixels
+from hmocap_ros.detection.params import KeypointParams
 from hmocap_ros.detection.keypoint_roi import box_roi, skeleton_roi
 from hmocap_ros.detection.keypoint_network import LANDMARK_NAMES, NUM_LANDMARKS, ViewLandmarks
 from hmocap_ros.detection.keypoint_triangulation import (HEAD_OFFSET, HIP_WIDENING,

@@ -21,7 +21,8 @@ from hmocap_ros.io import topics
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import default_factory, make_header
-from hmocap_ros.rig import Rig, load_rig, rig_to_msg
+from hmocap_ros.geometry.rig import Rig, load_rig
+from hmocap_ros.io.rig_messages import rig_to_msg
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_BAG = ROOT / "hmocap_ros" / "data" / "demo" / "mocap_4cam.mcap"
@@ -161,7 +162,8 @@ def test_the_subject_is_scored_on_the_nearest_track():
 def write_tiny_bag(path: Path, n_empty: int, n_subject: int = 3) -> None:
     """A 2-camera 160x120 bag in the documented layout: RGB images of a grey room with the
     subject's silhouette painted in, exact silhouettes, skeleton, body shape."""
-    from hmocap_ros.render import project_batch, render_silhouettes
+    from hmocap_ros.geometry.projection import project_batch
+    from hmocap_ros.render import render_silhouettes
 
     model = load_body_model("tracking")
     full = load_rig(ROOT / "config" / "rig_example.yaml")
@@ -296,7 +298,8 @@ def test_eval_tracks_with_a_given_rig(tmp_path, capsys):
 
     from hmocap_ros.eval.mocap_frames import load_frames
     from hmocap_ros.io.bag_reader import BagReader
-    from hmocap_ros.rig import rig_from_msg, save_rig
+    from hmocap_ros.geometry.rig import save_rig
+    from hmocap_ros.io.rig_messages import rig_from_msg
 
     with BagReader(DEMO_BAG) as reader:
         rig = rig_from_msg(reader.first(topics.CAMERA_RIG))

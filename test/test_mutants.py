@@ -142,7 +142,7 @@ def keypoint_check_off(mp: pytest.MonkeyPatch) -> None:
 
 def landmark_undistortion_skipped(mp: pytest.MonkeyPatch) -> None:
     """The views' landmarks triangulated as they are, in the distorted image."""
-    from hmocap_ros.pinhole_camera import PinholeCamera
+    from hmocap_ros.geometry.pinhole_camera import PinholeCamera
 
     mp.setattr(PinholeCamera, "undistort_pixels", lambda self, pixels: np.asarray(pixels, float))
 

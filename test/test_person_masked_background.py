@@ -13,7 +13,7 @@ import pytest
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy, image_to_rgb
-from hmocap_ros.rig import rig_from_msg
+from hmocap_ros.io.rig_messages import rig_from_msg
 from hmocap_ros.segmentation import (ForegroundParams, PersonMaskedBackground, background_models,
                                      mask_scores)
 

@@ -7,14 +7,23 @@ import numba
 import numpy as np
 import pytest
 
+from hmocap_ros.geometry.pinhole_camera import look_at_pose as look_at
+from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import (DirectionalLight, KinectNoise, Lighting, Material, PointLight,
                                concatenate_meshes, depth_to_millimetres, face_range_mask,
-                               grid_quad, interpolate, kinect_depth, look_at, observed_counts,
-                               project_batch, project_points, rasterize, render_shadow_map,
-                               render_silhouettes, shade, xor_counts)
+                               grid_quad, interpolate, kinect_depth, observed_counts, rasterize,
+                               render_shadow_map, render_silhouettes, shade, xor_counts)
 from hmocap_ros.render.depth import projector_shadow
 from hmocap_ros.render.reference import coverage_pairs, silhouette_reference, zbuffer_reference
 from hmocap_ros.render.sensor import add_sensor_noise, random_illumination
+
+
+def project_points(points, K, R, t, dist=None, *, near: float = 1e-3, scale: float = 1.0):
+    """``project_batch`` of one point set into one camera: ``uv (N, 2)``, ``z (N,)``."""
+    uv, z = project_batch(np.asarray(points, dtype=np.float64)[None], np.asarray(K)[None],
+                          np.asarray(R)[None], np.asarray(t)[None],
+                          None if dist is None else np.asarray(dist)[None], near=near, scale=scale)
+    return uv[0, 0], z[0, 0]
 
 
 @pytest.fixture(scope="module")

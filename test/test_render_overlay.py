@@ -15,7 +15,7 @@ from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.rig import rig_from_msg
+from hmocap_ros.io.rig_messages import rig_from_msg
 
 FRAMES = 4
 HEAD_SHIFT_M = 0.2

@@ -1,4 +1,4 @@
-"""Tests of hmocap_ros.rig: the rig YAML format, validation errors and the CameraRig message."""
+"""Tests of hmocap_ros.geometry.rig: the rig YAML format, validation errors and the CameraRig message."""
 
 from pathlib import Path
 
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import yaml
 
-from hmocap_ros.camera_model import PinholeCamera, look_at, project_points, triangulate
-from hmocap_ros.rig import Rig, RigError, load_rig, rig_from_dict, rig_from_msg, rig_to_dict, rig_to_msg, save_rig
+from hmocap_ros.geometry import PinholeCamera, look_at, project_points, triangulate
+from hmocap_ros.geometry.rig import Rig, RigError, load_rig, rig_from_dict, rig_to_dict, save_rig
+from hmocap_ros.io.rig_messages import rig_from_msg, rig_to_msg
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "config" / "rig_example.yaml"
 ROOM_CENTRE = np.array([0.0, 1.0, 0.0])

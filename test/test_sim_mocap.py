@@ -13,17 +13,19 @@ import numpy as np
 import pytest
 
 from hmocap_ros.body import BodyShape, load_body_model
-from hmocap_ros.camera_model import project_points
+from hmocap_ros.geometry import project_points
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy, joint_state_to_dict
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.render.projection import project_batch
+from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render.silhouette import render_silhouettes
-from hmocap_ros.rig import load_rig, rig_from_msg
-from hmocap_ros.sim import mocap_dataset, mocap_lighting, mocap_subject
+from hmocap_ros.geometry.rig import load_rig
+from hmocap_ros.io.rig_messages import rig_from_msg
+from hmocap_ros.sim import mocap_lighting, mocap_subject
 from hmocap_ros.sim.appearance import PersonAppearance, dress, sample_appearance
 from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate, make_rig
+from hmocap_ros.sim.params import DATA_DIR
 from hmocap_ros.sim.mocap_render import (
     FrameState,
     MocapRenderer,
@@ -223,7 +225,7 @@ def test_posed_body_stays_watertight(models):
     from hmocap_ros.body import sample_pose, sample_shape
 
     params = sample_pose(tracking.skeleton, rng, 3, scale=0.6)
-    full_params = mocap_subject._full_parameters(params, tracking, full)
+    full_params = mocap_subject.full_parameters(params, tracking, full)
     shape = sample_shape(rng)
     res = full.forward(full_params, shape)
     # The finer rendered body and the tracking body share their joints exactly.
@@ -304,7 +306,7 @@ def test_still_seconds_hold_the_first_pose_in_view_from_the_first_frame(tmp_path
 
 def test_lighting_events_dim_the_lamp_and_come_back():
     t = np.arange(150) / 25.0
-    lamp, exposure, window = mocap_lighting._lighting_events(np.random.default_rng(3), t, 1.0, 6.0)
+    lamp, exposure, window = mocap_lighting.lighting_events(np.random.default_rng(3), t, 1.0, 6.0)
     assert lamp[0] == 1.0 and lamp[-1] == 1.0 and 0.25 <= lamp.min() <= 0.35
     dim = np.flatnonzero(lamp < 0.5)
     assert 1.0 + 0.2 * 5 <= t[dim[0]] <= 1.0 + 0.31 * 5 and t[dim[-1]] <= 1.0 + 0.71 * 5
@@ -351,10 +353,10 @@ def test_a_run_too_long_for_the_views_stays_inside_the_room(capsys):
     """The 4 m of the shipped run cannot stay in every view of the room: the placement keeps
     the pelvis ``MIN_PELVIS_CLEARANCE`` from walls and furniture in every frame, and says that
     the motion leaves some view."""
-    cfg = MocapSimConfig(out="unused.mcap", bvh=mocap_dataset.DATA_DIR / "bvh" / "09_01.bvh",
+    cfg = MocapSimConfig(out="unused.mcap", bvh=DATA_DIR / "bvh" / "09_01.bvh",
                          start=0.0, seconds=1.2, seed=204, progress=False)
-    rng_room, rng_shape, _, rng_place = mocap_subject._streams(cfg.seed)[:4]
-    _, room, _, _, motion = mocap_subject._subject_in_room(cfg, rng_room, rng_shape, rng_place)
+    rng_room, rng_shape, _, rng_place = mocap_subject.random_streams(cfg.seed)[:4]
+    _, room, _, _, motion = mocap_subject.subject_in_room(cfg, rng_room, rng_shape, rng_place)
     root = motion.root_translation[:, [0, 2]]
     assert len(root) == 30
     assert np.ptp(root, axis=0).max() > 3.5  # the run crosses the room

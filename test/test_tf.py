@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from hmocap_ros.geometry.rotations import quaternion_to_matrix
 from hmocap_ros.io import tf
 from hmocap_ros.io.msg_factory import RclpyFactory, RosbagsFactory, stamp_to_ns
 from hmocap_ros.io.typestore import hmocap_typestore
 from hmocap_ros.processes import NodeProcess, loopback_dds_env
-from hmocap_ros.rig import Rig, load_rig, save_rig
+from hmocap_ros.geometry.rig import Rig, load_rig, save_rig
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG = ROOT / "config" / "rig_example.yaml"
@@ -31,10 +32,10 @@ def test_rotation_to_quaternion_matches_scipy_and_round_trips():
         q = np.array(tf.rotation_to_quaternion(rotation.as_matrix()))
         assert q[3] >= 0 and np.isclose(np.linalg.norm(q), 1.0)
         np.testing.assert_allclose(np.abs(q @ rotation.as_quat()), 1.0, atol=1e-12)  # same rotation
-        np.testing.assert_allclose(tf.quaternion_to_rotation(q), rotation.as_matrix(), atol=1e-12)
+        np.testing.assert_allclose(quaternion_to_matrix(q), rotation.as_matrix(), atol=1e-12)
     for axis in np.eye(3):  # half turns: w = 0, the branch of the largest diagonal element
         matrix = Rotation.from_rotvec(np.pi * axis).as_matrix()
-        np.testing.assert_allclose(tf.quaternion_to_rotation(tf.rotation_to_quaternion(matrix)), matrix, atol=1e-12)
+        np.testing.assert_allclose(quaternion_to_matrix(tf.rotation_to_quaternion(matrix)), matrix, atol=1e-12)
     assert tf.rotation_to_quaternion(np.eye(3)) == (0.0, 0.0, 0.0, 1.0)
 
 
@@ -161,14 +162,14 @@ def _check_against_rig(transforms: dict, rig: Rig) -> None:
         parent, stamp, translation, rotation = transforms[camera.frame_id]
         assert parent == rig.frame_id and stamp > 0
         np.testing.assert_allclose(translation, camera.position, atol=1e-9)       # camera centre
-        np.testing.assert_allclose(tf.quaternion_to_rotation(rotation), camera.R_wc, atol=1e-9)  # orientation
+        np.testing.assert_allclose(quaternion_to_matrix(rotation), camera.R_wc, atol=1e-9)  # orientation
 
 
 def test_rig_publisher_publishes_static_transforms(tmp_path):
     rig = load_rig(RIG)
     # the changed rig: two cameras, one moved and renamed frame
     moved = load_rig(RIG)
-    from hmocap_ros.pinhole_camera import PinholeCamera
+    from hmocap_ros.geometry.pinhole_camera import PinholeCamera
 
     c1, c2 = moved[0], moved[1]
     c2 = PinholeCamera.from_pose(name=c2.name, width=c2.width, height=c2.height, K=c2.K,

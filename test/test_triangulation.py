@@ -5,8 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.camera_model import reprojection_errors, triangulate, triangulate_robust
-from hmocap_ros.rig import load_rig
+from hmocap_ros.geometry import reprojection_errors, triangulate, triangulate_robust
+from hmocap_ros.geometry.rig import load_rig
 
 ROOT = Path(__file__).resolve().parents[1]
 

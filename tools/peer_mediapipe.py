@@ -23,7 +23,7 @@ order) prints the package's keypoints beside the peer, joint by joint.
 MediaPipe is not a dependency of hmocap_ros (its last wheel with the pose model inside,
 0.10.14, needs numpy < 2): the first run creates a separate venv, ``.venv-peer``, with
 ``pip install mediapipe==0.10.14 "numpy<2"`` and runs ``peer_mediapipe_worker.py`` in it.
-Triangulation is ``hmocap_ros.camera_model.triangulate_robust`` (undistorted DLT on the
+Triangulation is ``hmocap_ros.geometry.triangulate_robust`` (undistorted DLT on the
 landmarks with visibility > 0.5, a view that reprojects more than ``--max-reprojection-px``
 away left out; 0 gives the plain DLT of ``triangulate``).
 """
@@ -45,7 +45,7 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 from mocap_table import SEQUENCES, bag_seed, bag_stem  # noqa: E402
 
-from hmocap_ros.camera_model import triangulate, triangulate_robust  # noqa: E402
+from hmocap_ros.geometry import triangulate, triangulate_robust  # noqa: E402
 from hmocap_ros.tracking.methods import METHODS  # noqa: E402
 
 #: our joint -> MediaPipe Pose landmark index
@@ -72,7 +72,7 @@ def read_bag(bag: Path, stack_path: Path):
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.io.msg_factory import stamp_to_ns
-    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.io.rig_messages import rig_from_msg
 
     with BagReader(bag) as reader:
         rig = rig_from_msg(reader.first(topics.CAMERA_RIG))

@@ -1,4 +1,6 @@
-"""Small batched rotation helpers (numpy): exponential map, hinge and Euler projections.
+"""Batched rotation helpers of the body model (numpy): revolute twists, hinge and Euler projections.
+
+The rotation primitives (exponential map, quaternions) are :mod:`hmocap_ros.geometry.rotations`.
 
 All functions take stacks of shape (..., 3, 3) / (..., 3) and never loop in Python over
 the batch.  Angles are radians.
@@ -7,13 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from hmocap_ros.geometry.rotations import rotvec_to_matrix, skew
+
 _EPS = 1e-12
-
-
-def skew(axis: np.ndarray) -> np.ndarray:
-    """Cross-product matrix [a]x of one axis (3,)."""
-    x, y, z = np.asarray(axis, dtype=np.float64)
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def axis_angle_matrix(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -26,43 +24,6 @@ def axis_angle_matrix(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     k2 = k @ k
     t = np.asarray(angle, dtype=np.float64)[..., None, None]
     return np.eye(3) + np.sin(t) * k + (1.0 - np.cos(t)) * k2
-
-
-def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
-    """Exponential map of rotation vectors (..., 3) -> (..., 3, 3)."""
-    v = np.asarray(rotvec, dtype=np.float64)
-    theta = np.linalg.norm(v, axis=-1)
-    small = theta < 1e-8
-    safe = np.where(small, 1.0, theta)
-    # sin(t)/t and (1-cos t)/t^2 with their Taylor limits near zero
-    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
-    x, y, z = v[..., 0], v[..., 1], v[..., 2]
-    zero = np.zeros_like(x)
-    k = np.stack([np.stack([zero, -z, y], -1), np.stack([z, zero, -x], -1),
-                  np.stack([-y, x, zero], -1)], -2)
-    return np.eye(3) + a[..., None, None] * k + b[..., None, None] * (k @ k)
-
-
-def matrix_to_rotvec(r: np.ndarray) -> np.ndarray:
-    """Logarithm map (..., 3, 3) -> rotation vectors (..., 3) with angle in [0, pi]."""
-    r = np.asarray(r, dtype=np.float64)
-    cos_t = np.clip((np.trace(r, axis1=-2, axis2=-1) - 1.0) * 0.5, -1.0, 1.0)
-    w = np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
-                  r[..., 1, 0] - r[..., 0, 1]], -1)
-    sin_t = 0.5 * np.linalg.norm(w, axis=-1)
-    theta = np.arctan2(sin_t, cos_t)
-    scale = np.where(sin_t > 1e-8, theta / (2.0 * np.maximum(sin_t, 1e-300)), 0.5)
-    out = w * scale[..., None]
-    # near pi the antisymmetric part vanishes: take the axis from R + I
-    near_pi = (sin_t <= 1e-6) & (cos_t < 0.0)
-    if np.any(near_pi):
-        m = (r[near_pi] + np.eye(3)) * 0.5
-        col = np.argmax(np.diagonal(m, axis1=-2, axis2=-1), axis=-1)
-        axis = m[np.arange(len(m)), :, col]
-        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
-        out[near_pi] = axis * theta[near_pi][..., None]
-    return out
 
 
 def hinge_angle(r: np.ndarray, axis: np.ndarray) -> np.ndarray:

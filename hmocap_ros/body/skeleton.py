@@ -69,9 +69,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hmocap_ros.geometry.rotations import rotvec_to_matrix
+
 from .dof_table import master_dof_table
-from .rotations import (axis_angle_matrix, euler2_angles, euler3_angles, hinge_angle,
-                        rotvec_to_matrix, swing_twist_angles)
+from .rotations import axis_angle_matrix, euler2_angles, euler3_angles, hinge_angle, swing_twist_angles
 
 DOF_SETS = ("tracking", "full")
 SWING_NORM_MAX = np.deg2rad(170.0)  # swing cone kept away from the antipodal singularity

@@ -19,9 +19,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from hmocap_ros.calibration.geometry import rotation_matrices, rotation_vectors
 from hmocap_ros.calibration.observations import Observations
-from hmocap_ros.lens_distortion import distort_xy
+from hmocap_ros.geometry.distortion import distort_xy
+from hmocap_ros.geometry.rotations import matrix_to_rotvec, rotvec_to_matrix
 
 __all__ = ["BundleResult", "project_observations", "bundle_adjust"]
 
@@ -83,8 +83,8 @@ class _Problem:
         self.n = self.n_cam + self.n_board + (_N_INTR * self.M if refine_intrinsics else 0)
 
     def pack(self, R_cam, t_cam, R_board, t_board):
-        cams = np.concatenate([rotation_vectors(R_cam[self.free]), t_cam[self.free]], axis=1)
-        boards = np.concatenate([rotation_vectors(R_board), t_board], axis=1)
+        cams = np.concatenate([matrix_to_rotvec(R_cam[self.free]), t_cam[self.free]], axis=1)
+        boards = np.concatenate([matrix_to_rotvec(R_board), t_board], axis=1)
         parts = [cams.ravel(), boards.ravel()]
         if self.refine_intrinsics:
             intr = np.concatenate([self.K[:, 0, 0, None], self.K[:, 1, 1, None], self.K[:, 0, 2, None],
@@ -97,14 +97,14 @@ class _Problem:
         boards = x[self.n_cam:self.n_cam + self.n_board].reshape(-1, 6)
         R_cam = np.repeat(np.eye(3)[None], self.M, axis=0)
         t_cam = np.zeros((self.M, 3))
-        R_cam[self.free] = rotation_matrices(cams[:, :3])
+        R_cam[self.free] = rotvec_to_matrix(cams[:, :3])
         t_cam[self.free] = cams[:, 3:]
         K, D = self.K.copy(), self.D.copy()
         if self.refine_intrinsics:
             intr = x[self.n_cam + self.n_board:].reshape(self.M, _N_INTR)
             K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2] = intr[:, 0], intr[:, 1], intr[:, 2], intr[:, 3]
             D = intr[:, 4:].copy()
-        return R_cam, t_cam, rotation_matrices(boards[:, :3]), boards[:, 3:], K, D
+        return R_cam, t_cam, rotvec_to_matrix(boards[:, :3]), boards[:, 3:], K, D
 
     def residuals(self, x):
         R_cam, t_cam, R_board, t_board, K, D = self.unpack(x)

@@ -9,7 +9,7 @@ from typing import Callable
 import numpy as np
 
 from hmocap_ros.calibration.bundle_adjustment import BundleResult, bundle_adjust
-from hmocap_ros.calibration.geometry import compose, invert
+from hmocap_ros.geometry.rotations import compose, invert
 from hmocap_ros.calibration.initialisation import (chain_cameras, initial_board_poses,
                                                    view_poses)
 from hmocap_ros.calibration.observations import Observations

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hmocap_ros.calibration.geometry import compose, invert
+from hmocap_ros.geometry.rotations import compose, invert
 
 __all__ = ["FLOOR_ROTATION", "CAMERA_TO_ROOM", "room_from_floor_board", "room_from_camera"]
 

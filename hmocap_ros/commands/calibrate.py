@@ -8,7 +8,7 @@ Reads every ``/<cam>/image_raw`` of the bag, detects the board's corners
 (:mod:`~hmocap_ros.calibration.initialisation`), refines everything by bundle adjustment
 (:mod:`~hmocap_ros.calibration.bundle_adjustment`) and sets the room frame from the board lying
 on the floor during the first ``--floor-seconds`` (:mod:`~hmocap_ros.calibration.room_frame`).
-Writes the rig YAML (:mod:`hmocap_ros.rig` format), ``<stem>.report.txt`` and ``<stem>.png``
+Writes the rig YAML (:mod:`hmocap_ros.geometry.rig` format), ``<stem>.report.txt`` and ``<stem>.png``
 (the cameras in the room from above and from the side). Progress goes to stdout.
 
 Bad input (no board in the bag, a board of other dimensions than configured, fewer than two
@@ -75,7 +75,7 @@ def _read(bag: Path, spec, every: int, log):
     from hmocap_ros.io.camera_info import camera_info_to_dict
     from hmocap_ros.io.images import image_to_rgb
     from hmocap_ros.io.msg_factory import stamp_to_ns
-    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.io.rig_messages import rig_from_msg
 
     with BagReader(bag) as reader:
         topics = reader.topics()
@@ -181,7 +181,7 @@ def _write_outputs(out: Path, rig, text: str, solution, source, room: str,
                    total: float) -> tuple[Path, Path]:
     """The rig YAML, the report and the picture, each written whole or not at all."""
     from hmocap_ros.calibration.report import save_rig_picture
-    from hmocap_ros.rig import save_rig
+    from hmocap_ros.geometry.rig import save_rig
 
     label = Path(str(source)).name
     stem = out.name[:-len(out.suffix)] if out.suffix else out.name
@@ -223,8 +223,8 @@ def calibrate_session(ns: argparse.Namespace, session, source: Path,
     from hmocap_ros.calibration.observations import Observations
     from hmocap_ros.calibration.pipeline import calibrate_rig
     from hmocap_ros.calibration.report import camera_rows, report_text
-    from hmocap_ros.camera_model import PinholeCamera
-    from hmocap_ros.rig import Rig
+    from hmocap_ros.geometry import PinholeCamera
+    from hmocap_ros.geometry.rig import Rig
 
     spec, out = session.spec, Path(ns.out)
     views = _check_board(session, spec, source)
@@ -279,7 +279,7 @@ def run_live_calibration(ns: argparse.Namespace, ros_args: list | None = None,
 def main_from_args(ns: argparse.Namespace, ros_args: list | None = None) -> int:
     from hmocap_ros.calibration.pipeline import CalibrationError
     from hmocap_ros.io.bag_reader import BagReadError
-    from hmocap_ros.rig import RigError
+    from hmocap_ros.geometry.rig import RigError
 
     if bool(ns.bag) == bool(ns.live):
         print("hmocap calibrate: give a bag or --live (not both)", file=sys.stderr)

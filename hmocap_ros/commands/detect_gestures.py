@@ -56,7 +56,7 @@ def _info_topic(depth_topic: str) -> str:
 
 def _camera(info):
     """PinholeCamera of a CameraInfo message, or None when it has no intrinsics."""
-    from hmocap_ros.camera_model import PinholeCamera
+    from hmocap_ros.geometry import PinholeCamera
     from hmocap_ros.io.conversions import ConversionError, camera_info_to_dict
 
     try:

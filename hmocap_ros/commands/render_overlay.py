@@ -45,7 +45,7 @@ def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, o
         if track:
             if kind != "multiview":
                 raise OverlayError(f"{bag}: --track needs a multi-view bag (a rig and camera images)")
-            from hmocap_ros.commands.track import TrackError, track_to_bag
+            from hmocap_ros.eval.bag_tracking import TrackError, track_to_bag
 
             outputs = Path(tmp) / "tracked.mcap"
             if progress is not None:

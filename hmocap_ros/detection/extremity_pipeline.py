@@ -6,7 +6,7 @@ detectors, registered in :data:`DETECTORS` and chosen by ``detector``:
 
 ``skin``
     the thesis' own (sec. 2.5.1, eq. 2.16-2.18): the skin probability of each view inside its
-    foreground (:mod:`hmocap_ros.segmentation.skin`) fused on the oriented surface of the
+    foreground (:mod:`hmocap_ros.detection.skin`) fused on the oriented surface of the
     carved hull (:mod:`.skin_extremities`); the candidates are labelled by eq. 2.19 against the
     last skeleton when one is given, else ``unknown`` (the tracker assigns them to its own
     predicted pose anyway).
@@ -30,11 +30,12 @@ from typing import Sequence
 import numpy as np
 
 from hmocap_ros.detection.detections import MODEL_JOINT, UNKNOWN, Detections
-from hmocap_ros.detection.keypoint_detector import KeypointDetector, KeypointParams
+from hmocap_ros.detection.greedy_assignment import classify
+from hmocap_ros.detection.keypoint_detector import KeypointDetector
+from hmocap_ros.detection.params import KeypointParams
+from hmocap_ros.detection.skin import skin_probability
 from hmocap_ros.detection.skin_extremities import SkinExtremityDetector, SkinExtremityParams
 from hmocap_ros.params import group, param
-from hmocap_ros.segmentation.skin import skin_probability
-from hmocap_ros.tracking.detection_assignment import classify
 
 __all__ = ["DETECTORS", "ExtremityDetectionParams", "ExtremityPipeline", "skeleton_labels"]
 

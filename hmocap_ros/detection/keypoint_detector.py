@@ -48,89 +48,20 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from hmocap_ros.camera_model import project_points
+from hmocap_ros.geometry import project_points
 from hmocap_ros.detection.keypoint_network import PoseLandmarkNetwork, ViewLandmarks
 from hmocap_ros.detection.keypoint_roi import Roi, box_roi, landmarks_roi, skeleton_roi
 from hmocap_ros.detection.keypoint_triangulation import Keypoints3D, triangulate_views
 from hmocap_ros.detection.pose_detector import PoseDetector
-from hmocap_ros.params import param
+from hmocap_ros.detection.params import KeypointParams
 
-__all__ = ["CROP_SOURCES", "KeypointParams", "KeypointDetector", "foreground_box",
-           "previous_pixels"]
+__all__ = ["CROP_SOURCES", "KeypointDetector", "foreground_box", "previous_pixels"]
 
 _LOG = logging.getLogger(__name__)
 #: masks are shrunk to about this width (pixels) to find the person's box
 _ROI_MASK_WIDTH = 160
 #: where a view's crop came from (module docstring), in the order they are tried
 CROP_SOURCES = ("track", "skeleton", "detector", "foreground")
-
-
-@dataclass(frozen=True)
-class KeypointParams:
-    """Tunables of :class:`KeypointDetector` and
-    :func:`~hmocap_ros.detection.keypoint_triangulation.triangulate_views`."""
-
-    box_margin: float = param(
-        1.15, "Side of the upright crop about a foreground box (the crop when the pose detector "
-              "finds nobody) over the box's longer side (>= 1).")
-    previous_box_pad: float = param(
-        0.25, "Growth of the previous skeleton's projected radius (its farthest keypoint from "
-              "the hips' midpoint) for a view without a track (>= 0).")
-    min_blob_fraction: float = param(
-        0.002, "Smallest foreground, as a fraction of the mask's pixels, that counts as a "
-               "person (a view with less is skipped; in [0, 1)).")
-    min_detection_score: float = param(
-        0.5, "Smallest score of the pose detector for a detection to place a view's first "
-             "crop (in [0, 1]).")
-    min_pose_score: float = param(
-        0.5, "Smallest pose presence score of a view's network output for its landmarks to be "
-             "used and to place the view's next crop (in [0, 1]).")
-    min_visibility: float = param(
-        0.1, "Smallest keypoint weight (landmark visibility x presence x pose score, reduced "
-             "outside the silhouette) for a view to take part in a keypoint (in [0, 1]).")
-    confident_visibility: float = param(
-        0.5, "When at least min_views agreeing views have a weight of this or more (in [0, 1]), "
-             "only they are triangulated.")
-    mask_tolerance_px: float = param(
-        8.0, "A keypoint farther than this from the view's foreground (full-image pixels, "
-             ">= 0) is outside the silhouette.")
-    outside_mask_weight: float = param(
-        0.3, "Factor on the weight of a keypoint outside the silhouette (in [0, 1]; 0 drops it).")
-    max_reprojection_px: float = param(
-        12.0, "tau: a view agrees with a 3D keypoint when its landmark lies within this many "
-              "pixels of the point's projection (> 0).")
-    min_views: int = param(
-        2, "Fewest agreeing views for a keypoint to be reported (>= 2).")
-    min_score: float = param(
-        0.3, "Keypoints with a lower confidence are not reported (in [0, 1]).")
-    resolve_swaps: bool = param(
-        True, "Rename the sides of a view whose left and right disagree with the other views.")
-    swap_margin: float = param(
-        0.5, "The sides of views are renamed only when the consensus gained exceeds this share "
-             "of the renamed views' weight (>= 0).")
-    threads: int = param(
-        2, "LiteRT threads of the landmark network and the pose detector (>= 1).")
-
-    def __post_init__(self) -> None:
-        checks = {
-            "box_margin": self.box_margin >= 1.0, "previous_box_pad": self.previous_box_pad >= 0,
-            "min_blob_fraction": 0 <= self.min_blob_fraction < 1,
-            "min_detection_score": 0 <= self.min_detection_score <= 1,
-            "min_pose_score": 0 <= self.min_pose_score <= 1,
-            "min_visibility": 0 <= self.min_visibility <= 1,
-            "confident_visibility": 0 <= self.confident_visibility <= 1,
-            "mask_tolerance_px": self.mask_tolerance_px >= 0,
-            "outside_mask_weight": 0 <= self.outside_mask_weight <= 1,
-            "max_reprojection_px": self.max_reprojection_px > 0,
-            "min_views": int(self.min_views) == self.min_views and self.min_views >= 2,
-            "min_score": 0 <= self.min_score <= 1,
-            "threads": int(self.threads) >= 1,
-            "swap_margin": self.swap_margin >= 0,
-        }
-        bad = [name for name, ok in checks.items() if not ok]
-        if bad:
-            raise ValueError("KeypointParams: out of range: "
-                             + ", ".join(f"{n}={getattr(self, n)!r}" for n in bad))
 
 
 def _blob_box(mask: np.ndarray, min_pixels: float):
@@ -195,7 +126,7 @@ class KeypointDetector:
     """Per view the landmark network on its tracked crop, then robust triangulation (module
     docstring).
 
-    ``cameras``: the rig's cameras (a :class:`~hmocap_ros.rig.Rig` or a list); ``model_path``:
+    ``cameras``: the rig's cameras (a :class:`~hmocap_ros.geometry.rig.Rig` or a list); ``model_path``:
     the landmark model, ``detector_path`` the pose detector's (default: the shipped ones;
     :class:`~.tflite_model.ModelFileError` when one is missing or corrupt).
     :attr:`last_timings` holds the seconds per stage of the last :meth:`detect`: ``roi``,

@@ -27,7 +27,7 @@ a keypoint is triangulated from the views that agree:
    (``e_v < tau``, in front of the camera) are triangulated together, twice, and the final
    point is the DLT of the views that agree with it: only those of weight
    ``confident_visibility`` or more when there are ``min_views`` of them. Triangulation is
-   :func:`hmocap_ros.camera_model.triangulate`.
+   :func:`hmocap_ros.geometry.triangulate`.
 4. **Body points** (design choices where the thesis, sec. 2.5, leaves the detector open; each
    matches the end-effector or joint of the tracker's body model, measured on simulated
    recordings): ``hand`` is the mean of the index and pinky landmarks (the knuckles: the
@@ -54,10 +54,10 @@ from typing import Sequence
 
 import numpy as np
 
-from hmocap_ros.camera_model import ROOM_UP, project_points, reprojection_errors, triangulate
+from hmocap_ros.geometry import ROOM_UP, project_points, reprojection_errors, triangulate
 from hmocap_ros.detection.keypoint_network import NUM_LANDMARKS, ViewLandmarks
 
-__all__ = ["KEYPOINT_LABELS", "COMPOSITION", "MIRROR", "Keypoints3D", "view_keypoints",
+__all__ = ["KEYPOINT_LABELS", "COMPOSITION", "MIRROR", "TRIANGULATED_POINTS", "Keypoints3D", "view_keypoints",
            "robust_points", "resolve_swaps", "triangulate_views"]
 
 #: Labels of the 3D keypoints (the subject's left and right), the message terms.
@@ -87,7 +87,9 @@ HIP_WIDENING = 0.03
 LEFT_OUT_SHARE = 0.25
 #: points triangulated besides the labels, to orient the head
 _AUXILIARY = {"nose": (0,), "left_ear": (7,), "right_ear": (8,)}
-_POINTS = KEYPOINT_LABELS + tuple(_AUXILIARY)
+#: the labels of the points :func:`view_keypoints` and :func:`robust_points` work on: the
+#: reported labels, then the auxiliary ones
+TRIANGULATED_POINTS = KEYPOINT_LABELS + tuple(_AUXILIARY)
 _COMPONENTS = {**COMPOSITION, **_AUXILIARY}
 
 
@@ -101,14 +103,14 @@ def _mirror(label: str) -> str:
 
 #: Index of each point's other side (itself for ``head`` and ``nose``), over the labels and the
 #: auxiliary points.
-MIRROR = np.array([_POINTS.index(_mirror(label)) for label in _POINTS])
+MIRROR = np.array([TRIANGULATED_POINTS.index(_mirror(label)) for label in TRIANGULATED_POINTS])
 _ARMS = np.array([KEYPOINT_LABELS.index(f"{s}_{p}") for p in ("hand", "shoulder", "elbow", "wrist")
                   for s in ("left", "right")])
 _LEGS = np.array([KEYPOINT_LABELS.index(f"{s}_{p}") for p in ("foot", "hip", "knee", "ankle")
                   for s in ("left", "right")])
-_ARMS_AND_EARS = np.concatenate([_ARMS, [_POINTS.index("left_ear"), _POINTS.index("right_ear")]])
-_MATRIX = np.zeros((len(_POINTS), NUM_LANDMARKS))
-for _k, _label in enumerate(_POINTS):
+_ARMS_AND_EARS = np.concatenate([_ARMS, [TRIANGULATED_POINTS.index("left_ear"), TRIANGULATED_POINTS.index("right_ear")]])
+_MATRIX = np.zeros((len(TRIANGULATED_POINTS), NUM_LANDMARKS))
+for _k, _label in enumerate(TRIANGULATED_POINTS):
     _MATRIX[_k, list(_COMPONENTS[_label])] = 1.0 / len(_COMPONENTS[_label])
 _USES = _MATRIX > 0
 
@@ -118,8 +120,8 @@ def _head_centre(points: np.ndarray) -> np.ndarray:
     in the head's frame: up is the sign of forward x ears' axis that points up in the room);
     without the nose or an ear, the up offset along the room's up axis."""
     up = np.asarray(ROOM_UP)
-    head, nose = points[_POINTS.index("head")], points[_POINTS.index("nose")]
-    across = points[_POINTS.index("left_ear")] - points[_POINTS.index("right_ear")]
+    head, nose = points[TRIANGULATED_POINTS.index("head")], points[TRIANGULATED_POINTS.index("nose")]
+    across = points[TRIANGULATED_POINTS.index("left_ear")] - points[TRIANGULATED_POINTS.index("right_ear")]
     forward = nose - head
     if np.all(np.isfinite(across) & np.isfinite(forward)) and np.linalg.norm(across) > 1e-3:
         across = across / np.linalg.norm(across)
@@ -204,7 +206,7 @@ def view_keypoints(cameras, views: Sequence[ViewLandmarks | None],
                    params) -> tuple[np.ndarray, np.ndarray]:
     """Per-view pixels ``(V, P, 2)`` (NaN: no view) and weights ``(V, P)`` (0: unused) of the
     labels and the auxiliary points (nose, ears), step 1 of the module docstring."""
-    n_views, n_labels = len(cameras), len(_POINTS)
+    n_views, n_labels = len(cameras), len(TRIANGULATED_POINTS)
     pixels = np.full((n_views, n_labels, 2), np.nan)
     weights = np.zeros((n_views, n_labels))
     for v, (camera, view) in enumerate(zip(cameras, views)):
@@ -338,11 +340,11 @@ def triangulate_views(cameras, views: Sequence[ViewLandmarks | None],
     ``cameras``: the rig's cameras; ``views``: per camera its landmarks or None; ``masks``: per
     camera a uint8 foreground mask (any resolution) or None; ``previous``: label -> (3,) room
     position of the last skeleton's keypoints (decides which sides are which);
-    ``params``: a :class:`~hmocap_ros.detection.keypoint_detector.KeypointParams` (default:
+    ``params``: a :class:`~hmocap_ros.detection.params.KeypointParams` (default:
     its defaults).
     """
     if params is None:
-        from hmocap_ros.detection.keypoint_detector import KeypointParams
+        from hmocap_ros.detection.params import KeypointParams
         params = KeypointParams()
     cameras = list(cameras)
     if len(views) != len(cameras) or (masks is not None and len(masks) != len(cameras)):

@@ -14,7 +14,7 @@ Per frame set:
    centre pixel only). The z-buffer is kept at a cell of about one projected voxel, so the
    carved shell has no holes that let its back show through.
 3. **Probability surface** (eq. 2.17): ``Prob(q) = sum_c eta_c(q) T(proj_c(q))`` with ``T`` the
-   per-pixel skin map of each view (``segmentation.skin``; maps of any resolution).
+   per-pixel skin map of each view (``detection.skin``; maps of any resolution).
 4. **Filtering** (eq. 2.18): ``Q' = {q : Prob(q) >= Gamma}``, clustered by distance tolerance
    ``theta_tol`` (connected components of a kd-tree radius graph, as in Rusu's Euclidean
    clustering [100]) and kept when their size lies in ``[theta_min, theta_max]``.
@@ -39,10 +39,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from hmocap_ros.camera_model import Projection, project_points
+from hmocap_ros.geometry import Projection, project_points
 from hmocap_ros.params import param
-from hmocap_ros.rig import camera_arrays
-from hmocap_ros.tracking.visual_hull import carve, coarse_people, room_bounds
+from hmocap_ros.geometry.rig import camera_arrays
+from hmocap_ros.detection.visual_hull import carve, coarse_people, room_bounds
 
 __all__ = ["SkinExtremityParams", "SkinCandidates", "SkinExtremityDetector", "surface_points",
            "visibility", "extremity_probability", "cluster_candidates"]
@@ -116,7 +116,7 @@ def visibility(points: np.ndarray, normals: np.ndarray, cameras: Sequence, voxel
     A point is visible in a camera when it is in its image and no other surface point lies in
     front of it (z-buffer with cells of about one projected voxel; ``depth_tolerance`` voxels
     of slack). ``views`` (M,) bool leaves cameras out (missing views). ``proj``: the points'
-    :func:`~hmocap_ros.camera_model.project_points` in ``cameras``, if already computed.
+    :func:`~hmocap_ros.geometry.project_points` in ``cameras``, if already computed.
     """
     M, S = len(cameras), len(points)
     if S == 0:

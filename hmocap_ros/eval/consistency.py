@@ -23,7 +23,7 @@ The views' keypoints come from the landmark network on each view's tracked crop
 foreground from a background model per camera (``--learn-from``, default ``person_masks``:
 a recording without ground truth does not say that its room starts empty). Without
 ``--tracked`` the bag is tracked first with ``hmocap track``'s defaults
-(:func:`~hmocap_ros.commands.track.track_to_bag`, into a temporary bag); with it, the tracked
+(:func:`~hmocap_ros.eval.bag_tracking.track_to_bag`, into a temporary bag); with it, the tracked
 bag's first body (``/skeleton``, ``/humans/bodies/<id>/joint_states`` and ``body_shape``,
 :func:`~hmocap_ros.export.motion.read_motion`). A frame set is checked where the body has a
 skeleton at its stamp; a tracker that found nobody gives ``frames_with_pose`` 0 and null
@@ -167,15 +167,15 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                        progress=None) -> dict:
     """The checks of the module docstring for ``bag`` and a tracked body's ``motion``
     (:class:`~hmocap_ros.export.motion.BodyMotion`)."""
-    from hmocap_ros.camera_projection import project_points
-    from hmocap_ros.detection.keypoint_detector import KeypointParams
-    from hmocap_ros.detection.keypoint_triangulation import (_POINTS, triangulate_views,
+    from hmocap_ros.geometry.projection import project_points
+    from hmocap_ros.detection.params import KeypointParams
+    from hmocap_ros.detection.keypoint_triangulation import (TRIANGULATED_POINTS, triangulate_views,
                                                              view_keypoints)
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.render import render_silhouettes
-    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.segmentation import ForegroundParams, background_models
     from hmocap_ros.segmentation.person_masks import PersonMasks
 
@@ -231,7 +231,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                                                              camera.height, camera.width)
                 for k, name in enumerate(rig.names):
                     for j, label in enumerate(labels):
-                        p = _POINTS.index(label)
+                        p = TRIANGULATED_POINTS.index(label)
                         if weights[k, p] >= params.confident_visibility and projected.depth[k, j] > 0:
                             reproj[(label, name)].append(
                                 float(np.linalg.norm(projected.pixels[k, j] - pixels[k, p])))
@@ -252,7 +252,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                                         if projected.depth[k, j] > 0}
                         tiles.append(_tile(images[k], foregrounds[k], rendered[k], pixels[k],
                                            weights[k] * (weights[k] >= params.confident_visibility),
-                                           _POINTS, joint_pixels, _BONES))
+                                           TRIANGULATED_POINTS, joint_pixels, _BONES))
             if tiles:
                 rows.append(tiles)
             if progress is not None:
@@ -312,7 +312,7 @@ def evaluate_consistency(bag, tracked=None, *, learn_from: str = "person_masks",
                          picture: Path | None = None, progress=None) -> dict:
     """Track ``bag`` unless ``tracked`` is given, then :func:`consistency_report`.
     :class:`ConsistencyError` for bad input."""
-    from hmocap_ros.commands.track import TrackError, track_to_bag
+    from hmocap_ros.eval.bag_tracking import TrackError, track_to_bag
     from hmocap_ros.export.motion import ExportError
     from hmocap_ros.io.bag_reader import BagReadError
 

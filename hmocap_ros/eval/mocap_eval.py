@@ -437,7 +437,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
         overrides = tracker_overrides(ns.param)
         rig = None
         if ns.rig:
-            from hmocap_ros.rig import load_rig
+            from hmocap_ros.geometry.rig import load_rig
 
             rig = load_rig(Path(ns.rig))
         detector = ns.detector or ExtremityDetectionParams().detector

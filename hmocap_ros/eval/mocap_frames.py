@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BagFrames", "load_frames"]
+__all__ = ["BagFrames", "empty_room_frames", "load_frames"]
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +87,7 @@ def _read_truth(reader, available, bag) -> tuple[dict, tuple, object]:
     return truth_by_stamp, joint_names, body_shape
 
 
-def _empty_room_frames(reader, image_topics, slop_ns: int, first_truth) -> int:
+def empty_room_frames(reader, image_topics, slop_ns: int, first_truth) -> int:
     """Frame sets before the first ground-truth skeleton: the empty room to learn from."""
     n_empty = 0
     for stamp, _ in reader.frame_sets(image_topics, slop_ns, allow_partial=True, min_topics=1):
@@ -202,7 +202,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     """
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
-    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.segmentation import ForegroundParams, background_models
 
     out = sys.stderr if out is None else out
@@ -231,7 +231,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
             raise ValueError(f"{bag}: none of the image topics {image_topics} is in the bag")
         fallback = ""
         if silhouettes == "fg":
-            n_empty = _empty_room_frames(reader, present_images, slop_ns,
+            n_empty = empty_room_frames(reader, present_images, slop_ns,
                                          min(truth_by_stamp) if truth_by_stamp else None)
             if learn_from is None:
                 learn_from = "empty_room" if n_empty else "person_masks"

@@ -1,5 +1,5 @@
 """``sensor_msgs/CameraInfo`` <-> the plain camera dict that
-:meth:`~hmocap_ros.camera_model.PinholeCamera.from_camera_info` reads.
+:meth:`~hmocap_ros.geometry.PinholeCamera.from_camera_info` reads.
 """
 
 from __future__ import annotations

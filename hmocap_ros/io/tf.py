@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hmocap_ros.geometry.rotations import quaternion_to_matrix
+
 __all__ = [
     "DEFAULT_FIXED_FRAME",
     "FrameTransform",
@@ -46,7 +48,6 @@ __all__ = [
     "camera_transform",
     "frame_transform",
     "from_transform_stamped",
-    "quaternion_to_rotation",
     "rig_transforms",
     "rotation_to_quaternion",
     "rotations_to_quaternions",
@@ -144,21 +145,6 @@ def rotations_to_quaternions(rotations) -> np.ndarray:
     return np.where(q[:, 3:] < 0, -q, q)
 
 
-def quaternion_to_rotation(quaternion_xyzw) -> np.ndarray:
-    """3x3 rotation matrix of a quaternion ``(x, y, z, w)`` (normalised first; ``ValueError``
-    for a zero or non-finite one)."""
-    q = np.asarray(quaternion_xyzw, dtype=np.float64)
-    norm = float(np.linalg.norm(q)) if q.shape == (4,) else 0.0
-    if not (np.isfinite(norm) and norm > 0):
-        raise ValueError(f"a quaternion must be 4 finite numbers (x, y, z, w), not all zero: {quaternion_xyzw!r}")
-    x, y, z, w = q / norm
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 @dataclass(frozen=True)
 class FrameTransform:
     """The pose of frame ``child`` in frame ``parent``: ``p_parent = R(rotation) p_child + translation``."""
@@ -188,14 +174,14 @@ class FrameTransform:
     def matrix(self) -> np.ndarray:
         """4x4 homogeneous matrix taking child coordinates to parent coordinates."""
         out = np.eye(4)
-        out[:3, :3] = quaternion_to_rotation(self.rotation)
+        out[:3, :3] = quaternion_to_matrix(self.rotation, tolerance=None)
         out[:3, 3] = self.translation
         return out
 
     def apply(self, points_child) -> np.ndarray:
         """Points (..., 3) in child coordinates -> parent coordinates."""
         points = np.asarray(points_child, dtype=np.float64)
-        return points @ quaternion_to_rotation(self.rotation).T + np.asarray(self.translation)
+        return points @ quaternion_to_matrix(self.rotation, tolerance=None).T + np.asarray(self.translation)
 
 
 def frame_transform(parent: str, child: str, rotation, translation) -> FrameTransform:
@@ -206,7 +192,7 @@ def frame_transform(parent: str, child: str, rotation, translation) -> FrameTran
 
 
 def camera_transform(camera, parent: str) -> FrameTransform:
-    """The optical frame of a rig camera (:class:`~hmocap_ros.pinhole_camera.PinholeCamera`:
+    """The optical frame of a rig camera (:class:`~hmocap_ros.geometry.pinhole_camera.PinholeCamera`:
     its ``frame_id``, centre ``position`` and optical -> room rotation ``R_wc``) in ``parent``,
     the rig's room frame."""
     return frame_transform(parent, camera.frame_id, camera.R_wc, camera.position)

@@ -134,7 +134,7 @@ from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.tf import TF_TOPIC
 from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, image_qos,
                                      image_reliability_param, param, run_node, take_rig)
-from hmocap_ros.rig import Rig
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
 from hmocap_ros.tracking.params import TrackerParams

@@ -60,7 +60,7 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
     from hmocap_ros.io.camera_info import camera_info_to_dict
     from hmocap_ros.io.images import image_to_rgb
     from hmocap_ros.io.msg_factory import stamp_to_ns
-    from hmocap_ros.rig import rig_from_msg
+    from hmocap_ros.io.rig_messages import rig_from_msg
 
     if ns.seconds <= 0 or ns.fps <= 0 or ns.min_views < 0:
         raise ValueError("--seconds and --fps must be positive, --min-views not negative")

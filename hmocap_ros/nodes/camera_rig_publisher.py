@@ -40,7 +40,8 @@ from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.tf import DEFAULT_FIXED_FRAME, TF_STATIC_TOPIC, rig_transforms, tf_message
 from hmocap_ros.nodes.common import (LATCHED_QOS, declare_parameters, image_qos, image_reliability_param, param,
                                      run_node)
-from hmocap_ros.rig import Rig, RigError, load_rig, rig_to_msg
+from hmocap_ros.geometry.rig import Rig, RigError, load_rig
+from hmocap_ros.io.rig_messages import rig_to_msg
 
 NODE_NAME = "camera_rig_publisher"
 

@@ -245,7 +245,7 @@ def take_rig(node: Node, rig_file: str, set_rig: Callable) -> None:
     ``camera_rig`` topic (:func:`changed_rig`)."""
     from hmocap_interfaces.msg import CameraRig
 
-    from hmocap_ros.rig import RigError, load_rig
+    from hmocap_ros.geometry.rig import RigError, load_rig
 
     if rig_file:
         try:
@@ -267,7 +267,8 @@ def take_rig(node: Node, rig_file: str, set_rig: Callable) -> None:
 def changed_rig(msg, current, logger):
     """The rig of a ``camera_rig`` message when it differs from ``current`` (a node's rig or
     None); None when it is the same rig or invalid (logged)."""
-    from hmocap_ros.rig import RigError, rig_from_msg
+    from hmocap_ros.geometry.rig import RigError
+    from hmocap_ros.io.rig_messages import rig_from_msg
 
     try:
         rig = rig_from_msg(msg)
@@ -283,7 +284,7 @@ def depth_camera_from_info(msg, current, logger):
     """The PinholeCamera of a ``depth/camera_info`` message, or ``current`` when it cannot be
     read (logged, throttled); a new camera, or one whose focal length changed, is logged."""
     from hmocap_ros.io.conversions import ConversionError, camera_info_to_dict
-    from hmocap_ros.camera_model import PinholeCamera
+    from hmocap_ros.geometry import PinholeCamera
 
     try:
         camera = PinholeCamera.from_camera_info(camera_info_to_dict(msg))

@@ -58,7 +58,7 @@ from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.point_clouds import array_to_pointcloud2
 from hmocap_ros.nodes.common import (RESULT_QOS, declare_parameters, image_qos, image_reliability_param,
                                      param, run_node, take_rig)
-from hmocap_ros.rig import Rig
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 
 NODE_NAME = "extremity_detection"

@@ -5,7 +5,7 @@ every view and counts the pixels where the model silhouette and the foreground d
 :func:`hmocap_ros.render.xor_counts` takes projected vertices; at the thesis' budget
 (3,500 particles x 4 views x 1,202 vertices) the projected array alone is about 130 MB,
 written once and read back. Here each (particle, view) is projected into a small per-thread
-buffer and rasterised at once, with the same projection (:mod:`hmocap_ros.render.projection`,
+buffer and rasterised at once, with the same projection (:mod:`hmocap_ros.geometry.projection`,
 OpenCV distortion) and the same coverage rule (:mod:`hmocap_ros.render.silhouette`), so the
 counts are identical to ``xor_counts(project_batch(...))``.
 """
@@ -14,8 +14,9 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from hmocap_ros.render.projection import _dist8, _project_one, distortion_valid_r2
-from hmocap_ros.render.silhouette import (_fill_silhouette, binary_observed, clip_boxes,
+from hmocap_ros.geometry.distortion import coefficients8, monotonic_radius2
+from hmocap_ros.geometry.projection import project_one_view
+from hmocap_ros.render.silhouette import (fill_silhouette, binary_observed, clip_boxes,
                                           count_xor_and_clear, observed_counts)
 
 __all__ = ["xor_counts_from_vertices"]
@@ -35,8 +36,8 @@ def _fused_body(verts, K, R, t, d, near, max_r2, faces, observed, rects, observe
     for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
         b = i // n_views
         m = i % n_views
-        _project_one(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
-        x0, y0, x1, y1 = _fill_silhouette(
+        project_one_view(verts[b], K[m], R[m], t[m], d[m], near, max_r2[m], uv, z)
+        x0, y0, x1, y1 = fill_silhouette(
             buf, uv, faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3], front_only)
         rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)
         out[b, m] = observed_in_rect[m] + rendered - 2 * both
@@ -74,7 +75,7 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     Cameras: ``K, R (M, 3, 3)``, ``t (M, 3)``, ``dist (M, k)`` OpenCV coefficients or None, at
     the masks' resolution. ``faces``, ``boxes`` and ``front_only`` as in
     :func:`hmocap_ros.render.xor_counts`. ``max_r2`` (M,): the cameras'
-    :func:`~hmocap_ros.render.projection.distortion_valid_r2`, if the caller keeps them.
+    :func:`~hmocap_ros.geometry.distortion.monotonic_radius2`, if the caller keeps them.
     Parallel over poses x views (serial below :data:`PARALLEL_MIN_ITEMS` pairs).
     """
     verts = np.asarray(verts)
@@ -96,9 +97,9 @@ def xor_counts_from_vertices(verts: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     if dist is None:
         d = np.zeros((n_views, 8))
     else:
-        d = np.stack([_dist8(x) for x in np.asarray(dist, dtype=np.float64).reshape(n_views, -1)])
+        d = coefficients8(np.asarray(dist, dtype=np.float64).reshape(n_views, -1))
     if max_r2 is None:
-        max_r2 = np.array([distortion_valid_r2(x) for x in d])
+        max_r2 = np.array([monotonic_radius2(x) for x in d])
     max_r2 = np.ascontiguousarray(max_r2, dtype=np.float64)
     obs01 = binary_observed(observed)
     _, height, width = obs01.shape

@@ -6,7 +6,7 @@ face index then says which object each pixel shows, which gives the exact ground
 silhouette (:func:`face_range_mask`).
 
 Inputs are plain arrays: vertices already projected to pixels (with lens distortion, see
-:mod:`hmocap_ros.render.projection`) and their depth along the optical axis (camera z). Coverage
+:mod:`hmocap_ros.geometry.projection`) and their depth along the optical axis (camera z). Coverage
 follows :mod:`hmocap_ros.render.scanline` (pixel centres at integer coordinates, top-left rule),
 so the z-buffer's coverage equals the silhouette renderer's. There is no near-plane clipping:
 a triangle with a vertex at depth <= ``near`` or a non-finite coordinate is skipped, so

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from hmocap_ros.render.projection import look_at
+from hmocap_ros.geometry.pinhole_camera import look_at_pose
 from hmocap_ros.render.rasterize import rasterize
 
 
@@ -52,7 +52,7 @@ def render_shadow_map(vertices: np.ndarray, faces: np.ndarray, *, light_position
         distance = float(np.linalg.norm(centre - eye))
         if distance <= radius:
             raise ValueError("the point light is inside the occluders' bounding sphere")
-        R, t = look_at(eye, centre, _up_for(centre - eye))
+        R, t = look_at_pose(eye, centre, _up_for(centre - eye))
         focal = 0.5 * size / math.tan(math.asin(radius / distance))
         K = np.array([[focal, 0.0, half], [0.0, focal, half], [0.0, 0.0, 1.0]])
         xc = v @ R.T + t
@@ -61,7 +61,7 @@ def render_shadow_map(vertices: np.ndarray, faces: np.ndarray, *, light_position
     elif light_direction is not None:
         d = np.asarray(light_direction, dtype=np.float64)
         d = d / np.linalg.norm(d)
-        R, t = look_at(centre - 4.0 * radius * d, centre, _up_for(d))
+        R, t = look_at_pose(centre - 4.0 * radius * d, centre, _up_for(d))
         scale = 0.5 * size / radius
         K = np.array([[scale, 0.0, half], [0.0, scale, half], [0.0, 0.0, 1.0]])
         xc = v @ R.T + t

@@ -26,7 +26,7 @@ from hmocap_ros.render.scanline import row_range, row_span, sort_by_y
 
 
 @nb.njit(cache=True, nogil=True)
-def _fill_silhouette(buf, proj, faces, x_min, y_min, x_max, y_max, front_only):
+def fill_silhouette(buf, proj, faces, x_min, y_min, x_max, y_max, front_only):
     """Set ``buf[y, x] = 1`` for every pixel centre covered by a triangle, inside the clip
     rectangle ``[x_min, x_max) x [y_min, y_max)``. Return the bounding box of what was set
     as ``(x0, y0, x1, y1)`` (empty when ``x0 >= x1``)."""
@@ -90,7 +90,7 @@ def _render_kernel(proj, faces, out, front_only):
     width = out.shape[2]
     for i in nb.prange(n):
         out[i, :, :] = 0
-        _fill_silhouette(out[i], proj[i], faces, 0, 0, width, height, front_only)
+        fill_silhouette(out[i], proj[i], faces, 0, 0, width, height, front_only)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
@@ -106,7 +106,7 @@ def _xor_kernel(proj, faces, observed, rects, observed_in_rect, front_only, n_ch
         for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
             b = i // n_views
             m = i % n_views
-            x0, y0, x1, y1 = _fill_silhouette(
+            x0, y0, x1, y1 = fill_silhouette(
                 buf, proj[b, m], faces, rects[m, 0], rects[m, 1], rects[m, 2], rects[m, 3],
                 front_only)
             rendered, both = count_xor_and_clear(buf, observed[m], x0, y0, x1, y1)

@@ -7,16 +7,25 @@ truth.
 :func:`background_models` builds the one the parameters name for each camera.
 """
 
-from hmocap_ros.segmentation.background_model import BackgroundModel, compile_kernels
+from hmocap_ros.segmentation.background_model import BackgroundModel, compile_background_kernels
 from hmocap_ros.segmentation.mask_metrics import MaskScores, mask_scores
 from hmocap_ros.segmentation.params import ForegroundParams
-from hmocap_ros.segmentation.person_masked_background import PersonMaskedBackground
+from hmocap_ros.segmentation.person_masked_background import PersonMaskedBackground, compile_learning
 
 #: ``learn_from`` -> the model class of one camera.
 BACKGROUND_MODELS = {"empty_room": BackgroundModel, "person_masks": PersonMaskedBackground}
 
 __all__ = ["BACKGROUND_MODELS", "BackgroundModel", "ForegroundParams", "MaskScores",
            "PersonMaskedBackground", "background_models", "compile_kernels", "mask_scores"]
+
+
+def compile_kernels(params: ForegroundParams | None = None) -> None:
+    """Compile (or load from numba's cache) every kernel a segmenting model calls, now: those of
+    :class:`BackgroundModel` with the argument types of ``params`` (defaults if None), then
+    those of :class:`PersonMaskedBackground`. A node calls it before it subscribes, so that no
+    kernel compiles on the first frames with a person."""
+    compile_background_kernels(params)
+    compile_learning()
 
 
 def background_models(params: ForegroundParams | None, cameras) -> list:

@@ -53,13 +53,14 @@ import numpy as np
 from hmocap_ros.segmentation.mask_cleanup import clean_mask, structuring_element
 from hmocap_ros.segmentation.params import ForegroundParams
 
-__all__ = ["BackgroundModel", "ForegroundParams", "classify_and_update", "compile_kernels", "estimate_gain",
-           "learn_step"]
+__all__ = ["GAIN_RANGE", "BackgroundModel", "ForegroundParams", "check_frame", "check_stamp",
+           "classify_and_update", "compile_background_kernels", "estimate_gain", "learn_step"]
 
 #: Background colours with a smaller squared norm (about 8 levels per channel) are too dark
 #: for a brightness ratio to mean anything: no shadow and no gain sample there.
 _MIN_MEAN_NORM2 = np.float32(192.0)
-_GAIN_RANGE = (0.25, 4.0)
+#: the camera gain estimate (frame brightness over the background's) is clipped to this range
+GAIN_RANGE = (0.25, 4.0)
 _COUNT_MAX = np.iinfo(np.uint16).max
 
 
@@ -178,13 +179,16 @@ def classify_and_update(frame, mean, var, fg_count, prev_mask, gain, k2, min_var
                     mean[y, x, 2] = m2 + absorb_rate * (i2 - m2)
 
 
-def _check_stamp(stamp_ns) -> int:
+def check_stamp(stamp_ns) -> int:
+    """The stamp as an int; ValueError unless it is an integer number of nanoseconds."""
     if isinstance(stamp_ns, (bool, np.bool_)) or not isinstance(stamp_ns, (int, np.integer)):
         raise ValueError(f"stamp_ns must be an integer number of nanoseconds, got {type(stamp_ns).__name__}")
     return int(stamp_ns)
 
 
-def _check_frame(rgb, shape) -> np.ndarray:
+def check_frame(rgb, shape) -> np.ndarray:
+    """The frame, checked to be a non-empty (H, W, 3) uint8 image of the model's ``shape`` (None:
+    any); ValueError naming what is wrong."""
     if not isinstance(rgb, np.ndarray):
         raise ValueError(f"frame must be a numpy array, got {type(rgb).__name__}")
     if rgb.dtype != np.uint8:
@@ -249,8 +253,8 @@ class BackgroundModel:
         Raises ValueError, leaving the model unchanged, for a frame that is not uint8 (H, W, 3),
         has another size than the learned background, or a stamp older than the last one.
         """
-        stamp = _check_stamp(stamp_ns)
-        frame = _check_frame(rgb, self.shape)
+        stamp = check_stamp(stamp_ns)
+        frame = check_frame(rgb, self.shape)
         if self.last_stamp_ns is not None and stamp < self.last_stamp_ns:
             raise ValueError(f"stamp {stamp} is older than the previous frame's {self.last_stamp_ns}; "
                              "call relearn() if the stream restarted")
@@ -287,7 +291,7 @@ class BackgroundModel:
         if p.illumination_compensation:
             gain = estimate_gain(frame, self.mean, self.raw_mask, self.shadow_mask,
                                  p.gain_sample_step, self._gain_buf)
-            self.gain = float(min(max(gain, _GAIN_RANGE[0]), _GAIN_RANGE[1]))
+            self.gain = float(min(max(gain, GAIN_RANGE[0]), GAIN_RANGE[1]))
         classify_and_update(
             frame, self.mean, self.variance, self._fg_count, self._mask, np.float32(self.gain),
             self._k2, self._min_var, self._max_var, p.shadow_suppression,
@@ -299,9 +303,9 @@ class BackgroundModel:
         return self._mask.copy()
 
 
-def compile_kernels(params: ForegroundParams | None = None) -> None:
-    """Compile (or load from numba's cache) every kernel a segmenting model calls, now (those
-    of :class:`~hmocap_ros.segmentation.PersonMaskedBackground` too).
+def compile_background_kernels(params: ForegroundParams | None = None) -> None:
+    """Compile (or load from numba's cache) every kernel :class:`BackgroundModel` calls, now
+    (:func:`hmocap_ros.segmentation.compile_kernels` adds those of the person-masked model).
 
     numba compiles a kernel on its first call. On a fresh checkout (no cache yet) that is
     seconds per kernel, and the clean-up kernels run only once a mask holds a small blob or
@@ -325,6 +329,3 @@ def compile_kernels(params: ForegroundParams | None = None) -> None:
     scene[26:30, 2:8] = 60              # ... and a shadow-like darker patch
     model.apply(scene, 2)
     model.apply(scene, 3)
-    from hmocap_ros.segmentation.person_masked_background import compile_learning
-
-    compile_learning()

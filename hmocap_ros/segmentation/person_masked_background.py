@@ -36,7 +36,7 @@ import cv2
 import numba as nb
 import numpy as np
 
-from hmocap_ros.segmentation.background_model import (_GAIN_RANGE, _check_frame, _check_stamp,
+from hmocap_ros.segmentation.background_model import (GAIN_RANGE, check_frame, check_stamp,
                                                       classify_and_update, estimate_gain)
 from hmocap_ros.segmentation.mask_cleanup import clean_mask, structuring_element
 from hmocap_ros.segmentation.params import ForegroundParams
@@ -200,8 +200,8 @@ class PersonMaskedBackground:
         """Segment one frame and learn from it; the uint8 0/255 foreground mask. ValueError,
         the model unchanged, for a frame that is not uint8 (H, W, 3), has another size than the
         model's, or a stamp older than the last one."""
-        stamp = _check_stamp(stamp_ns)
-        frame = _check_frame(rgb, self.shape)
+        stamp = check_stamp(stamp_ns)
+        frame = check_frame(rgb, self.shape)
         if self.last_stamp_ns is not None and stamp < self.last_stamp_ns:
             raise ValueError(f"stamp {stamp} is older than the previous frame's {self.last_stamp_ns}; "
                              "call relearn() if the stream restarted")
@@ -219,7 +219,7 @@ class PersonMaskedBackground:
         if p.illumination_compensation:
             gain = estimate_gain(frame, self.mean, self.raw_mask, self.shadow_mask,
                                  p.gain_sample_step, self._gain_buf)
-            self.gain = float(min(max(gain, _GAIN_RANGE[0]), _GAIN_RANGE[1]))
+            self.gain = float(min(max(gain, GAIN_RANGE[0]), GAIN_RANGE[1]))
         classify_and_update(
             frame, self.mean, self.variance, self._fg_count, self._mask, np.float32(self.gain),
             self._k2, self._min_var, self._max_var, p.shadow_suppression,

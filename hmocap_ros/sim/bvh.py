@@ -32,8 +32,8 @@ from typing import NamedTuple
 import numpy as np
 
 from hmocap_ros.sim.bvh_parser import (
-    _AXES,
-    _CHANNEL_NAMES,
+    AXES,
+    CHANNEL_NAMES,
     Bvh,
     BvhError,
     load_bvh,
@@ -123,7 +123,7 @@ def euler_to_matrix(angles_deg: np.ndarray, order: str) -> np.ndarray:
     for i, axis in enumerate(order.upper()):
         c, s = np.cos(angles[..., i]), np.sin(angles[..., i])
         elementary = np.zeros(angles.shape[:-1] + (3, 3))
-        a = _AXES[axis]
+        a = AXES[axis]
         b, d = (a + 1) % 3, (a + 2) % 3
         elementary[..., a, a] = 1.0
         elementary[..., b, b] = c
@@ -144,7 +144,7 @@ def local_transforms(bvh: Bvh, motion: np.ndarray | None = None) -> tuple[np.nda
         start = int(bvh.channel_start[j])
         rot_cols, rot_axes = [], ""
         for k, channel in enumerate(channels):
-            kind, axis = _CHANNEL_NAMES[channel]
+            kind, axis = CHANNEL_NAMES[channel]
             if kind == "position":
                 translations[:, j, axis] = motion[:, start + k]
             else:

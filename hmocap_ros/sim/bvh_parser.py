@@ -13,12 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Bvh", "BvhError", "load_bvh", "parse_bvh"]
+__all__ = ["AXES", "CHANNEL_NAMES", "Bvh", "BvhError", "load_bvh", "parse_bvh"]
 
-_AXES = {"X": 0, "Y": 1, "Z": 2}
+#: BVH axis letter -> coordinate index.
+AXES = {"X": 0, "Y": 1, "Z": 2}
 #: Channel name -> (``"position"`` or ``"rotation"``, axis index).
-_CHANNEL_NAMES = {
-    f"{axis}{kind}": (kind, _AXES[axis]) for axis in "XYZ" for kind in ("position", "rotation")
+CHANNEL_NAMES = {
+    f"{axis}{kind}": (kind, AXES[axis]) for axis in "XYZ" for kind in ("position", "rotation")
 }
 
 
@@ -256,15 +257,15 @@ class _HierarchyParser:
         names = []
         for _ in range(int(count_token)):
             channel, channel_line = self.take()
-            if channel not in _CHANNEL_NAMES:
+            if channel not in CHANNEL_NAMES:
                 raise BvhError(
                     f"{source}: line {channel_line}: CHANNELS of {name!r}: "
-                    f"{channel!r} is not one of {sorted(_CHANNEL_NAMES)} "
+                    f"{channel!r} is not one of {sorted(CHANNEL_NAMES)} "
                     f"(or the count {count_token} is larger than the names given)"
                 )
             names.append(channel)
         if (self.pos < len(tokens) and tokens[self.pos][1] == count_line
-                and tokens[self.pos][0] in _CHANNEL_NAMES):
+                and tokens[self.pos][0] in CHANNEL_NAMES):
             raise BvhError(
                 f"{source}: line {count_line}: CHANNELS of {name!r} says "
                 f"{count_token} but lists more channel names"

@@ -5,7 +5,7 @@ sensor noise.
 Every pixel is an inverse lookup: the pixel's ray (undistorted once per camera, at
 ``supersample`` x ``supersample`` sub-pixel positions) is intersected with the board plane and
 the board texture is sampled there (bilinear); the sub-pixel samples are averaged, so edges
-are anti-aliased and corners land where :func:`hmocap_ros.camera_model.project_points` puts
+are anti-aliased and corners land where :func:`hmocap_ros.geometry.project_points` puts
 them. Only the board's bounding box in the image is traced.
 """
 

@@ -58,7 +58,8 @@ def generate(config: CalibrationSimConfig, log=print) -> tuple[Path, Path, int]:
     from hmocap_ros.io.conversions import numpy_to_image
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.typestore import hmocap_typestore
-    from hmocap_ros.rig import load_rig, rig_to_msg
+    from hmocap_ros.geometry.rig import load_rig
+    from hmocap_ros.io.rig_messages import rig_to_msg
     from hmocap_ros.sim.calibration_path import board_poses
     from hmocap_ros.sim.calibration_render import BoardRenderer
     from hmocap_ros.sim.mocap_outputs import clear_outputs, output_paths, save_rig_yaml
@@ -140,7 +141,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main_from_args(ns: argparse.Namespace) -> int:
     """Run ``hmocap sim calibration`` with parsed options; print a summary."""
-    from hmocap_ros.rig import load_rig
+    from hmocap_ros.geometry.rig import load_rig
 
     try:
         config = CalibrationSimConfig(

@@ -14,7 +14,7 @@ seeded generator:
 * 0-2 other people standing behind or beside the person (posed by the caller with the
   ``hands`` body model, see ``gesture_dataset``).
 
-Coordinates are the room frame of :mod:`hmocap_ros.camera_model`: metres, +Y up, floor at
+Coordinates are the room frame of :mod:`hmocap_ros.geometry`: metres, +Y up, floor at
 y = 0; the camera looks along +Z.  :func:`render_depth` turns meshes into a z-buffer with
 :func:`hmocap_ros.render.rasterize` and into uint16 millimetres with
 :func:`hmocap_ros.render.kinect_depth` (noise growing as z^2, projector shadows, holes at
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hmocap_ros.camera_model import PinholeCamera, look_at
+from hmocap_ros.geometry import PinholeCamera, look_at
 from hmocap_ros.render import (
     KinectNoise,
     concatenate_meshes,
@@ -35,7 +35,7 @@ from hmocap_ros.render import (
     kinect_depth,
     rasterize,
 )
-from hmocap_ros.render.projection import project_points
+from hmocap_ros.geometry.projection import project_batch
 
 #: Kinect v1 depth intrinsics at 640x480 (focal length in pixels).
 KINECT_FX = 575.0
@@ -411,7 +411,9 @@ def render_depth(camera: PinholeCamera, meshes, rng: np.random.Generator,
     if isinstance(noise, str):
         noise = kinect_noise(camera.width)
     verts, faces, face_offsets, _ = concatenate_meshes(meshes)
-    uv, z = project_points(verts, camera.K, camera.R, camera.t, camera.D)
+    uv, z = project_batch(np.asarray(verts, dtype=np.float64)[None], camera.K[None], camera.R[None],
+                          camera.t[None], np.asarray(camera.D)[None])
+    uv, z = uv[0, 0], z[0, 0]
     zbuf, face_id, _ = rasterize(uv, z, faces, camera.height, camera.width, with_barycentrics=False)
     if noise is None:
         valid = np.isfinite(zbuf)

@@ -22,7 +22,7 @@ Output, next to each other (``BAG`` = ``--out``, e.g. ``run.mcap``):
   (latched ``hmocap_interfaces/BodyShape``). Every message of a frame has the same
   ``header.stamp`` and is logged at it; room-frame data has frame id ``room``, images the
   camera's optical frame id.
-- ``<stem>_rig.yaml``: the rig (``hmocap_ros.rig.load_rig`` format).
+- ``<stem>_rig.yaml``: the rig (``hmocap_ros.geometry.rig.load_rig`` format).
 - ``<stem>.contact.png``: a contact sheet (all views of a few frames, ground-truth skeleton
   projected, silhouette outlined).
 
@@ -64,72 +64,23 @@ from pathlib import Path
 
 import numpy as np
 
-# Besides what generate() uses, these imports re-export parts of a recording (DISTRACTOR_BVH,
-# ROOM_FRAME, MIN_PELVIS_CLEARANCE and the underscored helpers) for callers that build them
-# separately: benchmarks/bench_sim.py and the tests.
-from hmocap_ros.sim.mocap_distractors import (  # noqa: F401
-    DISTRACTOR_BVH,
-    DistractorContext,
-    build_distractors,
-)
+from hmocap_ros.sim.mocap_distractors import DistractorContext, build_distractors
 from hmocap_ros.sim.mocap_frames import Timeline, write_frames, write_latched
-from hmocap_ros.sim.mocap_lighting import (  # noqa: F401
-    _lighting_events,
-    camera_gains,
-    light_levels,
-)
+from hmocap_ros.sim.mocap_lighting import camera_gains, light_levels
 from hmocap_ros.sim.mocap_outputs import (
     clear_outputs,
     output_paths,
     save_contact_sheet,
     save_rig_yaml,
 )
-from hmocap_ros.sim.mocap_rig import ROOM_FRAME, make_rig, views_seeing  # noqa: F401
-from hmocap_ros.sim.mocap_subject import (  # noqa: F401
-    MIN_PELVIS_CLEARANCE,
-    _full_parameters,
-    _motion_window,
-    _performer,
-    _place,
-    _retargeted,
-    _shaped_skeleton,
-    _streams,
-    _subject_in_room,
-)
+from hmocap_ros.sim.mocap_rig import make_rig, views_seeing
+from hmocap_ros.sim.mocap_subject import make_performer, random_streams, subject_in_room
+from hmocap_ros.sim.params import DEFAULT_BVH, MocapSimConfig
 
 __all__ = ["MocapSimConfig", "SimResult", "make_rig", "generate", "add_arguments",
            "main_from_args", "views_seeing", "DEFAULT_BVH", "BASE_STAMP_NS"]
 
-DATA_DIR = Path(__file__).resolve().parents[1] / "data"
-DEFAULT_BVH = DATA_DIR / "bvh" / "13_26.bvh"
 BASE_STAMP_NS = 1_700_000_000_000_000_000
-
-
-@dataclass(frozen=True)
-class MocapSimConfig:
-    """Everything that defines a recording (the CLI options)."""
-
-    out: Path
-    bvh: Path = DEFAULT_BVH
-    cameras: int = 4
-    width: int = 640
-    height: int = 480
-    fps: float = 25.0
-    start: float = 0.0
-    seconds: float = 4.0
-    background_seconds: float = 1.0
-    still_seconds: float = 0.0
-    seed: int = 0
-    distractors: bool = False
-    lighting_changes: bool = False
-    shadows: bool = True
-    noise: bool = True
-    supersample: int = 0
-    rig: Path | None = None
-    contact_frames: int = 4
-    force: bool = False
-    progress: bool = True
-
 
 @dataclass(frozen=True, eq=False)
 class SimResult:
@@ -168,19 +119,19 @@ class _Recording:
 
 
 def _set_up(config: MocapSimConfig) -> _Recording:
-    """Draw everything of a recording from its seed's streams (``mocap_subject._streams``)."""
+    """Draw everything of a recording from its seed's streams (``mocap_subject.random_streams``)."""
     from hmocap_ros.body import load_body_model
     from hmocap_ros.sim.appearance import dress, sample_appearance
     from hmocap_ros.sim.mocap_render import MocapRenderer, RenderOptions
 
     fps = float(config.fps)
     (rng_room, rng_shape, rng_look, rng_place, rng_dist, rng_light, rng_cam,
-     rng_events) = _streams(config.seed)
-    rig, room, tracking, shape, motion = _subject_in_room(config, rng_room, rng_shape,
+     rng_events) = random_streams(config.seed)
+    rig, room, tracking, shape, motion = subject_in_room(config, rng_room, rng_shape,
                                                           rng_place)
     full = load_body_model("hands", "full")
     look = dress(full, sample_appearance(rng_look))
-    subject = _performer(motion, tracking, full, shape, look)
+    subject = make_performer(motion, tracking, full, shape, look)
     n_motion = len(subject.params)
     n_bg = int(round(config.background_seconds * fps))
     n_frames = n_bg + n_motion

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.sim.mocap_subject import _performer, _retargeted
+from hmocap_ros.sim.mocap_subject import make_performer, retargeted_motion
 
 __all__ = ["DISTRACTORS", "DISTRACTOR_BVH", "DistractorContext", "Distractors",
            "build_distractors"]
@@ -128,7 +128,7 @@ def _second_person(ctx: DistractorContext, out: Distractors, rng) -> None:
 
     shape = sample_shape(rng)
     look = dress(ctx.full, sample_appearance(rng))
-    motion = _retargeted(DISTRACTOR_BVH, ctx.tracking, shape, ctx.fps)
+    motion = retargeted_motion(DISTRACTOR_BVH, ctx.tracking, shape, ctx.fps)
     n_motion = len(ctx.subject.params)
     idx = np.arange(n_motion) % (2 * motion.n_frames - 2)
     idx = np.where(idx < motion.n_frames, idx, 2 * motion.n_frames - 2 - idx)
@@ -137,7 +137,7 @@ def _second_person(ctx: DistractorContext, out: Distractors, rng) -> None:
     subject_xz = ctx.subject.joints[:, 0][:, [0, 2]]
     motion = _place_distractor(motion, ctx.room, ctx.rig, subject_xz, rng)
     if motion is not None:
-        out.performers.append(_performer(motion, ctx.tracking, ctx.full, shape, look))
+        out.performers.append(make_performer(motion, ctx.tracking, ctx.full, shape, look))
 
 
 def _door(ctx: DistractorContext, out: Distractors, rng) -> None:

@@ -104,7 +104,7 @@ def write_latched(bag, factory, rig, shape, body_height: float, stamp: int) -> N
     """The latched topics: the camera rig and the subject's body shape."""
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_writer import LATCHED
-    from hmocap_ros.rig import rig_to_msg
+    from hmocap_ros.io.rig_messages import rig_to_msg
 
     bag.add_topic(topics.CAMERA_RIG, "hmocap_interfaces/msg/CameraRig", LATCHED)
     bag.add_topic(topics.GT_BODY_SHAPE, "hmocap_interfaces/msg/BodyShape", LATCHED)
@@ -127,7 +127,7 @@ def _write_views(bag, factory, rig, frame, stamp: int) -> None:
 
 def _sheet_tiles(rig, frame, points: np.ndarray, parents: np.ndarray) -> list:
     """Contact-sheet tiles of a frame: every view, skeleton projected, silhouette outlined."""
-    from hmocap_ros.camera_model import project_points
+    from hmocap_ros.geometry import project_points
     from hmocap_ros.sim.contact_sheet import Tile
 
     cams = list(rig.names)

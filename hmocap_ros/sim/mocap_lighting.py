@@ -2,7 +2,7 @@
 
 Every recording has small smooth drifts of the daylight and of the cameras' exposure, and a
 fixed colour response (white balance and gain) per camera; ``--lighting-changes`` adds sudden
-events (``_lighting_events``). :class:`hmocap_ros.sim.mocap_render.MocapRenderer` folds them
+events (``lighting_events``). :class:`hmocap_ros.sim.mocap_render.MocapRenderer` folds them
 into the light intensities.
 """
 
@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-__all__ = ["camera_gains", "light_levels"]
+__all__ = ["camera_gains", "light_levels", "lighting_events"]
 
 
 def _smooth_noise(rng, t: np.ndarray, amplitude: float, periods=(3.0, 9.0)) -> np.ndarray:
@@ -24,7 +24,7 @@ def _smooth_noise(rng, t: np.ndarray, amplitude: float, periods=(3.0, 9.0)) -> n
     return amplitude * out / 1.5
 
 
-def _lighting_events(rng, t: np.ndarray, t_motion: float, t_end: float):
+def lighting_events(rng, t: np.ndarray, t_motion: float, t_end: float):
     """Lamp gain, exposure factor and window factor per frame for ``--lighting-changes``.
 
     The lamp dims to ~30 % over 0.1 s at 20-30 % of the motion and comes back at 60-70 %; the
@@ -55,12 +55,12 @@ def _lighting_events(rng, t: np.ndarray, t_motion: float, t_end: float):
 def light_levels(rng_light, rng_events, t: np.ndarray, t_motion: float, t_end: float,
                  changes: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Window gain, exposure and lamp gain per frame (times ``t``): smooth drifts drawn from
-    ``rng_light``, and with ``changes`` the events of ``_lighting_events`` from ``rng_events``."""
+    ``rng_light``, and with ``changes`` the events of ``lighting_events`` from ``rng_events``."""
     window_gain = 1.0 + _smooth_noise(rng_light, t, 0.12)
     exposure = 1.0 + _smooth_noise(rng_light, t, 0.03, periods=(5.0, 12.0))
     lamp_gain = np.ones(len(t))
     if changes:
-        lamp_gain, exposure_step, window_step = _lighting_events(rng_events, t, t_motion, t_end)
+        lamp_gain, exposure_step, window_step = lighting_events(rng_events, t, t_motion, t_end)
         exposure = exposure * exposure_step
         window_gain = window_gain * window_step
     return window_gain, exposure, lamp_gain

@@ -30,8 +30,8 @@ def clear_outputs(paths: Sequence[Path], force: bool) -> None:
 
 
 def save_rig_yaml(rig, path: Path, bag_name: str, seed: int) -> None:
-    """The rig in ``hmocap_ros.rig.load_rig`` format, with a header naming the recording."""
-    from hmocap_ros.rig import save_rig
+    """The rig in ``hmocap_ros.geometry.rig.load_rig`` format, with a header naming the recording."""
+    from hmocap_ros.geometry.rig import save_rig
 
     save_rig(rig, path, header=(
         f"Camera rig of {bag_name} (hmocap sim mocap, seed {seed}).\n"

@@ -7,7 +7,7 @@ map. :meth:`MocapRenderer.render` takes what moves (:class:`FrameState`: posed v
 person, the door's opening angle, the ball, the light levels) and, per camera,
 
 1. projects the whole scene with the camera's lens distortion
-   (:func:`hmocap_ros.render.projection.project_batch`) and z-buffers it
+   (:func:`hmocap_ros.geometry.projection.project_batch`) and z-buffers it
    (:func:`hmocap_ros.render.rasterize.rasterize`), optionally supersampled;
 2. shades it (:func:`hmocap_ros.render.shading.shade`): procedural textures, Lambert light from
    a lamp with a soft shadow map (furniture and people cast shadows, people also on
@@ -35,7 +35,8 @@ import cv2
 import numpy as np
 
 from hmocap_ros.render.meshes import vertex_normals
-from hmocap_ros.render.projection import look_at, project_batch
+from hmocap_ros.geometry.pinhole_camera import look_at_pose
+from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render.rasterize import rasterize
 from hmocap_ros.render.shading import (
     DirectionalLight,
@@ -46,7 +47,7 @@ from hmocap_ros.render.shading import (
     shade,
 )
 from hmocap_ros.render.shadow import ShadowMap
-from hmocap_ros.rig import camera_arrays  # noqa: F401 (re-exported)
+from hmocap_ros.geometry.rig import camera_arrays  # noqa: F401 (re-exported)
 from hmocap_ros.sim.appearance import PERSON_MATERIALS, PersonLook
 from hmocap_ros.sim.room import Room, ball_mesh
 
@@ -178,7 +179,7 @@ class MocapRenderer:
     """Renders frames of one recording: fixed rig, room and people (module docstring).
 
     Args:
-        rig: the cameras (:class:`hmocap_ros.rig.Rig`).
+        rig: the cameras (:class:`hmocap_ros.geometry.rig.Rig`).
         room: the furnished room (:func:`hmocap_ros.sim.room.build_room`).
         people: ``(faces (F, 3), look)`` per person, the subject first; their vertices come
             with every :class:`FrameState`.
@@ -261,7 +262,7 @@ class MocapRenderer:
     def _lamp_camera(self):
         size = int(self.options.shadow_map_size)
         lamp = np.asarray(self.room.lamp, float)
-        R, t = look_at(lamp, lamp - [0.0, 1.0, 0.0], up=(0.0, 0.0, 1.0))
+        R, t = look_at_pose(lamp, lamp - [0.0, 1.0, 0.0], up=(0.0, 0.0, 1.0))
         half = 0.5 * (size - 1)
         focal = 0.5 * size / math.tan(math.radians(0.5 * self.options.shadow_fov_deg))
         K = np.array([[focal, 0.0, half], [0.0, focal, half], [0.0, 0.0, 1.0]])

@@ -31,9 +31,9 @@ def make_rig(n_cameras: int = 4, width: int = 640, height: int = 480):
     point within a few pixels of the centre, mild barrel distortion), drawn from a fixed
     seed per camera count: a calibrated installation does not change between recordings.
     """
-    from hmocap_ros.camera_model import look_at
+    from hmocap_ros.geometry import look_at
     from hmocap_ros.config_files import find_config_file
-    from hmocap_ros.rig import Rig, load_rig
+    from hmocap_ros.geometry.rig import Rig, load_rig
 
     if not 1 <= n_cameras <= 8:
         raise ValueError(f"--cameras must be between 1 and 8, got {n_cameras}")
@@ -64,7 +64,7 @@ def make_rig(n_cameras: int = 4, width: int = 640, height: int = 480):
 def views_seeing(rig, points: np.ndarray, margin: float) -> np.ndarray:
     """(F, M) whether all points (F, P, 3) of a frame are inside camera m's image (with a
     margin, as a fraction of the image size)."""
-    from hmocap_ros.camera_model import project_points
+    from hmocap_ros.geometry import project_points
 
     proj = project_points(rig.cameras, points)
     w, h = rig[0].width, rig[0].height

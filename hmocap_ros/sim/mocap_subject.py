@@ -1,9 +1,9 @@
 """The subject of a simulated recording: body shape, retargeted motion, placement in the room.
 
-A recording draws from eight independent random streams (``_streams``) so that an option that
+A recording draws from eight independent random streams (``random_streams``) so that an option that
 adds something (distractors, lighting changes) does not change what the others draw.
-``_subject_in_room`` sets up the rig, the room and the subject's placed motion;
-``_performer`` turns a placed motion into the parameters of the tracking body and of the finer
+``subject_in_room`` sets up the rig, the room and the subject's placed motion;
+``make_performer`` turns a placed motion into the parameters of the tracking body and of the finer
 rendered body (relaxed fingers), with the feet on the floor.
 """
 
@@ -20,9 +20,11 @@ import numpy as np
 from hmocap_ros.sim.mocap_rig import make_rig, views_seeing
 
 if TYPE_CHECKING:
-    from hmocap_ros.sim.mocap_dataset import MocapSimConfig
+    from hmocap_ros.sim.params import MocapSimConfig
 
-__all__ = ["MIN_PELVIS_CLEARANCE"]
+__all__ = ["MIN_PELVIS_CLEARANCE", "full_parameters", "make_performer", "motion_window",
+           "place_subject", "random_streams", "retargeted_motion", "shaped_skeleton",
+           "subject_in_room"]
 
 # Relaxed hand: flexion (rad) of the finger joints of the rendered body.
 FINGER_CURL = {"1_flex": 0.25, "2_flex": 0.35, "3_flex": 0.25}
@@ -45,7 +47,7 @@ class _Performer:
     full_params: np.ndarray  # (F, D_full) parameters of the rendered body
 
 
-def _full_parameters(track_params, tracking, full) -> np.ndarray:
+def full_parameters(track_params, tracking, full) -> np.ndarray:
     """Parameters of the full-DoF model: the tracking DoFs copied, fingers relaxed."""
     out = np.zeros((len(track_params), full.skeleton.n_dofs))
     names = full.skeleton.dof_names
@@ -61,7 +63,7 @@ def _full_parameters(track_params, tracking, full) -> np.ndarray:
     return out
 
 
-def _retargeted(bvh_path, tracking, shape, fps):
+def retargeted_motion(bvh_path, tracking, shape, fps):
     """A BVH clip retargeted onto the tracking body of ``shape``, at ``fps``."""
     from hmocap_ros.body.anthropometry import apply_shape
     from hmocap_ros.sim.retarget import load_motion
@@ -72,7 +74,7 @@ def _retargeted(bvh_path, tracking, shape, fps):
                        fps=fps)
 
 
-def _motion_window(motion, start: float, seconds: float, fps: float, still: float = 0.0):
+def motion_window(motion, start: float, seconds: float, fps: float, still: float = 0.0):
     """``seconds`` of ``motion`` from ``start`` (shorter, with a warning, where the clip ends),
     after ``still`` seconds of its first frame held (the subject standing before it moves)."""
     n = motion.n_frames
@@ -91,14 +93,14 @@ def _motion_window(motion, start: float, seconds: float, fps: float, still: floa
                    root_translation=motion.root_translation[held], source_frames=None)
 
 
-def _performer(motion, tracking, full, shape, look) -> _Performer:
+def make_performer(motion, tracking, full, shape, look) -> _Performer:
     """Tracking parameters of a placed motion, feet put back on the floor after the
     projection onto the model's DoFs, and the joints they give."""
     from hmocap_ros.body import local_rotations_to_pose
 
     params = local_rotations_to_pose(tracking.skeleton, motion.local_rotations,
                                      motion.root_translation)
-    full_params = _full_parameters(params, tracking, full)
+    full_params = full_parameters(params, tracking, full)
     # The DoF projection drops a little rotation (e.g. ankle inversion): re-level the feet
     # on the rendered mesh's lowest points (10th percentile over the clip, as the retarget).
     lowest = np.concatenate([full.forward(full_params[i:i + 64], shape).vertices[..., 1].min(-1)
@@ -121,7 +123,9 @@ class _RestSkeleton:
     end_site_parents: np.ndarray
 
 
-def _shaped_skeleton(model, shape) -> _RestSkeleton:
+def shaped_skeleton(model, shape) -> _RestSkeleton:
+    """The rest skeleton of ``model`` with ``shape`` applied (joint positions and end sites),
+    what :func:`place_subject` keeps clear of the furniture and the views' edges."""
     from hmocap_ros.body.anthropometry import apply_shape
 
     rest = apply_shape(model, shape)
@@ -129,7 +133,7 @@ def _shaped_skeleton(model, shape) -> _RestSkeleton:
                          model.end_site_parents)
 
 
-def _place(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int = 64):
+def place_subject(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int = 64):
     """Choose position and heading so the subject stays in every view and off the furniture.
 
     Candidates are drawn from ``rng``: positions uniform over the central floor; headings
@@ -188,17 +192,17 @@ def _place(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int
     return best
 
 
-def _streams(seed: int) -> tuple:
+def random_streams(seed: int) -> tuple:
     """The recording's eight independent random streams (room, shape, look, place,
     distractors, light, cameras, events), so that e.g. ``--distractors`` does not change the
     subject."""
     return tuple(np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(8))
 
 
-def _subject_in_room(config: MocapSimConfig, rng_room, rng_shape, rng_place) -> tuple:
+def subject_in_room(config: MocapSimConfig, rng_room, rng_shape, rng_place) -> tuple:
     """``(rig, room, tracking model, subject shape, placed motion)`` of a recording."""
     from hmocap_ros.body import load_body_model, sample_shape
-    from hmocap_ros.rig import load_rig
+    from hmocap_ros.geometry.rig import load_rig
     from hmocap_ros.sim.room import build_room
 
     fps = float(config.fps)
@@ -207,7 +211,7 @@ def _subject_in_room(config: MocapSimConfig, rng_room, rng_shape, rng_place) -> 
     room = build_room(rng_room)
     tracking = load_body_model("tracking")
     shape = sample_shape(rng_shape)
-    motion = _retargeted(Path(config.bvh), tracking, shape, fps)
-    motion = _motion_window(motion, config.start, config.seconds, fps, config.still_seconds)
-    motion = _place(motion, rig, room, rng_place, _shaped_skeleton(tracking, shape))
+    motion = retargeted_motion(Path(config.bvh), tracking, shape, fps)
+    motion = motion_window(motion, config.start, config.seconds, fps, config.still_seconds)
+    motion = place_subject(motion, rig, room, rng_place, shaped_skeleton(tracking, shape))
     return rig, room, tracking, shape, motion

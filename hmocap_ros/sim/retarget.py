@@ -54,17 +54,17 @@ from hmocap_ros.sim.retarget_landmarks import (
     FAMILY_TWIST_SOURCES,
     RestChain,
     Virtual,
-    _bvh_point,
+    bvh_point,
     t_pose_frames,
 )
 from hmocap_ros.sim.retarget_motion import Motion, heading_of, place_in_room, resample
 from hmocap_ros.sim.retarget_rotations import (
-    _fk,
-    _fk_end_sites,
-    _nearest_rotation,
-    _topological_order,
-    _unit,
-    _up_axis_rotation,
+    joint_forward_kinematics,
+    end_site_forward_kinematics,
+    nearest_rotation,
+    topological_order,
+    unit_vectors,
+    up_axis_rotation,
     kabsch,
     swing,
 )
@@ -241,7 +241,7 @@ def _observed(
     """
     pose = forward_kinematics(bvh)
     bvh_pts = {name: p for name, spec in landmarks.items()
-               if (p := _bvh_point(bvh, pose, spec)) is not None}
+               if (p := bvh_point(bvh, pose, spec)) is not None}
     needed = ("l_hip", "r_hip", "l_knee", "r_knee", "l_ankle", "r_ankle", "neck")
     missing = [n for n in needed if n not in bvh_pts]
     if missing:
@@ -256,7 +256,7 @@ def _observed(
     if keep.size == 0:
         raise ValueError(f"{bvh.source}: no frames left to retarget")
     mid_hips = 0.5 * (bvh_pts["l_hip"] + bvh_pts["r_hip"])
-    to_body = _up_axis_rotation(np.mean(bvh_pts["neck"] - mid_hips, axis=0))
+    to_body = up_axis_rotation(np.mean(bvh_pts["neck"] - mid_hips, axis=0))
     obs = {n: p[keep] @ to_body.T for n, p in bvh_pts.items()}
     bvh_rot = {
         j: to_body @ pose.rotations[keep, bvh.joint_names.index(k)]
@@ -284,7 +284,7 @@ def _global_rotations(
             children[int(p)].append(s)
     n_frames = next(iter(obs.values())).shape[0]
     glob = np.empty((n_frames, len(names), 3, 3))
-    for j in _topological_order(parents):
+    for j in topological_order(parents):
         name, parent = names[j], int(parents[j])
         kids = children[j]
         aim = kids[0] if len(kids) == 1 and {kids[0], name} <= (body_pts.keys() & obs.keys()) \
@@ -296,10 +296,10 @@ def _global_rotations(
             # with the frames where the position frame is well defined counting most.
             seg = bvh_rot[name]
             weight = np.maximum(conditioning, 0.05)
-            offset = _nearest_rotation(np.einsum("f,fji,fjk->ik", weight, seg, frame))
+            offset = nearest_rotation(np.einsum("f,fji,fjk->ik", weight, seg, frame))
             frame = seg @ offset
         if aim is not None:
-            d0 = frame @ _unit(body_pts[aim] - body_pts[name])
+            d0 = frame @ unit_vectors(body_pts[aim] - body_pts[name])
             frame = swing(d0, obs[aim] - obs[name]) @ frame
         glob[:, j] = frame
     return glob
@@ -339,13 +339,13 @@ def _position_frame(
         weights.append(w)
     if not rest_vecs:
         return np.array(g_parent), np.ones(g_parent.shape[0])
-    a = _unit(np.stack(rest_vecs))  # (N, 3)
-    b = _unit(np.stack(obs_vecs, axis=1))  # (F, N, 3)
+    a = unit_vectors(np.stack(rest_vecs))  # (N, 3)
+    b = unit_vectors(np.stack(obs_vecs, axis=1))  # (F, N, 3)
     h = np.einsum("n,fni,nj->fij", np.asarray(weights), b, a)
     sv = np.linalg.svd(h, compute_uv=False)
     conditioning = sv[:, 1] / np.maximum(sv[:, 0], 1e-12)
     # The parent's axes e_i -> G_parent e_i, weakly: they decide twist only when nothing else does.
-    return _nearest_rotation(h + _PARENT_PULL * g_parent), conditioning
+    return nearest_rotation(h + _PARENT_PULL * g_parent), conditioning
 
 
 def _leg_length(points: Mapping[str, np.ndarray]) -> float:
@@ -374,10 +374,10 @@ def _feet_on_floor(
     floor) is a contact height; the ``percentile`` of it over the clip is taken as the floor, so a
     jump does not lift the clip and a foot-skating outlier does not sink it.
     """
-    positions, glob = _fk(motion.local_rotations, motion.root_translation, rest, parents)
+    positions, glob = joint_forward_kinematics(motion.local_rotations, motion.root_translation, rest, parents)
     points, rest_points = [positions], [rest]
     if end_sites_rest is not None and end_site_parents is not None and len(end_site_parents):
-        sites = _fk_end_sites(positions, glob, rest, end_sites_rest, end_site_parents)
+        sites = end_site_forward_kinematics(positions, glob, rest, end_sites_rest, end_site_parents)
         points.append(sites)
         rest_points.append(np.asarray(end_sites_rest, float))
     heights = np.concatenate(points, axis=1)[..., 1]

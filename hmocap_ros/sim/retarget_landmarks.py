@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from hmocap_ros.sim.bvh import Bvh, BvhPose
-from hmocap_ros.sim.retarget_rotations import _unit
+from hmocap_ros.sim.retarget_rotations import unit_vectors
 
-__all__ = ["FAMILY_LANDMARKS", "FAMILY_TWIST_SOURCES", "RestChain", "Virtual", "t_pose_frames"]
+__all__ = ["FAMILY_LANDMARKS", "FAMILY_TWIST_SOURCES", "RestChain", "Virtual", "bvh_point",
+           "t_pose_frames"]
 
 
 @dataclass(frozen=True)
@@ -132,7 +133,7 @@ FAMILY_TWIST_SOURCES: dict[str, dict[str, str]] = {
 }
 
 
-def _bvh_point(bvh: Bvh, pose: BvhPose, spec) -> np.ndarray | None:
+def bvh_point(bvh: Bvh, pose: BvhPose, spec) -> np.ndarray | None:
     """(F, 3) position of a BVH point spec, or None when the file lacks it."""
     if isinstance(spec, str):
         if spec in bvh.joint_names or spec in bvh.end_site_names:
@@ -150,7 +151,7 @@ def _bvh_point(bvh: Bvh, pose: BvhPose, spec) -> np.ndarray | None:
         j = bvh.joint_names.index(spec.joint)
         return pose.positions[:, j] + pose.rotations[:, j] @ offset
     for alternative in spec:
-        point = _bvh_point(bvh, pose, alternative)
+        point = bvh_point(bvh, pose, alternative)
         if point is not None:
             return point
     return None
@@ -192,15 +193,15 @@ def t_pose_frames(landmarks: Mapping[str, np.ndarray]) -> int:
     if not all(n in landmarks for n in need) or len(landmarks["neck"]) < 3:
         return 0
     lm = {n: np.asarray(landmarks[n], float) for n in need}
-    lateral = _unit(lm["l_shoulder"][0] - lm["r_shoulder"][0])
-    up = _unit(lm["neck"][0] - 0.5 * (lm["l_hip"][0] + lm["r_hip"][0]))
+    lateral = unit_vectors(lm["l_shoulder"][0] - lm["r_shoulder"][0])
+    up = unit_vectors(lm["neck"][0] - 0.5 * (lm["l_hip"][0] + lm["r_hip"][0]))
     arms = (
-        _unit(lm["l_elbow"][0] - lm["l_shoulder"][0]) @ lateral > 0.85
-        and _unit(lm["r_elbow"][0] - lm["r_shoulder"][0]) @ -lateral > 0.85
+        unit_vectors(lm["l_elbow"][0] - lm["l_shoulder"][0]) @ lateral > 0.85
+        and unit_vectors(lm["r_elbow"][0] - lm["r_shoulder"][0]) @ -lateral > 0.85
     )
     legs = (
-        _unit(lm["l_knee"][0] - lm["l_hip"][0]) @ -up > 0.9
-        and _unit(lm["r_knee"][0] - lm["r_hip"][0]) @ -up > 0.9
+        unit_vectors(lm["l_knee"][0] - lm["l_hip"][0]) @ -up > 0.9
+        and unit_vectors(lm["r_knee"][0] - lm["r_hip"][0]) @ -up > 0.9
     )
     if not (arms and legs):
         return 0

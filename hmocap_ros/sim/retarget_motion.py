@@ -7,7 +7,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hmocap_ros.sim.retarget_rotations import _rot_y
+from hmocap_ros.sim.retarget_rotations import rotation_about_y
 
 __all__ = ["Motion", "heading_of", "place_in_room", "resample"]
 
@@ -16,7 +16,7 @@ __all__ = ["Motion", "heading_of", "place_in_room", "resample"]
 class Motion:
     """A body motion: per-frame local joint rotations and root position, body frame.
 
-    Forward kinematics (``retarget_rotations._fk``): ``G_root = local[root]``,
+    Forward kinematics (``retarget_rotations.joint_forward_kinematics``): ``G_root = local[root]``,
     ``p_root = root_translation``, ``G_j = G_parent @ local[j]``,
     ``p_j = p_parent + G_parent @ (rest_j - rest_parent)``; all rotations identity gives the
     body's rest pose with the pelvis at ``root_translation``.
@@ -126,7 +126,7 @@ def place_in_room(
     """
     if anchor not in ("mean", "first"):
         raise ValueError(f"anchor must be 'mean' or 'first', got {anchor!r}")
-    turn = _rot_y(heading - heading_of(motion, 0, root))
+    turn = rotation_about_y(heading - heading_of(motion, 0, root))
     trans = motion.root_translation
     centre = trans.mean(axis=0) if anchor == "mean" else trans[0].copy()
     centre[1] = 0.0

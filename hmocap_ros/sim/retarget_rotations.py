@@ -10,10 +10,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["kabsch", "swing"]
+__all__ = ["end_site_forward_kinematics", "joint_forward_kinematics", "kabsch", "nearest_rotation",
+           "rotation_about_y", "swing", "topological_order", "unit_vectors", "up_axis_rotation"]
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
+def unit_vectors(v: np.ndarray) -> np.ndarray:
+    """``v`` (..., 3) scaled to unit length along its last axis (zero vectors left as they are)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 1e-12, n, 1.0)
 
@@ -35,10 +37,10 @@ def kabsch(
     b = np.asarray(observed_dirs, dtype=np.float64)
     w = np.ones(a.shape[-2]) if weights is None else np.asarray(weights, dtype=np.float64)
     h = np.einsum("...n,...ni,...nj->...ij", w, b, a)
-    return _nearest_rotation(h)
+    return nearest_rotation(h)
 
 
-def _nearest_rotation(m: np.ndarray) -> np.ndarray:
+def nearest_rotation(m: np.ndarray) -> np.ndarray:
     """Projection of (..., 3, 3) matrices onto SO(3) (polar decomposition with det fix)."""
     u, _, vt = np.linalg.svd(m)
     d = np.sign(np.linalg.det(u @ vt))
@@ -54,7 +56,7 @@ def swing(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     Rodrigues' formula with ``k = u x v``: ``R = I + [k]x + [k]x^2 / (1 + u.v)``; for opposite
     directions a half turn about an axis perpendicular to ``u``.
     """
-    u, v = np.broadcast_arrays(_unit(np.asarray(u, float)), _unit(np.asarray(v, float)))
+    u, v = np.broadcast_arrays(unit_vectors(np.asarray(u, float)), unit_vectors(np.asarray(v, float)))
     k = np.cross(u, v)
     c = np.einsum("...i,...i->...", u, v)
     kx = np.zeros(k.shape + (3,))
@@ -65,18 +67,19 @@ def swing(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     r = np.eye(3) + kx + kx @ kx / denom[..., None, None]
     if np.any(opposite):
         helper = np.where(np.abs(u[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        n = _unit(np.cross(u, helper))
+        n = unit_vectors(np.cross(u, helper))
         half_turn = 2.0 * n[..., :, None] * n[..., None, :] - np.eye(3)
         r = np.where(opposite[..., None, None], half_turn, r)
     return r
 
 
-def _rot_y(angle: float) -> np.ndarray:
+def rotation_about_y(angle: float) -> np.ndarray:
+    """(3, 3) rotation by ``angle`` (rad) about +Y (the room's up axis)."""
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
-def _up_axis_rotation(up: np.ndarray) -> np.ndarray:
+def up_axis_rotation(up: np.ndarray) -> np.ndarray:
     """Rotation taking the BVH axis nearest to ``up`` onto +Y, horizontal axes kept if possible."""
     axis = np.zeros(3)
     i = int(np.argmax(np.abs(up)))
@@ -88,7 +91,9 @@ def _up_axis_rotation(up: np.ndarray) -> np.ndarray:
     return np.rint(swing(axis, np.array([0.0, 1.0, 0.0])))
 
 
-def _topological_order(parents: np.ndarray) -> list[int]:
+def topological_order(parents: np.ndarray) -> list[int]:
+    """Joint indices by depth in the tree of ``parents`` (-1: root), parents before children;
+    ValueError when the parents hold a cycle."""
     depth = np.zeros(len(parents), dtype=int)
     for j in range(len(parents)):
         p, d = parents[j], 0
@@ -100,13 +105,13 @@ def _topological_order(parents: np.ndarray) -> list[int]:
     return [int(j) for j in np.argsort(depth, kind="stable")]
 
 
-def _fk(
+def joint_forward_kinematics(
     local_rotations: np.ndarray, root_translation: np.ndarray, rest_joints: np.ndarray,
     parents: Sequence[int],
 ) -> tuple[np.ndarray, np.ndarray]:
     """Body forward kinematics (convention in ``Motion``).
 
-    Returns positions (F, J, 3) and global rotations (F, J, 3, 3). A private stand-in with the
+    Returns positions (F, J, 3) and global rotations (F, J, 3, 3). A stand-in with the
     convention of ``hmocap_ros.body.kinematics.forward_kinematics`` (tested to agree), so this
     module does not depend on the body package.
     """
@@ -115,7 +120,7 @@ def _fk(
     parents = np.asarray(parents, int)
     glob = np.empty_like(local)
     pos = np.empty(local.shape[:2] + (3,))
-    for j in _topological_order(parents):
+    for j in topological_order(parents):
         p = parents[j]
         if p < 0:
             glob[:, j] = local[:, j]
@@ -126,7 +131,7 @@ def _fk(
     return pos, glob
 
 
-def _fk_end_sites(
+def end_site_forward_kinematics(
     positions: np.ndarray, glob: np.ndarray, rest_joints: np.ndarray,
     end_sites_rest: np.ndarray, end_site_parents: Sequence[int],
 ) -> np.ndarray:

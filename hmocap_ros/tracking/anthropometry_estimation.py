@@ -49,40 +49,14 @@ from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import clip_body_pose, root_room_limits
 from hmocap_ros.tracking.startup_pose import (HEADING_SEARCH_SIZES, LIMB_GRID, LIMB_STEPS,
                                               initial_pose, powell_fit, search_headings)
-from hmocap_ros.tracking.visual_hull import Hull
+from hmocap_ros.tracking.params import EstimationParams
+from hmocap_ros.detection.visual_hull import Hull
 
 __all__ = [
     "HEADING_SEARCH_SIZES", "INIT_SPREAD", "LIMB_GRID", "LIMB_STEPS", "ROOT_DOFS", "SHAPE_KEYS",
-    "SHAPE_PARAMS", "TABLE_2_2", "AnthropometryEstimator", "EstimationParams", "Hypothesis",
+    "SHAPE_PARAMS", "TABLE_2_2", "AnthropometryEstimator", "Hypothesis",
     "entity_size_errors", "initial_pose", "powell_fit", "shape_from_state", "shape_to_state",
 ]
-
-
-@dataclass(frozen=True)
-class EstimationParams:
-    """Settings of the start-up (see the module docstring and :mod:`.anthropometry_layers`)."""
-
-    n_particles: int = 250
-    frames: int = 4
-    estimate_shape: bool = True
-    survival_rate: float = 0.5
-    rejection_tau: float = 0.7
-    rejection_trials: int = 8
-    shape_bone_std: float = 0.04
-    shape_radial_std: float = 0.06
-    global_std: float = 0.015
-    init_spread_scale: float = 1.0
-    anneal_scale: float = 0.25
-    part_scale: float = 0.5
-    frame_decay: float = 0.7
-    anneal_alpha: float = 0.5
-    powell_scale: bool = False
-    prior_on_proportions: bool = True
-    powell_maxfev: int = 120
-    limb_maxfev: int = 30
-    scale_limits: tuple = (0.8, 1.2)
-    shape_limits: tuple = (0.7, 1.4)
-    proposal_fraction: float = 0.0
 
 
 @dataclass(eq=False)

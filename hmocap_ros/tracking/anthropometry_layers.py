@@ -30,7 +30,7 @@ from hmocap_ros.tracking.anthropometry_state import ROOT_DOFS, SHAPE_KEYS, SHAPE
 from hmocap_ros.tracking.body_layers import body_sigma0
 
 if TYPE_CHECKING:
-    from hmocap_ros.tracking.anthropometry_estimation import EstimationParams
+    from hmocap_ros.tracking.params import EstimationParams
 
 __all__ = ["INIT_SPREAD", "TABLE_2_2", "init_spread", "layer_dims", "pose_index", "shape_std",
            "startup_filters"]

@@ -36,9 +36,9 @@ import numpy as np
 from hmocap_ros.body.anthropometry import BodyShape, ShapedRest, apply_shape
 from hmocap_ros.body.kinematics import forward_kinematics, skin_vertices, skinning_matrices
 from hmocap_ros.body.skeleton import pose_to_local_rotations
-from hmocap_ros.render import project_batch, xor_counts
-from hmocap_ros.render.projection import distortion_valid_r2
-from hmocap_ros.rig import camera_arrays
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.render import xor_counts
+from hmocap_ros.geometry.rig import camera_arrays
 from hmocap_ros.render.fused_xor import xor_counts_from_vertices
 
 __all__ = ["Observation", "SilhouetteFitness", "StageTimes", "downsample_mask", "posed_mesh",
@@ -159,7 +159,7 @@ class SilhouetteFitness:
     """Silhouette XOR cost of body particles for one rig (eq. 2.8 and 2.15).
 
     model: the body model (``load_body_model("tracking")``).
-    cameras: the rig's cameras at full resolution (a :class:`~hmocap_ros.rig.Rig` or a list).
+    cameras: the rig's cameras at full resolution (a :class:`~hmocap_ros.geometry.rig.Rig` or a list).
     working_scale: image scale of the comparison (0.25: 640x480 -> 160x120).
     front_only: rasterise only front faces (exact for the closed body mesh, about 2x faster).
     min_count: floor of ``C(S_v)`` in working-resolution pixels.
@@ -179,7 +179,7 @@ class SilhouetteFitness:
         self.cameras = tuple(self.cameras)
         self.working = tuple(c.scaled(self.working_scale) for c in self.cameras)
         self._K, self._R, self._t, self._D = camera_arrays(self.working)
-        self._max_r2 = np.array([distortion_valid_r2(d) for d in self._D])
+        self._max_r2 = np.array([c.max_normalized_radius2 for c in self.working])
         self.faces = np.ascontiguousarray(self.model.faces, dtype=np.int32)
         self._rest_cache: tuple | None = None
 

@@ -82,7 +82,7 @@ from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
 from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
 from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult, stage_timings
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
-from hmocap_ros.tracking.visual_hull import room_bounds
+from hmocap_ros.detection.visual_hull import room_bounds
 
 __all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "BodyTracker", "TrackResult",
            "TrackerParams", "TrackerState"]

@@ -23,8 +23,10 @@ from typing import Sequence
 
 import numpy as np
 
+from hmocap_ros.detection.greedy_assignment import greedy_pairs
+
 __all__ = ["END_EFFECTORS", "EFFECTOR_LABELS", "MAX_DISTANCE", "HEAD_EXCLUSION", "Assigned",
-           "classify", "detection_cost", "reacquire_hands"]
+           "detection_cost", "reacquire_hands"]
 
 #: End-effectors the detections are assigned to (thesis: hands and head; feet from keypoints).
 END_EFFECTORS = ("l_hand", "r_hand", "head", "l_foot", "r_foot")
@@ -87,18 +89,6 @@ def detection_cost(assigned: np.ndarray, effectors: np.ndarray) -> np.ndarray:
     return cost / max(count, 1)
 
 
-def _greedy_pairs(d: np.ndarray) -> list[tuple[int, int]]:
-    """The thesis' greedy solution of an assignment (eq. 2.19): repeatedly the closest finite
-    (row, column) pair of ``d`` (modified), each row and column used once."""
-    pairs = []
-    while np.isfinite(d).any():
-        i, e = np.unravel_index(np.argmin(d), d.shape)
-        pairs.append((int(i), int(e)))
-        d[i, :] = np.inf
-        d[:, e] = np.inf
-    return pairs
-
-
 def reacquire_hands(candidates: np.ndarray, assigned: np.ndarray, shoulders: np.ndarray,
                     reach: np.ndarray, head: np.ndarray, head_exclusion: float) -> np.ndarray:
     """Second pass for hands eq. 2.19 left unassigned: (2, 3) hands (module docstring).
@@ -122,25 +112,6 @@ def reacquire_hands(candidates: np.ndarray, assigned: np.ndarray, shoulders: np.
     d[:, used] = np.inf
     d[d > np.asarray(reach, dtype=np.float64)[:, None]] = np.inf
     d[np.isfinite(hands).all(axis=1)] = np.inf
-    for i, e in _greedy_pairs(d):
+    for i, e in greedy_pairs(d):
         hands[i] = candidates[e]
     return hands
-
-
-def classify(candidates: np.ndarray, targets: np.ndarray, max_distance: Sequence[float]
-             ) -> np.ndarray:
-    """Eq. 2.19 by the thesis' greedy rule: (I, 3) assigned candidate per target (NaN: none).
-
-    Repeatedly assigns the closest (target, candidate) pair whose distance is within the
-    target's maximum ``Upsilon_i``; each candidate and target is used once.
-    """
-    targets = np.asarray(targets, dtype=np.float64)
-    out = np.full(targets.shape, np.nan)
-    if len(candidates) == 0:
-        return out
-    d = np.linalg.norm(targets[:, None] - candidates[None], axis=2)
-    d[d > np.asarray(max_distance, dtype=np.float64)[:, None]] = np.inf
-    d[~np.isfinite(targets).all(axis=1)] = np.inf
-    for i, e in _greedy_pairs(d):
-        out[i] = candidates[e]
-    return out

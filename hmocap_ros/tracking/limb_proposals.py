@@ -40,7 +40,8 @@ import numpy as np
 
 from hmocap_ros.body.kinematics import end_site_positions, forward_kinematics
 from hmocap_ros.body.skeleton import SWING_NORM_MAX, pose_to_local_rotations
-from hmocap_ros.render import project_batch, render_silhouettes
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.render import render_silhouettes
 
 __all__ = ["LIMBS", "LimbProposalParams", "LimbProposer"]
 

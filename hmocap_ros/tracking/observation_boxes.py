@@ -30,7 +30,8 @@ import numpy as np
 
 from functools import lru_cache
 
-from hmocap_ros.render.projection import _project_one, distortion_valid_r2
+from hmocap_ros.geometry.distortion import coefficients8, monotonic_radius2
+from hmocap_ros.geometry.projection import project_one_view
 
 __all__ = ["LAYER_ANCHORS", "LAYER_PARTS", "box_corners", "chain_lengths", "layer_boxes",
            "layer_vertex_indices", "part_boxes_3d", "reach_box"]
@@ -112,7 +113,7 @@ def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 @lru_cache(maxsize=64)
 def _valid_r2(dist: tuple) -> float:
-    return distortion_valid_r2(np.array(dist))
+    return monotonic_radius2(coefficients8(np.array(dist, dtype=np.float64)))
 
 
 def layer_boxes(lo: np.ndarray, hi: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
@@ -128,7 +129,7 @@ def layer_boxes(lo: np.ndarray, hi: np.ndarray, K: np.ndarray, R: np.ndarray, t:
     uv = np.empty((len(K), 8, 2), dtype=np.float32)
     z = np.empty(8, dtype=np.float32)
     for m in range(len(K)):  # 8 points: a serial call beats waking the thread pool
-        _project_one(corners, np.asarray(K[m], np.float64), np.asarray(R[m], np.float64),
+        project_one_view(corners, np.asarray(K[m], np.float64), np.asarray(R[m], np.float64),
                      np.asarray(t[m], np.float64), d8[m], 1e-3, _valid_r2(tuple(d8[m])), uv[m], z)
     uv = uv.astype(np.float64)  # (M, 8, 2)
     boxes = np.empty((uv.shape[0], 4))

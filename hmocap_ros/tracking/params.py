@@ -15,7 +15,7 @@ from hmocap_ros.params import group, param
 from hmocap_ros.tracking.keypoint_first import KeypointFirstParams
 from hmocap_ros.tracking.methods import get_method, method_names
 
-__all__ = ["DetectorParams", "FilterParams", "HullParams", "LostParams", "ResearchParams",
+__all__ = ["DetectorParams", "EstimationParams", "FilterParams", "HullParams", "LostParams", "ResearchParams",
            "StartupParams", "TRACKER_MESHES", "TrackerParams", "WeightingParams"]
 
 #: Shipped meshes a tracker can render its particles with (``weighting.mesh``).
@@ -247,6 +247,33 @@ class LostParams:
 
     def __post_init__(self):
         _check([(self.frames >= 1, "lost.frames must be >= 1")])
+
+
+@dataclass(frozen=True)
+class EstimationParams:
+    """Settings of the start-up (:mod:`.anthropometry_estimation` and :mod:`.anthropometry_layers`, thesis sec. 2.3)."""
+
+    n_particles: int = 250
+    frames: int = 4
+    estimate_shape: bool = True
+    survival_rate: float = 0.5
+    rejection_tau: float = 0.7
+    rejection_trials: int = 8
+    shape_bone_std: float = 0.04
+    shape_radial_std: float = 0.06
+    global_std: float = 0.015
+    init_spread_scale: float = 1.0
+    anneal_scale: float = 0.25
+    part_scale: float = 0.5
+    frame_decay: float = 0.7
+    anneal_alpha: float = 0.5
+    powell_scale: bool = False
+    prior_on_proportions: bool = True
+    powell_maxfev: int = 120
+    limb_maxfev: int = 30
+    scale_limits: tuple = (0.8, 1.2)
+    shape_limits: tuple = (0.7, 1.4)
+    proposal_fraction: float = 0.0
 
 
 @dataclass(frozen=True)

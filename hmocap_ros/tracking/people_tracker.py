@@ -1,7 +1,7 @@
 """Several people in one room: one :class:`~.body_tracker.BodyTracker` per person.
 
 A smart room often holds more than its user. One tracker follows one body and starts on the
-person the cameras see best (:func:`~.visual_hull.visual_hull`), so with a bystander in
+person the cameras see best (:func:`~hmocap_ros.detection.visual_hull.visual_hull`), so with a bystander in
 better view it follows the bystander. :class:`PeopleTracker` runs up to ``max_people``
 trackers on the same frame sets, each following a person of its own:
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator, EstimationParams
-from hmocap_ros.tracking.params import ResearchParams, TrackerParams
+from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator
+from hmocap_ros.tracking.params import EstimationParams, ResearchParams, TrackerParams
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS
 
 __all__ = ["ResearchPolicy", "SearchDecision", "fresh_search"]

@@ -8,7 +8,7 @@ sizes and returns the camera of the video's frames:
 
 * same size: the camera as it is;
 * turned (``turns`` quarter turns clockwise, from ``--rotate``): :func:`rotate_camera`;
-* the same aspect ratio: :meth:`~hmocap_ros.pinhole_camera.PinholeCamera.scaled`;
+* the same aspect ratio: :meth:`~hmocap_ros.geometry.pinhole_camera.PinholeCamera.scaled`;
 * at most :data:`MAX_CROP_PX` pixels fewer along either axis, none more: cut at the right and
   bottom edges (the principal point stays; the Pose2Sim demo's two 1080-wide videos of its
   1088-wide calibration reproject best so, see ``docs/real_recordings.md``);

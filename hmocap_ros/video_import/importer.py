@@ -188,7 +188,7 @@ def plan_import(video_paths, calibration, options: ImportOptions = ImportOptions
     :class:`VideoImportError` (one line) for anything that does not fit."""
     from hmocap_ros.calibration.formats import (CalibrationFormatError, load_calibration_rig,
                                                 read_calibration)
-    from hmocap_ros.rig import Rig
+    from hmocap_ros.geometry.rig import Rig
 
     if not video_paths:
         raise VideoImportError("no videos")
@@ -260,7 +260,7 @@ def _write_latched(writer, factory, rig, stamp: int) -> None:
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_writer import LATCHED
     from hmocap_ros.io.tf import TF_MESSAGE_TYPE, TF_STATIC_TOPIC, rig_transforms, tf_message
-    from hmocap_ros.rig import rig_to_msg
+    from hmocap_ros.io.rig_messages import rig_to_msg
 
     writer.add_topic(topics.CAMERA_RIG, "hmocap_interfaces/msg/CameraRig", LATCHED)
     writer.add_topic(TF_STATIC_TOPIC, TF_MESSAGE_TYPE, LATCHED)

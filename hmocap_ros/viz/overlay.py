@@ -5,7 +5,7 @@ the frames drawn here and writes the video. One picture per frame set:
 
 - **Multi-view** (:func:`multiview_picture`): each camera's image, scaled to ``tile_width``, with
   every tracked body's skeleton projected through the camera (its own lens distortion,
-  :meth:`PinholeCamera.project <hmocap_ros.pinhole_camera.PinholeCamera.project>`): bones as
+  :meth:`PinholeCamera.project <hmocap_ros.geometry.pinhole_camera.PinholeCamera.project>`): bones as
   lines, joints as dots. With ground truth each joint is coloured by its 3D error
   (:func:`error_colours`: green at 0, yellow at half of :data:`ERROR_SCALE_MM`, red from it on)
   and the true skeleton is drawn thin in white beneath; without, each body has its colour

@@ -5,7 +5,7 @@ Formats (:data:`FORMATS`, one entry each; :func:`detect_format` tells them apart
 ===========  =========================================================  ==========  ===========
 name         files                                                       world up    unit
 ===========  =========================================================  ==========  ===========
-``rig``      this package's rig YAML (:mod:`hmocap_ros.rig`)             +Y          metre
+``rig``      this package's rig YAML (:mod:`hmocap_ros.geometry.rig`)             +Y          metre
 ``toml``     Pose2Sim / Anipose ``Calib.toml`` (:mod:`.toml_format`)     guessed     guessed
 ``qca``      Qualisys ``.qca`` XML (:mod:`.qca_format`)                  +Z          millimetre
 ``opencv``   OpenCV FileStorage ``intri.yml`` + ``extri.yml``,           guessed     guessed
@@ -14,7 +14,7 @@ name         files                                                       world u
              (:mod:`.ros_format`)
 ===========  =========================================================  ==========  ===========
 
-:func:`load_calibration_rig` reads any of them into a :class:`~hmocap_ros.rig.Rig` in the room
+:func:`load_calibration_rig` reads any of them into a :class:`~hmocap_ros.geometry.rig.Rig` in the room
 frame (:mod:`.world_frame`: the up axis and unit the file states, the caller gives, or the
 cameras tell); :func:`save_calibration_rig` writes a rig in any of them. ``hmocap rig convert``
 and ``hmocap import videos`` are built on these two.
@@ -40,7 +40,7 @@ __all__ = ["AXES", "FORMATS", "UNITS", "CalibrationFormat", "CalibrationFormatEr
 
 
 def _read_rig(path) -> ForeignCalibration:
-    from hmocap_ros.rig import RigError, load_rig
+    from hmocap_ros.geometry.rig import RigError, load_rig
 
     try:
         rig = load_rig(path)
@@ -50,7 +50,7 @@ def _read_rig(path) -> ForeignCalibration:
 
 
 def _write_rig(calibration: ForeignCalibration, path) -> list[Path]:
-    from hmocap_ros.rig import save_rig
+    from hmocap_ros.geometry.rig import save_rig
 
     rig, _ = calibration_to_rig(calibration)
     save_rig(rig, path, header=f"camera rig converted from {calibration.source} by hmocap rig convert")
@@ -153,7 +153,7 @@ def read_calibration(path: str | Path, format: str | None = None) -> ForeignCali
 def load_calibration_rig(path: str | Path, *, format: str | None = None, up: str | None = None,
                          units: str | None = None, floor: float = 0.0, sizes: dict | None = None,
                          frame_id: str = "room"):
-    """A calibration file of any format as a room-frame :class:`~hmocap_ros.rig.Rig`, and the
+    """A calibration file of any format as a room-frame :class:`~hmocap_ros.geometry.rig.Rig`, and the
     notes on what was guessed (:func:`.world_frame.calibration_to_rig`). ``units``: a key of
     :data:`UNITS` overriding the file's (or the guess)."""
     calibration = read_calibration(path, format)

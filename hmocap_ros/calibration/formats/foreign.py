@@ -7,7 +7,7 @@ order ``k1, k2, p1, p2[, k3[, k4, k5, k6]]``) and the world -> camera transform
 world is Z-up or Y-up and whether its unit is the metre or the millimetre is what the file says
 (``up``, ``metres_per_unit``) or, where the format does not say, None:
 :mod:`~hmocap_ros.calibration.formats.world_frame` settles both (from the user or from the
-cameras) when it turns the calibration into a :class:`~hmocap_ros.rig.Rig`.
+cameras) when it turns the calibration into a :class:`~hmocap_ros.geometry.rig.Rig`.
 """
 from __future__ import annotations
 

@@ -45,21 +45,21 @@ def _load(path: Path):
 
 
 def _camera(path: Path, data) -> ForeignCamera:
-    from hmocap_ros.camera_model import quaternion_to_matrix
-    from hmocap_ros.rig import RigError, _matrix, _vector
+    from hmocap_ros.geometry import quaternion_to_matrix
+    from hmocap_ros.geometry.rig import RigError, read_matrix_entry, read_vector_entry
 
     name = str(data.get("camera_name") or path.stem)
     where = f"{path}: camera {name!r}"
     try:
-        K = _matrix(data["camera_matrix"], where, "camera_matrix", 3, 3)
-        D = _matrix(data["distortion_coefficients"], where, "distortion_coefficients", 1, None)
+        K = read_matrix_entry(data["camera_matrix"], where, "camera_matrix", 3, 3)
+        D = read_matrix_entry(data["distortion_coefficients"], where, "distortion_coefficients", 1, None)
         pose = data.get("pose")
         if not isinstance(pose, dict) or not {"position", "orientation"} <= set(pose):
             raise CalibrationFormatError(
                 f"{where}: no pose (add 'pose: {{position: [x, y, z], orientation: [x, y, z, w]}}', "
                 f"the optical frame in the world, metres, +Z up)")
-        position = _vector(pose["position"], where, "pose.position", 3)
-        R_wc = quaternion_to_matrix(_vector(pose["orientation"], where, "pose.orientation", 4))
+        position = read_vector_entry(pose["position"], where, "pose.position", 3)
+        R_wc = quaternion_to_matrix(read_vector_entry(pose["orientation"], where, "pose.orientation", 4))
     except (RigError, ValueError) as error:
         if isinstance(error, CalibrationFormatError):
             raise
@@ -91,7 +91,7 @@ def write_ros(calibration: ForeignCalibration, path: str | Path) -> list[Path]:
     """One ``<name>.yaml`` per camera in the folder ``path`` (module docstring); returns the
     files written."""
     from hmocap_ros.io.tf import rotation_to_quaternion
-    from hmocap_ros.rig import _Flow, _matrix_dict, _RigDumper
+    from hmocap_ros.geometry.rig import FlowList, matrix_entry, RigDumper
 
     folder = Path(path)
     folder.mkdir(parents=True, exist_ok=True)
@@ -105,15 +105,15 @@ def write_ros(calibration: ForeignCalibration, path: str | Path) -> list[Path]:
             "image_width": int(camera.size[0]),
             "image_height": int(camera.size[1]),
             "camera_name": camera.name,
-            "camera_matrix": _matrix_dict(K),
+            "camera_matrix": matrix_entry(K),
             "distortion_model": model,
-            "distortion_coefficients": _matrix_dict(D[None, :]),
-            "rectification_matrix": _matrix_dict(np.eye(3)),
-            "projection_matrix": _matrix_dict(np.hstack([K, np.zeros((3, 1))])),
-            "pose": {"position": _Flow(float(v) for v in camera.centre),
-                     "orientation": _Flow(float(v) for v in rotation_to_quaternion(R_wc))},
+            "distortion_coefficients": matrix_entry(D[None, :]),
+            "rectification_matrix": matrix_entry(np.eye(3)),
+            "projection_matrix": matrix_entry(np.hstack([K, np.zeros((3, 1))])),
+            "pose": {"position": FlowList(float(v) for v in camera.centre),
+                     "orientation": FlowList(float(v) for v in rotation_to_quaternion(R_wc))},
         }
         file = folder / f"{camera.name}.yaml"
-        file.write_text(yaml.dump(data, Dumper=_RigDumper, sort_keys=False, width=120))
+        file.write_text(yaml.dump(data, Dumper=RigDumper, sort_keys=False, width=120))
         written.append(file)
     return written

@@ -1,6 +1,6 @@
 """From another tool's world to the package's room frame and back.
 
-The room frame (:mod:`hmocap_ros.camera_model`): metres, right-handed, **+Y up**, the floor at
+The room frame (:mod:`hmocap_ros.geometry`): metres, right-handed, **+Y up**, the floor at
 ``y = 0``. Other tools' worlds are Z-up (Qualisys, Pose2Sim, REP-103 ``world``), Y-up, or the
 first camera's frame (Anipose), in metres or millimetres. A calibration becomes a room-frame rig
 by one similarity transform ``x_room = s A x_world - s f e_y``:
@@ -113,7 +113,7 @@ def _distortion(D: np.ndarray) -> tuple[np.ndarray, str]:
 def calibration_to_rig(calibration: ForeignCalibration, *, up: str | None = None,
                        metres_per_unit: float | None = None, floor: float = 0.0,
                        sizes: dict | None = None, frame_id: str = "room"):
-    """The :class:`~hmocap_ros.rig.Rig` of ``calibration`` in the room frame (module
+    """The :class:`~hmocap_ros.geometry.rig.Rig` of ``calibration`` in the room frame (module
     docstring), and the notes on what was guessed.
 
     ``up`` and ``metres_per_unit`` override what the file says; where neither the file nor the
@@ -122,8 +122,8 @@ def calibration_to_rig(calibration: ForeignCalibration, *, up: str | None = None
     cameras whose file gives no image size. ``CalibrationFormatError`` when something can be
     neither read nor guessed.
     """
-    from hmocap_ros.camera_model import PinholeCamera
-    from hmocap_ros.rig import Rig
+    from hmocap_ros.geometry import PinholeCamera
+    from hmocap_ros.geometry.rig import Rig
 
     notes = list(calibration.notes)
     source = calibration.source

@@ -34,7 +34,7 @@ from typing import Sequence
 import numpy as np
 from scipy import ndimage
 
-from hmocap_ros.render import project_batch
+from hmocap_ros.geometry.projection import project_batch
 
 __all__ = ["Hull", "carve", "coarse_people", "room_bounds", "visual_hull"]
 

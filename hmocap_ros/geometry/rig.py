@@ -1,10 +1,8 @@
-"""The calibrated camera rig: YAML file format, :class:`Rig` and the ``CameraRig`` message.
+"""The calibrated camera rig: YAML file format and :class:`Rig`.
 
 There is no tf2 here, so the rig (camera names, intrinsics and each camera's pose in the room)
 is read from a YAML file under ``config/``, published latched as ``hmocap_interfaces/msg/CameraRig``
-and stored once in every bag. No rclpy in this module: messages are built through a message
-factory (``hmocap_ros.io.msg_factory``) so the same code makes rosbags dataclasses and rclpy
-messages.
+(:mod:`hmocap_ros.io.rig_messages`) and stored once in every bag.
 
 YAML format
 -----------
@@ -42,7 +40,9 @@ from typing import Any, Iterator
 import numpy as np
 import yaml
 
-from hmocap_ros.camera_model import DISTORTION_MODELS, PinholeCamera, Projection, project_points
+from hmocap_ros.geometry.distortion import DISTORTION_MODELS
+from hmocap_ros.geometry.pinhole_camera import PinholeCamera
+from hmocap_ros.geometry.projection import Projection, project_points
 
 __all__ = [
     "RigError",
@@ -52,13 +52,13 @@ __all__ = [
     "save_rig",
     "rig_from_dict",
     "rig_to_dict",
-    "rig_to_msg",
-    "rig_from_msg",
-    "CAMERA_RIG_TYPE",
+    "FlowList",
+    "RigDumper",
+    "matrix_entry",
+    "read_matrix_entry",
+    "read_vector_entry",
 ]
 
-#: ROS type name of the rig message.
-CAMERA_RIG_TYPE = "hmocap_interfaces/msg/CameraRig"
 
 _CAMERA_KEYS = {
     "name", "frame_id", "image_width", "image_height", "camera_name", "camera_matrix",
@@ -127,7 +127,7 @@ class Rig:
         return Rig(self.frame_id, tuple(c.scaled(factor) for c in self.cameras))
 
     def project(self, points_world, **kwargs) -> Projection:
-        """:func:`~hmocap_ros.camera_model.project_points` with this rig's cameras."""
+        """:func:`~hmocap_ros.geometry.project_points` with this rig's cameras."""
         return project_points(self.cameras, points_world, **kwargs)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -151,12 +151,12 @@ class Rig:
 def camera_arrays(cameras) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Cameras (a Rig or a sequence of PinholeCamera) stacked as ``(K, R, t, D)``, float64,
     with the OpenCV distortion padded to 8 coefficients: the arguments of
-    :func:`hmocap_ros.render.project_batch` and the tracker's kernels."""
+    :func:`hmocap_ros.geometry.projection.project_batch` and the tracker's kernels."""
     cams = list(cameras)
     return (np.stack([np.asarray(c.K, np.float64) for c in cams]),
             np.stack([np.asarray(c.R, np.float64) for c in cams]),
             np.stack([np.asarray(c.t, np.float64).ravel() for c in cams]),
-            np.stack([np.pad(np.asarray(c.D, np.float64).ravel(), (0, 8))[:8] for c in cams]))
+            np.stack([c.distortion8 for c in cams]))
 
 
 # --------------------------------------------------------------------------------------------
@@ -164,7 +164,7 @@ def camera_arrays(cameras) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
 # --------------------------------------------------------------------------------------------
 
 
-def _matrix(entry: Any, where: str, field: str, rows: int | None, cols: int | None) -> np.ndarray:
+def read_matrix_entry(entry: Any, where: str, field: str, rows: int | None, cols: int | None) -> np.ndarray:
     """Parse ``{rows, cols, data}`` into a ``(rows, cols)`` float array, checking the sizes."""
     if not isinstance(entry, dict) or not {"rows", "cols", "data"} <= set(entry):
         raise RigError(f"{where}: field {field!r} must be a mapping with rows, cols and data")
@@ -185,7 +185,9 @@ def _matrix(entry: Any, where: str, field: str, rows: int | None, cols: int | No
     return data.reshape(r, c)
 
 
-def _vector(entry: Any, where: str, field: str, size: int) -> np.ndarray:
+def read_vector_entry(entry: Any, where: str, field: str, size: int) -> np.ndarray:
+    """Parse a list of ``size`` finite numbers into a float array; RigError naming ``where``
+    and ``field`` otherwise."""
     try:
         vector = np.asarray(entry, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
@@ -217,21 +219,21 @@ def _camera_from_dict(entry: Any, index: int, source: str) -> PinholeCamera:
     model = entry["distortion_model"]
     if model not in DISTORTION_MODELS:
         raise RigError(f"{where}: field 'distortion_model' must be one of {', '.join(DISTORTION_MODELS)}, got {model!r}")
-    K = _matrix(entry["camera_matrix"], where, "camera_matrix", 3, 3)
-    D = _matrix(entry["distortion_coefficients"], where, "distortion_coefficients", 1, None).reshape(-1)
+    K = read_matrix_entry(entry["camera_matrix"], where, "camera_matrix", 3, 3)
+    D = read_matrix_entry(entry["distortion_coefficients"], where, "distortion_coefficients", 1, None).reshape(-1)
     if D.size > DISTORTION_MODELS[model]:
         raise RigError(f"{where}: field 'distortion_coefficients' has {D.size} values, {model} takes {DISTORTION_MODELS[model]}")
     rect = None
     if entry.get("rectification_matrix") is not None:
-        rect = _matrix(entry["rectification_matrix"], where, "rectification_matrix", 3, 3)
+        rect = read_matrix_entry(entry["rectification_matrix"], where, "rectification_matrix", 3, 3)
     proj = None
     if entry.get("projection_matrix") is not None:
-        proj = _matrix(entry["projection_matrix"], where, "projection_matrix", 3, 4)
+        proj = read_matrix_entry(entry["projection_matrix"], where, "projection_matrix", 3, 4)
     pose = entry["pose"]
     if not isinstance(pose, dict) or set(pose) != {"position", "orientation"}:
         raise RigError(f"{where}: field 'pose' must be a mapping with exactly position and orientation")
-    position = _vector(pose["position"], where, "pose.position", 3)
-    orientation = _vector(pose["orientation"], where, "pose.orientation", 4)
+    position = read_vector_entry(pose["position"], where, "pose.position", 3)
+    orientation = read_vector_entry(pose["orientation"], where, "pose.orientation", 4)
     norm = float(np.linalg.norm(orientation))
     if abs(norm - 1.0) > 1e-3:
         raise RigError(f"{where}: field 'pose.orientation' is not a unit quaternion (x, y, z, w): norm {norm:.6g}")
@@ -273,20 +275,22 @@ def rig_from_dict(data: Any, source: str = "<rig>") -> Rig:
     return Rig(frame_id, cameras)
 
 
-class _Flow(list):
+class FlowList(list):
     """A list dumped in YAML flow style (``[1, 2, 3]``)."""
 
 
-class _RigDumper(yaml.SafeDumper):
-    pass
+class RigDumper(yaml.SafeDumper):
+    """The YAML dumper of rig files: :class:`FlowList` values in flow style."""
 
 
-_RigDumper.add_representer(_Flow, lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True))
+RigDumper.add_representer(FlowList, lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True))
 
 
-def _matrix_dict(array: np.ndarray) -> dict:
+def matrix_entry(array: np.ndarray) -> dict:
+    """An array as the ``{rows, cols, data}`` mapping of a rig file (the inverse of
+    :func:`read_matrix_entry`)."""
     array = np.atleast_2d(np.asarray(array, dtype=np.float64))
-    return {"rows": int(array.shape[0]), "cols": int(array.shape[1]), "data": _Flow(float(x) for x in array.ravel())}
+    return {"rows": int(array.shape[0]), "cols": int(array.shape[1]), "data": FlowList(float(x) for x in array.ravel())}
 
 
 def rig_to_dict(rig: Rig) -> dict:
@@ -298,14 +302,14 @@ def rig_to_dict(rig: Rig) -> dict:
             "frame_id": camera.frame_id,
             "image_width": camera.width,
             "image_height": camera.height,
-            "camera_matrix": _matrix_dict(camera.K),
+            "camera_matrix": matrix_entry(camera.K),
             "distortion_model": camera.distortion_model,
-            "distortion_coefficients": _matrix_dict(camera.D[None, :]),
-            "rectification_matrix": _matrix_dict(camera.rectification),
-            "projection_matrix": _matrix_dict(camera.projection),
+            "distortion_coefficients": matrix_entry(camera.D[None, :]),
+            "rectification_matrix": matrix_entry(camera.rectification),
+            "projection_matrix": matrix_entry(camera.projection),
             "pose": {
-                "position": _Flow(float(x) for x in camera.position),
-                "orientation": _Flow(float(x) for x in camera.pose_quaternion()),
+                "position": FlowList(float(x) for x in camera.position),
+                "orientation": FlowList(float(x) for x in camera.pose_quaternion()),
             },
         })
     return {"frame_id": rig.frame_id, "cameras": cameras}
@@ -331,73 +335,5 @@ def save_rig(rig: Rig, path: str | Path, header: str | None = None) -> None:
     ``header`` is written first as ``#`` comment lines.
     """
     lines = [] if header is None else [f"# {line}".rstrip() for line in header.splitlines()]
-    body = yaml.dump(rig_to_dict(rig), Dumper=_RigDumper, sort_keys=False, default_flow_style=False, width=120)
+    body = yaml.dump(rig_to_dict(rig), Dumper=RigDumper, sort_keys=False, default_flow_style=False, width=120)
     Path(path).write_text("\n".join(lines + [body]))
-
-
-# --------------------------------------------------------------------------------------------
-# hmocap_interfaces/msg/CameraRig
-# --------------------------------------------------------------------------------------------
-
-
-def _default_factory():
-    """A rosbags factory whose typestore knows hmocap_interfaces (CameraRig)."""
-    from hmocap_ros.io.msg_factory import RosbagsFactory
-    from hmocap_ros.io.typestore import hmocap_typestore
-
-    return RosbagsFactory(hmocap_typestore())
-
-
-def rig_to_msg(rig: Rig, stamp_ns: int = 0, factory=None):
-    """``hmocap_interfaces/msg/CameraRig`` of ``rig``, built with ``factory.make(typename, **fields)``.
-
-    ``factory`` is a ``hmocap_ros.io.msg_factory`` factory (``RclpyFactory`` in a node; the
-    default is a ``RosbagsFactory`` on :func:`hmocap_ros.io.typestore.hmocap_typestore`). Each CameraInfo carries ``stamp_ns`` and the camera's
-    optical ``frame_id``; the header carries the rig's ``frame_id``.
-    """
-    from hmocap_ros.io.conversions import dict_to_camera_info
-    from hmocap_ros.io.msg_factory import make_header
-
-    factory = _default_factory() if factory is None else factory
-    stamp_ns = int(stamp_ns)
-    header = make_header(factory, stamp_ns, rig.frame_id)
-    infos, poses = [], []
-    for camera in rig.cameras:
-        infos.append(dict_to_camera_info(camera.to_camera_info_dict(), stamp_ns=stamp_ns, factory=factory))
-        x, y, z = (float(v) for v in camera.position)
-        qx, qy, qz, qw = (float(v) for v in camera.pose_quaternion())
-        poses.append(factory.make(
-            "geometry_msgs/msg/Pose",
-            position=factory.make("geometry_msgs/msg/Point", x=x, y=y, z=z),
-            orientation=factory.make("geometry_msgs/msg/Quaternion", x=qx, y=qy, z=qz, w=qw),
-        ))
-    return factory.make(CAMERA_RIG_TYPE, header=header, camera_names=list(rig.names), camera_info=infos, camera_poses=poses)
-
-
-def rig_from_msg(msg) -> Rig:
-    """:class:`Rig` from a ``CameraRig`` message (rclpy message or rosbags dataclass)."""
-    from hmocap_ros.io.conversions import camera_info_to_dict
-
-    names = list(msg.camera_names)
-    infos = list(msg.camera_info)
-    poses = list(msg.camera_poses)
-    if not (len(names) == len(infos) == len(poses)):
-        raise RigError(
-            f"CameraRig message: {len(names)} camera_names, {len(infos)} camera_info and "
-            f"{len(poses)} camera_poses must have the same length"
-        )
-    if not names:
-        raise RigError("CameraRig message has no cameras")
-    cameras = []
-    for name, info, pose in zip(names, infos, poses):
-        position = (pose.position.x, pose.position.y, pose.position.z)
-        orientation = (pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w)
-        try:
-            cameras.append(PinholeCamera.from_camera_info(camera_info_to_dict(info), name, position, orientation))
-        except ValueError as error:
-            raise RigError(f"CameraRig message: camera {name!r}: {error}") from None
-    frame_id = msg.header.frame_id or "room"
-    try:
-        return Rig(frame_id, tuple(cameras))
-    except RigError as error:
-        raise RigError(f"CameraRig message: {error}") from None

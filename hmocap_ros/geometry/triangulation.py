@@ -1,7 +1,7 @@
 """Multi-view geometry on calibrated cameras: viewing rays, linear (DLT) triangulation and its
 robust variant that leaves out disagreeing views, reprojection errors.
 
-Frames and conventions are those of :mod:`hmocap_ros.camera_model`.
+Frames and conventions are those of :mod:`hmocap_ros.geometry`.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from typing import Sequence
 
 import numpy as np
 
-from hmocap_ros.camera_projection import project_points
-from hmocap_ros.pinhole_camera import PinholeCamera
+from hmocap_ros.geometry.pinhole_camera import PinholeCamera
+from hmocap_ros.geometry.projection import project_points
 
 __all__ = ["pixel_rays", "reprojection_errors", "triangulate", "triangulate_robust"]
 

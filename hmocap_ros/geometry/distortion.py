@@ -122,7 +122,7 @@ def monotonic_radius2(d8: np.ndarray, r_max: float = 20.0, samples: int = 8001) 
     """Largest r^2 up to which the radial distortion r -> r g(r^2) is increasing.
 
     Beyond it the polynomial folds back and maps points far outside the field of view into the
-    image, so projections there are meaningless; :func:`~hmocap_ros.camera_projection.project_points`
+    image, so projections there are meaningless; :func:`~hmocap_ros.geometry.projection.project_points`
     marks them invisible.
     Tangential terms are ignored (they are tiny in any real calibration).
     """

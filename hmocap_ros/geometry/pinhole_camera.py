@@ -1,7 +1,7 @@
 """A calibrated pinhole camera with OpenCV lens distortion, and :func:`look_at` to place one.
 
 Frames and conventions (room frame, optical frame, pixels, depth) are those of
-:mod:`hmocap_ros.camera_model`; distortion is :mod:`hmocap_ros.lens_distortion`.
+:mod:`hmocap_ros.geometry`; distortion is :mod:`hmocap_ros.geometry.distortion`.
 """
 
 from __future__ import annotations
@@ -11,50 +11,19 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from hmocap_ros.camera_projection import DEFAULT_MIN_DEPTH, project_points
-from hmocap_ros.lens_distortion import (DISTORTION_MODELS, coefficients8, monotonic_radius2,
-                                        undistort_normalized)
+from hmocap_ros.geometry.distortion import (DISTORTION_MODELS, coefficients8, monotonic_radius2,
+                                            undistort_normalized)
+from hmocap_ros.geometry.projection import DEFAULT_MIN_DEPTH, project_points
+from hmocap_ros.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
 
-__all__ = [
-    "QUATERNION_TOLERANCE",
-    "ROOM_UP",
-    "PinholeCamera",
-    "look_at",
-    "matrix_to_quaternion",
-    "quaternion_to_matrix",
-]
+__all__ = ["ROOM_UP", "PinholeCamera", "look_at", "look_at_pose"]
 
 #: Up axis of the room frame (metres, +Y up, floor at y = 0).
 ROOM_UP = (0.0, 1.0, 0.0)
 
-#: Tolerance on the norm of a pose quaternion before it is renormalised.
-QUATERNION_TOLERANCE = 1e-3
-
 #: Tolerance on R^T R = I for a world->camera rotation.
 _ROTATION_TOLERANCE = 1e-6
-
-
-def quaternion_to_matrix(quaternion_xyzw) -> np.ndarray:
-    """Rotation matrix (3, 3) of a unit quaternion ``(x, y, z, w)``.
-
-    Raises ``ValueError`` if the quaternion is not finite or its norm differs from 1 by more
-    than :data:`QUATERNION_TOLERANCE` (it is renormalised within the tolerance).
-    """
-    q = np.asarray(quaternion_xyzw, dtype=np.float64)
-    if q.shape != (4,) or not np.all(np.isfinite(q)):
-        raise ValueError(f"quaternion must be 4 finite numbers (x, y, z, w), got {quaternion_xyzw!r}")
-    norm = float(np.linalg.norm(q))
-    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
-        raise ValueError(f"quaternion {q.tolist()} is not a unit quaternion (norm {norm:.6g})")
-    return Rotation.from_quat(q / norm).as_matrix()
-
-
-def matrix_to_quaternion(rotation) -> np.ndarray:
-    """Unit quaternion ``(x, y, z, w)`` of a rotation matrix, with ``w >= 0`` (canonical sign)."""
-    # a writable copy: SciPy 1.11 (Ubuntu 24.04's) refuses a read-only array (a camera's R)
-    return Rotation.from_matrix(np.array(rotation, dtype=np.float64)).as_quat(canonical=True)
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:
@@ -279,7 +248,7 @@ class PinholeCamera:
     @cached_property
     def max_normalized_radius2(self) -> float:
         """r^2 of normalized coordinates beyond which the distortion folds back
-        (:func:`~hmocap_ros.lens_distortion.monotonic_radius2`)."""
+        (:func:`~hmocap_ros.geometry.distortion.monotonic_radius2`)."""
         return monotonic_radius2(self.distortion8)
 
     # ---- projection ---------------------------------------------------------------------
@@ -374,6 +343,31 @@ class PinholeCamera:
         )
 
 
+def look_at_pose(position, target, up=ROOM_UP, where: str = "camera") -> tuple[np.ndarray, np.ndarray]:
+    """World -> camera ``(R, t)`` of a camera at ``position`` looking at ``target`` (room frame,
+    metres), image "up" along ``up``.
+
+    The optical z axis points from ``position`` to ``target``; x (image right) is ``z x up``
+    normalised and y (image down) is ``z x x`` (OpenCV axes), so ``up`` appears upwards in the
+    image. ``ValueError`` (prefixed with ``where``) when the target is the position or the
+    viewing direction is parallel to ``up``. Cameras (:func:`look_at`), shadow maps and lamps
+    are placed with it.
+    """
+    position = np.asarray(position, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - position
+    norm = np.linalg.norm(forward)
+    if norm < 1e-12:
+        raise ValueError(f"{where}: target coincides with position")
+    z = forward / norm
+    x = np.cross(z, np.asarray(up, dtype=np.float64))
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError(f"{where}: viewing direction {z.tolist()} is parallel to up {list(up)}")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return R, -R @ position
+
+
 def look_at(
     name: str,
     position,
@@ -396,22 +390,11 @@ def look_at(
     (:data:`ROOM_UP`, +Y) appears upwards in the image. ``fy`` defaults to ``fx`` and the
     principal point to the image centre ``((W-1)/2, (H-1)/2)``.
     """
-    position = np.asarray(position, dtype=np.float64)
-    forward = np.asarray(target, dtype=np.float64) - position
-    norm = np.linalg.norm(forward)
-    if norm < 1e-12:
-        raise ValueError(f"camera {name!r}: target coincides with position")
-    z = forward / norm
-    x = np.cross(z, np.asarray(up, dtype=np.float64))
-    if np.linalg.norm(x) < 1e-9:
-        raise ValueError(f"camera {name!r}: viewing direction {z.tolist()} is parallel to up {list(up)}")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
+    R, t = look_at_pose(position, target, up, where=f"camera {name!r}")
     K = np.array([
         [fx, 0.0, (width - 1) / 2.0 if cx is None else cx],
         [0.0, fx if fy is None else fy, (height - 1) / 2.0 if cy is None else cy],
         [0.0, 0.0, 1.0],
     ])
-    return PinholeCamera(name=name, width=width, height=height, K=K, D=D, R=R, t=-R @ position,
+    return PinholeCamera(name=name, width=width, height=height, K=K, D=D, R=R, t=t,
                          distortion_model=distortion_model, frame_id=frame_id)

@@ -1,0 +1,298 @@
+"""The body tracker on a multi-view bag, into a bag (``hmocap track``, ``hmocap eval consistency``).
+
+Runs the code of the nodes (no DDS; deterministic for a ``seed``) over every frame set of a
+bag in the documented layout (:mod:`hmocap_ros.io.topics`; the rig from ``/camera_rig`` or
+``rig_file``), and writes what ``body_tracker`` publishes
+(:class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages`): ``/humans/bodies/tracked``,
+``/humans/bodies/<id>/joint_states``, ``/humans/bodies/<id>/body_shape`` and ``/body_shape``
+(latched), ``/skeleton``, ``/skeleton_markers`` and ``/tf``, each stamped with its frame set's
+stamp and logged at it. With a method that uses detections (``dd-hpf``) the extremity
+detection (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`, the
+``extremity_detection`` node's code, fed back the last skeleton as the node is) runs on every
+frame set too, and its ``/extremities`` go into the bag. No ground truth is needed.
+
+Foreground (``silhouettes``): ``masks``: the bag's ``/<camera>/foreground`` (a recording of
+``foreground_segmentation``); ``fg``: the images segmented as the foreground node does (a
+background model per camera, :func:`~hmocap_ros.segmentation.background_models`); ``gt``: the
+bag's exact silhouettes ``/ground_truth/<camera>/silhouette``. ``auto`` (default) takes the
+first of these the bag has. The background of ``fg`` is learnt as ``learn_from`` says:
+``empty_room`` from the first ``learn_frames`` frames, ``person_masks`` where the landmark
+network's person masks leave the room free (no empty room needed). By default: in a bag with
+ground truth that starts with an empty room, from the frames before the first skeleton (as
+``hmocap eval mocap`` does); with ``learn_frames``, from that many first frames; else (a
+recording without ground truth, or one whose subject is there from the first frame)
+``person_masks``, since nothing says the room is empty at the start.
+
+Frame sets are grouped by stamp as ``body_tracker`` groups them (``slop_ms`` 5, at least
+``min_views_to_sync`` 2 views); a missing view is a dropped camera. Bad input (no rig, no foreground
+source, no frame set) raises :class:`TrackError` with one line for the user. The bag is
+written whole or not at all.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["MIN_VIEWS", "SILHOUETTES", "SLOP_MS", "TrackError", "track_to_bag"]
+
+#: body_tracker's defaults: stamp spread (ms) within a frame set, and the fewest views of a set
+SLOP_MS = 5.0
+MIN_VIEWS = 2
+SILHOUETTES = ("auto", "masks", "fg", "gt")
+PROGRESS_PERIOD_S = 2.0
+EXTREMITIES_TOPIC = "/extremities"
+
+
+class TrackError(ValueError):
+    """Bad input of ``hmocap track`` (one line for the user)."""
+
+
+@dataclass
+class _Source:
+    """Where the masks come from: ``kind`` (masks, fg, gt), one topic per camera, a note."""
+
+    kind: str
+    topics: list
+    note: str = ""
+    learn_frames: int = 0
+    learn_from: str = "empty_room"
+
+
+def _source(bag, available: dict, rig, wanted: str) -> _Source:
+    """The mask source of ``--silhouettes`` (module docstring); ``fg`` in a bag with ground
+    truth is marked for :func:`_learn_frames` to look for its empty room."""
+    from hmocap_ros.io import topics
+
+    names = rig.names
+    by_kind = {"masks": [topics.camera_foreground(n) for n in names],
+               "fg": [topics.camera_image(n) for n in names],
+               "gt": [topics.gt_silhouette(n) for n in names]}
+    present = {kind: [t for t in ts if t in available] for kind, ts in by_kind.items()}
+    if wanted != "auto":
+        if not present[wanted]:
+            raise TrackError(f"{bag}: none of {', '.join(by_kind[wanted])} is in the bag "
+                             f"(--silhouettes {wanted})")
+        kinds = [wanted]
+    else:
+        kinds = [kind for kind in ("masks", "fg", "gt") if present[kind]]
+    if kinds:
+        truth = kinds[0] == "fg" and topics.GT_SKELETON in available
+        return _Source(kinds[0], by_kind[kinds[0]], note="truth" if truth else "")
+    raise TrackError(f"{bag}: no foreground masks, images or silhouettes of the rig's cameras "
+                     f"({', '.join(names)}) in the bag")
+
+
+def _learn_frames(reader, source: _Source, requested: int | None,
+                  learn_from: str | None) -> _Source:
+    """Settle how the background model of ``fg`` learns (module docstring)."""
+    from hmocap_ros.eval.mocap_frames import empty_room_frames
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.msg_factory import stamp_to_ns
+    from hmocap_ros.segmentation import ForegroundParams
+
+    if source.kind != "fg":
+        return source
+    source.learn_frames = ForegroundParams().learn_frames if requested is None else requested
+    truth = source.note == "truth"
+    source.note = ""
+    if learn_from == "person_masks" or (learn_from is None and requested is None and not truth):
+        source.learn_from = "person_masks"
+        if learn_from is None:
+            source.note = ("nothing says the recording starts with an empty room: the background "
+                           "is learnt where the person masks leave the room free (--learn-from "
+                           "empty_room to learn it from the first --learn-frames frames)")
+        return source
+    if requested is not None or learn_from == "empty_room" and not truth:
+        return source
+    first = stamp_to_ns(reader.first(topics.GT_SKELETON).header.stamp)
+    present = [t for t in source.topics if t in reader.topics()]
+    n_empty = empty_room_frames(reader, present, int(SLOP_MS * 1e6), first)
+    if n_empty > 0:
+        source.learn_frames = int(np.clip(n_empty, 1, 100))
+        source.note = f"learning the background from the {source.learn_frames} frames before the subject"
+    elif learn_from is None:
+        source.learn_from = "person_masks"
+        source.note = ("the bag has no empty-room frames before the subject appears: the background "
+                       "is learnt where the person masks leave the room free")
+    else:
+        source.note = (f"the bag has no empty-room frames before the subject appears: the "
+                       f"background is learnt from its first {source.learn_frames} frames, the "
+                       f"subject with it")
+    return source
+
+
+def _masks(source: _Source, rig, msgs: dict, stamp: int, models, rgb_of, warn) -> list:
+    """One mask per camera of a frame set (None: a dropped view)."""
+    from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+
+    out = []
+    for k, (cam, topic) in enumerate(zip(rig.cameras, source.topics)):
+        if topic not in msgs:
+            out.append(None)
+            continue
+        try:
+            if source.kind == "fg":
+                mask = models[k].apply(rgb_of(topic), stamp)
+            else:
+                mask = image_to_numpy(msgs[topic])
+                if mask.ndim != 2:
+                    raise ConversionError(f"must be mono8, got {msgs[topic].encoding}")
+        except ValueError as err:  # ConversionError is one
+            warn(f"{topic}: {err} (view dropped)")
+            out.append(None)
+            continue
+        if mask.shape != (cam.height, cam.width):
+            warn(f"{topic} is {mask.shape[1]}x{mask.shape[0]}, the rig says {cam.width}x{cam.height}: "
+                 f"view dropped")
+            mask = None
+        out.append(mask)
+    return out
+
+
+def _extremities_msg(det, stamp_ns: int, frame_id: str, factory):
+    from hmocap_ros.io.msg_factory import make_header
+
+    def vectors(kind, rows):
+        return [factory.make(kind, x=float(x), y=float(y), z=float(z)) for x, y, z in rows]
+
+    return factory.make("hmocap_interfaces/msg/Extremities", header=make_header(factory, stamp_ns, frame_id),
+                        detector=det.detector, labels=list(det.labels),
+                        positions=vectors("geometry_msgs/msg/Point", det.positions),
+                        normals=vectors("geometry_msgs/msg/Vector3", np.nan_to_num(det.normals)),
+                        scores=np.asarray(det.scores, np.float32))
+
+
+def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = None,
+                 silhouettes: str = "auto", learn_frames: int | None = None,
+                 learn_from: str | None = None, max_people: int = 1,
+                 seed: int = 0, overrides: dict | None = None, body_id: str = "b0",
+                 publish_tf: bool = True, rig_file: str | None = None, max_frames: int | None = None,
+                 progress=None) -> dict:
+    """Track every frame set of ``bag`` and write body_tracker's messages to the new bag ``out``
+    (module docstring). Returns ``frame_sets``, ``with_pose`` (frame sets with a body),
+    ``silhouettes`` (the source used), ``notes``, ``warnings`` (text -> count) and ``topics``
+    (topic -> messages written). :class:`TrackError` for bad input."""
+    from hmocap_ros.body import load_body_model
+    from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
+                                                         skeleton_labels)
+    from hmocap_ros.detection.keypoint_network import ModelFileError
+    from hmocap_ros.eval.mocap_eval import method_params
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.bag_writer import LATCHED, whole_bag
+    from hmocap_ros.io.conversions import image_to_rgb
+    from hmocap_ros.io.msg_factory import RosbagsFactory
+    from hmocap_ros.geometry.rig import RigError, load_rig
+    from hmocap_ros.io.rig_messages import rig_from_msg
+    from hmocap_ros.segmentation import ForegroundParams, background_models
+    from hmocap_ros.tracking.params import TrackerParams
+    from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
+    from hmocap_ros.tracking.tracker_messages import TrackerMessages, latched_topics
+
+    if silhouettes not in SILHOUETTES:
+        raise TrackError(f"--silhouettes must be one of {', '.join(SILHOUETTES)}, got {silhouettes!r}")
+    if max_people < 1:
+        raise TrackError(f"--max-people must be >= 1, got {max_people}")
+    if learn_frames is not None and learn_frames < 1:
+        raise TrackError(f"--learn-frames must be >= 1, got {learn_frames}")
+    params = method_params(method or TrackerParams().method, overrides=overrides)
+    counts = {"frame_sets": 0, "with_pose": 0, "notes": [], "warnings": {}, "topics": {}}
+    detection_params = ExtremityDetectionParams(detector=detector) if detector else ExtremityDetectionParams()
+
+    def warn(text: str) -> None:
+        counts["warnings"][text] = counts["warnings"].get(text, 0) + 1
+
+    with BagReader(bag) as reader:
+        available = reader.topics()
+        if rig_file:
+            try:
+                rig = load_rig(rig_file)
+            except (RigError, OSError) as err:
+                raise TrackError(f"cannot load the rig {rig_file}: {err}") from err
+        else:
+            rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
+            if rig_msg is None:
+                raise TrackError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown "
+                                 f"(give the rig file with --rig)")
+            rig = rig_from_msg(rig_msg)
+        source = _learn_frames(reader, _source(bag, available, rig, silhouettes), learn_frames,
+                               learn_from)
+        if source.note:
+            counts["notes"].append(source.note)
+        counts["silhouettes"] = source.kind
+        image_topics = [topics.camera_image(n) for n in rig.names]
+        pipeline = None
+        if params.tracking_method.uses_detector:
+            if any(t in available for t in image_topics):
+                try:
+                    pipeline = ExtremityPipeline(rig.cameras, detection_params)
+                except ModelFileError as err:
+                    raise TrackError(str(err)) from err
+            else:
+                counts["notes"].append(f"no images in the bag: {params.method} runs without detections")
+        models = None
+        if source.kind == "fg":
+            fg = ForegroundParams(learn_frames=source.learn_frames, learn_from=source.learn_from)
+            models = background_models(fg, rig.names)
+        read = [t for t in source.topics if t in available]
+        if pipeline is not None:
+            read += [t for t in image_topics if t in available and t not in read]
+        total = max(available[t].count for t in read)
+        ids = body_ids(body_id, max_people)
+        model = load_body_model("tracking")
+        people = PeopleTracker(model, rig, params, np.random.default_rng(seed), max_people=max_people, ids=ids)
+        factory = RosbagsFactory()
+        builder = TrackerMessages(model, ids, rig.frame_id, factory, publish_tf=publish_tf)
+        latched = {"/" + t for t in latched_topics(ids)}
+        previous = None
+        last_report = time.monotonic()
+        with whole_bag(out) as writer:
+            for topic in sorted(latched):
+                writer.add_topic(topic, "hmocap_interfaces/msg/BodyShape", LATCHED)
+            for stamp, msgs in reader.frame_sets(read, int(SLOP_MS * 1e6), allow_partial=True,
+                                                 min_topics=min(MIN_VIEWS, len(read))):
+                decoded: dict = {}
+
+                def rgb_of(topic: str) -> np.ndarray:
+                    if topic not in decoded:
+                        decoded[topic] = image_to_rgb(msgs[topic])
+                    return decoded[topic]
+
+                masks = _masks(source, rig, msgs, stamp, models, rgb_of, warn)
+                detections = None
+                if pipeline is not None:
+                    images = []
+                    for topic in image_topics:
+                        try:
+                            images.append(rgb_of(topic) if topic in msgs else None)
+                        except ValueError as err:
+                            warn(f"{topic}: {err} (no detections from this view)")
+                            images.append(None)
+                    detections = pipeline.detect(images, masks, previous)
+                    writer.write(EXTREMITIES_TOPIC, _extremities_msg(detections, stamp, rig.frame_id, factory),
+                                 stamp)
+                results = people.update(masks, int(stamp), detections)
+                built = builder.frame_set(int(stamp), results, [t.model for t in people.trackers])
+                for error in built.errors:
+                    warn(error)
+                for topic, msg in built.messages:
+                    writer.write(topic if topic.startswith("/") else "/" + topic, msg, stamp)
+                posed = [r for r in results if r.has_pose]
+                counts["frame_sets"] += 1
+                counts["with_pose"] += bool(posed)
+                previous = skeleton_labels(list(posed[0].joint_names), posed[0].joints) if posed else None
+                if progress is not None and time.monotonic() - last_report >= PROGRESS_PERIOD_S:
+                    last_report = time.monotonic()
+                    progress(f"{counts['frame_sets']}/{total} frame sets, "
+                             + ", ".join(f"{b}: {r.state}" for b, r in zip(ids, results)))
+                if max_frames is not None and counts["frame_sets"] >= max_frames:
+                    break
+            if counts["frame_sets"] == 0:
+                raise TrackError(f"{bag}: no frame set with {min(MIN_VIEWS, len(read))} views on "
+                                 f"{', '.join(read)}")
+            counts["topics"] = {t: n for t, n in writer.counts.items() if n}
+    return counts
