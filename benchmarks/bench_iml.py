@@ -74,6 +74,7 @@ from hmocap_ros.io.bag_reader import BagReader, BagReadError  # noqa: E402
 from hmocap_ros.sim import gesture_set as gs  # noqa: E402
 from hmocap_ros.sim.gesture_dataset import generate  # noqa: E402
 from hmocap_ros.sim.gesture_teacher import GestureTeacher, write_recording_bag  # noqa: E402
+from iml_table import relabelled  # noqa: E402
 
 #: Thesis table 3.3 (mean of tee, silence, cross; same subject in training and test).
 THESIS = {"minutes": [3, 6, 9], "iml": [0.54, 0.78, 0.82], "offline": [0.34, 0.64, 0.87],
@@ -81,16 +82,6 @@ THESIS = {"minutes": [3, 6, 9], "iml": [0.54, 0.78, 0.82], "offline": [0.34, 0.6
 ROUND = dict(do_gesture_s=3.0, update_positive_s=6.0, release_s=2.0, do_negatives_s=9.0)
 QUICK_ROUND = dict(do_gesture_s=1.0, update_positive_s=2.0, release_s=1.0, do_negatives_s=3.0)
 RHOS = (0.5, 0.6, 0.7, 0.8, 0.9)
-
-
-def relabelled(data, class_names: tuple):
-    """``data`` with its labels renumbered to ``class_names`` by name (others: background)."""
-    index = {n: i for i, n in enumerate(class_names)}
-    labels = []
-    for lab in data.labels:
-        name = data.class_names[lab[0]] if lab is not None else ""
-        labels.append((index[name], lab[1], lab[2]) if lab is not None and name in index else None)
-    return dataclasses.replace(data, labels=labels)
 
 
 class Scorer:
