@@ -220,13 +220,15 @@ def test_eval_without_empty_frames_learns_from_person_masks_or_falls_back_to_gt(
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "fg" and "person masks" in report["silhouettes_fallback"]
     assert "person masks" in capsys.readouterr().err
+    # a silhouette method on the exact silhouettes: whether the network finds the flat render's
+    # body depends on OpenCV's resampling, and kf-hpf waits for keypoints before a start-up
     assert run_eval([str(bag), "--json", str(out), *SMALL_BUDGET, "--learn-from", "empty_room",
-                     "--param", "startup.min_views=2"]) == 0
+                     "--method", "hpf-apo", "--param", "startup.min_views=2"]) == 0
     report = json.loads(out.read_text())
     assert report["silhouettes"] == "gt" and "ground-truth silhouettes" in \
         report["silhouettes_fallback"]
     assert "ground-truth silhouettes" in capsys.readouterr().err
-    res = report["methods"]["kf-hpf"]  # the default method
+    res = report["methods"]["hpf-apo"]
     assert res["frames"] == 3 and res["frames_with_pose"] == 3
 
 
