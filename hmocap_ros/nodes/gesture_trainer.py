@@ -271,6 +271,7 @@ class GestureTrainer(Node):
             log.error(f"teach '{request.gesture}': {err}")
             return response
         self.trainer, self.forest_path = trainer, path
+        self._last_frame_wall = time.monotonic()  # the camera's silence counts from the session's start
         p = self.params
         response.success = True
         response.message = (f"teaching '{trainer.gesture}' into {path}: {p.rounds} rounds of "
