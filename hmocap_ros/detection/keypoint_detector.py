@@ -6,9 +6,8 @@ the views' landmarks are triangulated robustly into
 
 The crop is the one the network was trained on, as MediaPipe's ``PoseLandmarkCpu`` graph makes
 it (:mod:`.keypoint_roi`): a square turned so that the body stands upright, 1.25 times the
-body's circle (MediaPipe's scale: a tighter 1.15 gained 1.5 mm over the 12 limb joints on the
-tuning clip 002_05 but lost 0.9 mm on the held-out clips). Each view keeps a track; its crop
-comes, in this order, from
+body's circle (MediaPipe's scale; docs/tracking.md, sec. 4, "Keypoints against the peer"
+says why not a tighter one). Each view keeps a track; its crop comes, in this order, from
 
 1. **the view's previous landmarks** (the track): the auxiliary points 33 (hips' centre) and 34
    (scale point) of the last frame set whose pose presence score reached ``min_pose_score``
@@ -33,10 +32,9 @@ intervals (the live node takes the newest and skips the others) and a filter tun
 steady video rate would lag behind a moving person.
 
 The views run one after the other, each network on ``threads`` LiteRT threads. Design choice:
-views in parallel (a network per thread; LiteRT releases the GIL) lost to LiteRT's own
-threads on the 2-core machine: 4 views in 161-175 ms and 135 ms of CPU per frame set on one
-network with 2 LiteRT threads, against 212-542 ms and 138-155 ms of CPU with two single-threaded
-networks side by side (``benchmarks/bench_keypoints.py``, two runs on a loaded machine).
+one network using LiteRT's own threads rather than views in parallel (a single-threaded
+network per thread; LiteRT releases the GIL), since it costs less CPU and wall time per frame
+set (docs/tracking.md, sec. 2.4, with the figures of ``benchmarks/bench_keypoints.py``).
 """
 from __future__ import annotations
 

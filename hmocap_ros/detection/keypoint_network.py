@@ -26,9 +26,9 @@ points MediaPipe aligns its next crop with (hip centre, and a point whose distan
 half the side of the body's square box: :func:`~.keypoint_roi.landmarks_roi`).
 
 Runtime: LiteRT (``ai-edge-litert``) with XNNPACK, ``threads`` threads per network
-(:mod:`.tflite_model`). On this package's 2-core machine it ran the model 2.5-3 times faster
-than OpenCV's dnn module per inference (``benchmarks/bench_keypoints.py``), and it does not
-depend on OpenCV's version.
+(:mod:`.tflite_model`) rather than OpenCV's dnn module: it is the faster of the two
+(docs/tracking.md, sec. 2.4, "Runtime", made by ``benchmarks/bench_keypoints.py``), and it does
+not depend on OpenCV's version.
 """
 from __future__ import annotations
 

@@ -19,9 +19,9 @@ Design choices where the thesis is silent:
 
 - **No class balancing**: every sample is taken at the same rate ``lambda``, as in alg. 6, so
   the leaves see the background as often as it comes (the offline trainer balances its bags,
-  sec. 3.2.3). Undersampling the frequent classes to the rarest one's count online (UOB)
-  gave a mean AP of 0.36 against 0.65 without on the validation bag (3 passes, same data):
-  the trees then see too little background to reject it.
+  sec. 3.2.3). Undersampling the frequent classes to the rarest one's count online (UOB) is
+  not done: the trees would see too little background to reject it (docs/gestures.md,
+  "Online forests and hard negatives", "Choices where the thesis is vague").
 - **Thresholds**: uniform in ``[-2 kappa, 2 kappa]``, the range of a clipped test (eq. 3.6)
   (plain tests use the same range); alg. 6 has no data to draw them from when a leaf is made.
 

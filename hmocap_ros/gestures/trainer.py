@@ -47,19 +47,16 @@ Design choices where the thesis is vague:
   the leaves hold. A leaf that splits hands its children the statistics of the samples it saw
   itself (alg. 6), not those its parent handed it, so every split made on the new gesture's
   session drops old evidence in that part of the tree (the background's as much as the known
-  gestures'). Measured (docs/gestures_interactive.md): ``tee`` taught for 3 minutes, then
-  ``silence`` for 3 minutes in the same forest: ``tee``'s AP on held-out subjects went from
-  0.81 to 0.79. The thesis' *do negative examples* asks the user for "other gestures that
+  gestures'). The thesis' *do negative examples* asks the user for "other gestures that
   should be distinguished"; the known ones can be shown in a ``rehearse`` state of each round
-  and learnt as themselves (``rehearse_s`` > 0). It is off by default: with 3 s of rehearsal
-  per round taken from the negatives, ``tee`` rose to 0.93 but ``silence`` reached 0.71
-  instead of 0.78, and the session grows with every known gesture.
+  and learnt as themselves (``rehearse_s`` > 0). It is off by default: its time is taken from
+  the negatives, so it costs the new gesture's accuracy, and the session grows with every
+  known gesture (docs/gestures_interactive.md, "Several gestures in one forest").
 - **The online forest of a new forest** (:class:`SessionOnlineParams`) splits a leaf after
   ``alpha`` = 100 samples instead of the 300 of the offline-bag online training: a session is
   one pass over a few hundred frames, and with 300 the trees of a 1-minute session stay
-  shallow (sec. 3.3.1: "if alpha is too large ... the trees not grown to its maximum depth").
-  ``tee`` on held-out validation subjects after 1 / 3 simulated minutes: AP 0.82 / 0.82 with
-  100, 0.53 / 0.74 with 300 (docs/gestures_interactive.md).
+  shallow (sec. 3.3.1: "if alpha is too large ... the trees not grown to its maximum depth";
+  docs/gestures_interactive.md, "What a session's AP depends on").
 - **Recording** (``record=True``): the frames the trainer learns from are kept with their
   annotation (the box centre in ``update_positive`` and ``rehearse``, background in
   ``do_negatives``), as the thesis' loop records them for the offline comparison of
