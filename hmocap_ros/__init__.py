@@ -3,10 +3,9 @@
 import os as _os
 
 # The hot paths are numba kernels with their own thread pool; numpy's BLAS calls here are
-# small (shape bases, 3x3 algebra). A multithreaded BLAS competing with numba's threads on a
-# small, loaded machine made a (40 x 45) @ (45 x 3606) product 30 times slower (measured on
-# 2 cores). Takes effect when hmocap_ros is imported before numpy (every console script);
-# set the variables yourself to choose otherwise.
+# small (shape bases, 3x3 algebra), so BLAS runs on one thread rather than competing with
+# numba's (docs/development.md, "Costs the code is shaped by"). Takes effect when hmocap_ros is imported before
+# numpy (every console script); set the variables yourself to choose otherwise.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 

@@ -108,7 +108,8 @@ PARALLEL_MIN_WORK = 1 << 18
 
 if numba is not None:
     # Two copies of one loop (serial / parallel): a shared helper function defeats numba's
-    # optimisation of the inner loop (6x slower), so the body is written out twice.
+    # optimisation of the inner loop, so the body is written out twice (docs/development.md,
+    # "Costs the code is shaped by").
 
     @njit(fastmath=True, cache=True)
     def _lbs_serial(mats, verts, index, value, out):  # pragma: no cover - compiled

@@ -109,7 +109,7 @@ class BodyModel:
         "tracking_coarse", both built from one rig), so a pose vector means the same on both;
         raises ValueError otherwise. A BodyShape's factors scale each mesh's own surface, so
         surface sizes differ a little between meshes (the neutral "tracking_coarse" torso is
-        17 mm thinner front to back): measure a shape on the mesh it was estimated with.
+        thinner front to back): measure a shape on the mesh it was estimated with.
         """
         if name == self.name:
             return self

@@ -9,8 +9,8 @@ depth)`` (well above a Kinect-like camera's noise); a comparison *moved* when mo
 than ``min_moving`` of the comparisons moved saw nobody.
 
 Design choice (not in the thesis): presence is read from motion over the whole session, not
-from the box: a user holding a gesture still changes little from frame to frame (0.1-0.3 % of
-the pixels on the simulated camera, as its noise), but every round has a user walking to a
+from the box: a user holding a gesture still changes as few pixels from frame to frame as the
+camera's noise (docs/gestures_interactive.md, "gesture_trainer"), but every round has a user walking to a
 new spot, releasing the gesture and moving around for negatives (a few % of the pixels in
 each of those frames), while an empty room only shows the sensor's noise.
 """

@@ -261,8 +261,8 @@ class RclpyFactory:
     """Build rclpy message objects (the generated ``pkg.msg`` classes, imported lazily).
 
     Numeric sequences given as numpy arrays, ``bytes`` or lists are stored as ``array.array``
-    with the generated type code (one memcpy: about 15 us for a 640x480x3 ``uint8`` image,
-    where passing the ndarray itself costs about 40 ms of per-element conversion); fixed-size
+    with the generated type code (one memcpy, where passing the ndarray itself is converted
+    element by element: docs/development.md, "Costs the code is shaped by"); fixed-size
     numeric arrays as ``float64``/... ndarrays; numpy scalars as Python scalars.
     """
 
@@ -420,7 +420,8 @@ def default_factory() -> RosbagsFactory:
 
 def __getattr__(name: str) -> Any:
     # ``DEFAULT_FACTORY``, the shared factory as a module attribute, is created on first
-    # access (building the Jazzy typestore takes ~60 ms); ``default_factory()`` is the API.
+    # access (an import that needs no message does not build the Jazzy typestore);
+    # ``default_factory()`` is the API.
     if name == "DEFAULT_FACTORY":
         return default_factory()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

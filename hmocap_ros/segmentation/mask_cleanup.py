@@ -7,8 +7,9 @@ connected foreground components below an area and filling of enclosed background
 below an area. Masks are uint8 0/255.
 
 Component areas are counted with numba over the labels of ``cv2.connectedComponents``:
-``cv2.connectedComponentsWithStats`` gives the same areas but its statistics (bounding boxes,
-centroids) cost about ten times the labelling itself, the largest item of a 10 ms frame budget.
+``cv2.connectedComponentsWithStats`` gives the same areas but also computes statistics
+(bounding boxes, centroids) that cost far more than the labelling itself (docs/development.md,
+"Costs the code is shaped by").
 """
 
 from __future__ import annotations

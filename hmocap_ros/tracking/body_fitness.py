@@ -45,8 +45,8 @@ __all__ = ["Observation", "SilhouetteFitness", "StageTimes", "downsample_mask", 
            "serial_below"]
 
 #: Below this many (particle, view) pairs the numba kernels run on the calling thread: waking
-#: the worker threads costs several milliseconds on a small VM, more than such a batch takes
-#: (one Powell evaluation: ~1 ms serial, ~15 ms with two threads).
+#: the worker threads costs more than such a batch takes (a Powell evaluation of the start-up;
+#: docs/development.md, "Costs the code is shaped by").
 SERIAL_BELOW = 256
 
 
@@ -161,7 +161,7 @@ class SilhouetteFitness:
     model: the body model (``load_body_model("tracking")``).
     cameras: the rig's cameras at full resolution (a :class:`~hmocap_ros.geometry.rig.Rig` or a list).
     working_scale: image scale of the comparison (0.25: 640x480 -> 160x120).
-    front_only: rasterise only front faces (exact for the closed body mesh, about 2x faster).
+    front_only: rasterise only front faces (exact for the closed body mesh, and faster).
     min_count: floor of ``C(S_v)`` in working-resolution pixels.
     times: accumulated :class:`StageTimes` (reset by the caller when it wants).
     """

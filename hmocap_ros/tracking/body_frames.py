@@ -88,8 +88,8 @@ SPREAD_SCALE = 0.05
 #: Distance (m) between an estimated joint and its detection at which the agreement falls to
 #: exp(-1/2) of the detection's score.
 AGREEMENT_SCALE = 0.05
-#: The spread is measured on at most this many particles, the heaviest (forward kinematics
-#: only, about 3 ms for 256 particles).
+#: The spread is taken over at most this many particles, the heaviest (forward kinematics
+#: only; docs/development.md, "Costs the code is shaped by").
 SPREAD_PARTICLES = 256
 
 

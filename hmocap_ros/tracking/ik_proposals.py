@@ -19,8 +19,8 @@ Choices where the thesis is vague:
 
 - End-effectors: a hand is the midpoint of wrist and hand tip (the detector returns the end
   of a skin blob, see ``extremity_detection``), a foot its toe end site (where the hull's
-  geodesic extremum, averaged over 8 cm, lands: about 2 cm from it, against 7 cm from the
-  ankle-toe midpoint); the head is the midpoint of head joint and head top. IK drives the
+  geodesic extremum, averaged over 8 cm, lands: nearer to it than to the ankle-toe midpoint,
+  docs/tracking.md, sec. 3.5); the head is the midpoint of head joint and head top. IK drives the
   arms and legs; the head detection serves the classification (it keeps the face from being
   taken for a hand) and not the torso layer, whose 6 root DoFs the silhouettes fix well.
 - IK survival rate: the weighted share of the final layer's particles whose hand lies within

@@ -74,14 +74,14 @@ MODEL_POINTS = {
 _STEP = 1e-5
 
 
-#: std (m) of a keypoint of score 1 about its body point: the scale of the residuals (the
-#: landmarks' spread about their median offset on the tuning clips is 2-4 cm)
+#: std (m) of a keypoint of score 1 about its body point: the scale of the landmarks' spread
+#: about their offsets (docs/tracking.md, sec. 3.7)
 KEYPOINT_STD = 0.03
 #: Huber threshold in keypoint stds: residuals beyond it cost linearly
 ROBUST_SCALE = 2.0
 #: std of the prior on each DoF about the predicted pose, in motion stds (``body_sigma0``) over
-#: the elapsed frames: 6 followed the tuning clips best of 1.5, 3, 6, 10, 20, 50 (a tighter
-#: prior lags fast limbs, a looser one lets the keypoints' noise through)
+#: the elapsed frames: a tighter prior lags fast limbs, a looser one lets the keypoints' noise
+#: through (docs/tracking.md, sec. 3.7)
 PRIOR_SCALE = 6.0
 #: Levenberg-Marquardt iterations per fit (it stops earlier when converged)
 ITERATIONS = 10

@@ -28,8 +28,8 @@ rest of the body at a reference pose (the previous estimate):
    is coarse: an arm along the torso is as "supported" as the true one), and the
    ``top_configs`` cheapest are the proposal set; particles draw from it uniformly.
 
-Everything is batched (forward kinematics of a few thousand candidate poses and one
-projection per stage): about 10 ms per limb at the default sizes.
+Everything is batched: forward kinematics of a few thousand candidate poses and one
+projection per stage (docs/development.md, "Costs the code is shaped by", gives the time).
 """
 from __future__ import annotations
 
