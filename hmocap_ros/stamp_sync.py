@@ -76,7 +76,7 @@ Typical use (live node: one ``add`` per image callback, ``poll`` on a timer; off
                              max_wait_ns=200_000_000)
     for stamp_ns, images in sync.add("cam_2", stamp_ns, image, now_ns=time.monotonic_ns()):
         tracker.step(stamp_ns, images)
-    for stamp_ns, images in sync.poll(time.monotonic_ns()):  # every ~50 ms
+    for stamp_ns, images in sync.poll(time.monotonic_ns()):  # on a timer
         tracker.step(stamp_ns, images)
 """
 

@@ -2,9 +2,10 @@
 
 A multi-view bag (a rig and camera images) gives one picture per frame set: every camera's
 image with the tracked skeletons projected onto it, tiled, coloured by the 3D error of each
-joint where the ground truth is known (green 0, red 150 mm and more, the true skeleton thin and
-white beneath), and the extremity detections as crosses. A depth bag gives the depth image
-false-coloured with the detected gestures' boxes and scores (the true ones in white).
+joint where the ground truth is known (green at 0, red from ``viz.overlay.ERROR_SCALE_MM`` on,
+the true skeleton thin and white beneath), and the extremity detections as crosses. A depth
+bag gives the depth image false-coloured with the detected gestures' boxes and scores (the
+true ones in white).
 Pictures and reading: :mod:`hmocap_ros.viz.overlay`, :mod:`hmocap_ros.viz.overlay_bag`.
 
 The skeletons and gestures are the bag's own (a recording of the nodes, or what ``hmocap
