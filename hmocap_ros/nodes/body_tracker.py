@@ -1,114 +1,28 @@
 """body_tracker: the 3D body pose of the people in the room from N cameras (thesis ch. 2).
 
 Synchronises the foreground masks of the rig cameras (and the extremity node's keypoints) by
-stamp and runs :class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on each set. The default
-method, ``kf-hpf`` (keypoint-first), fits the skinned body to the triangulated keypoints of
-the frame set (robust Levenberg-Marquardt IK over the kinematic tree, the motion model as its
-prior), checks every limb segment against the foreground of each view, and runs the layered
-silhouette filter (thesis eq. 2.8) only on the blocks the keypoints leave uncertain or the
-silhouettes contradict, within ``budget_ms``; a track starts from the keypoints and measures
-the body's shape from them over its first frames. Without keypoints (no extremity node, a dark
-or occluded view, no model file) it falls back to the silhouette filter, says so once and in
-the diagnostics, and keeps publishing. The thesis' silhouette methods (``apf``, ``hpf``,
-``hpf-apo``) and its detector-driven ``dd-hpf`` stay selectable by ``method``
-(:data:`~hmocap_ros.tracking.methods.METHODS`). Design and figures: docs/tracking.md.
+stamp and runs :class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on each frame set, one
+per person with ``max_people`` (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`).
+The default method, ``kf-hpf``, fits the skinned body to the keypoints, checks them against
+the silhouettes and runs the layered filter (alg. 5, weights eq. 2.8 and 2.15) only on the
+blocks they leave uncertain; without keypoints it runs the silhouette filter. ``method``
+selects the thesis' ``apf``, ``hpf``, ``hpf-apo`` and ``dd-hpf``
+(:data:`~hmocap_ros.tracking.methods.METHODS`).
 
 Subscriptions:
-  ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``
-  is set; the masks are expected at the rig's resolution.
-  ``<camera>/foreground`` (sensor_msgs/Image mono8, ``image_reliability``, queue ``queue_depth``),
-  per rig camera.
-  ``extremities`` (hmocap_interfaces/Extremities, reliable, a queue of ``queue_depth`` but at
-  least 10), with a method that uses detections (``kf-hpf``, ``dd-hpf``) only: the 3D keypoints of
-  the extremity_detection node, matched by stamp with the masks. While that topic has a
-  publisher, a frame set waits for its detections like for a camera (``max_wait_ms``); with
-  none, frame sets go out on their masks alone and the tracker runs on the silhouettes.
-Publications (all with the stamp of the frame set), following REP-155 (Human-Robot
-Interaction: ``humans/bodies/...`` topics and body frames), built by
-:class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages` (``hmocap track`` writes the
-same messages to a bag):
-  ``humans/bodies/tracked`` (hri_msgs/IdsList, REP-155's type): the ids
-  of the bodies with a pose in this frame set, for every frame set processed (empty: nobody).
-  ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState), per body with a pose: the
-  pose parameters (root translation in metres, angles in radians) by DoF name.
-  ``humans/bodies/<id>/body_shape`` (hmocap_interfaces/BodyShape, latched), per body: its
-  anthropometry, when estimated; the first body's also on ``body_shape``.
-  ``skeleton`` (hmocap_interfaces/Skeleton): 3D joints in the room frame, one message per
-  tracked body (``body_id`` says whose), with a ``confidence`` per joint (below).
-  ``skeleton_markers`` (visualization_msgs/MarkerArray): joints and bones for RViz/Foxglove,
-  one namespace per body.
-  ``/tf`` (tf2_msgs/TFMessage, with ``publish_tf``): per tracked body, room frame ->
-  ``body_<id>`` (the pelvis) and a frame per joint, ``<joint>_<id>`` (``l_wrist_b0``...),
-  along the kinematic tree, oriented as REP-155 asks (x forward, y left, z up at rest); the
-  names and conventions are those of :mod:`hmocap_ros.tracking.body_frames`. One message per
-  frame set with every tracked body's frames.
-  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): per body state, seconds per frame, ESS
-  and milliseconds per layer, time per stage, views used and dropped, frame sets skipped
-  (``skipped_frame_sets``: since the node started, ``skipped_since_last``: since the last
-  diagnostics message), ``wait_ms`` (how long the set waited for the tracker), and with
-  ``dd-hpf`` the detections assigned (``extremities``: which end-effectors,
-  ``joint_detections``: how many labelled joints).
+  ``camera_rig`` (hmocap_interfaces/CameraRig, latched), unless ``rig_file`` is set
+  ``<camera>/foreground`` (sensor_msgs/Image mono8), per rig camera
+  ``extremities`` (hmocap_interfaces/Extremities), with ``kf-hpf`` and ``dd-hpf``
+Publications (REP-155, stamped with the frame set):
+  ``humans/bodies/tracked`` (hri_msgs/IdsList)
+  ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState)
+  ``humans/bodies/<id>/body_shape``, ``body_shape`` (hmocap_interfaces/BodyShape, latched)
+  ``skeleton`` (hmocap_interfaces/Skeleton), ``skeleton_markers`` (visualization_msgs/MarkerArray)
+  ``/tf`` (tf2_msgs/TFMessage, with ``publish_tf``), ``diagnostics``
 
-No plain ``joint_states`` topic: a robot's ``/joint_states`` (robot_state_publisher) lives
-under that name in the same graph, so a body tracker publishing there corrupts the robot's
-TF tree, and a renamed plain topic (``body/joint_states``) would only repeat the first body's
-``humans/bodies/<body_id>/joint_states`` under a name no REP-155 tool looks for. The first
-body's id is the ``body_id`` parameter, so its per-body topic is as stable a name as any.
-
-Per-joint confidence (``Skeleton.confidence``, in [0, 1]): ``exp(-spread / 5 cm)``, the
-spread being the joint's position over the particles of the filter's final layer, or with
-``kf-hpf`` on a set the fit answers alone, the RMS residual of the keypoints of the joint's
-body block; a joint whose block has no keypoint keeps its prediction at ``exp(-3)`` (:mod:`hmocap_ros.tracking.body_frames`).
-
-Synchronisation (:class:`~hmocap_ros.stamp_sync.StampSynchronizer`): a frame set is complete
-when every camera's mask of its stamp (within ``slop_ms``) is there, or, with a camera
-missing, ``max_wait_ms`` after its newest mask arrived (a steady-clock timer polls every
-``max_wait_ms / 4``) or once a mask ``max_wait_ms`` newer has come, with at least
-``min_views_to_sync`` views; a mask that arrives after its set went out is dropped. The wait
-counts only time the node is idle: masks queued while the tracker works on a frame are not given
-up on. So the last frames of a stream and a live stream with a dead camera are tracked with at
-most ``max_wait_ms`` (plus a timer period) of added delay.
-Stamps that go back by more than half a second (a bag replayed again or looped, a camera
-clock reset; :data:`~hmocap_ros.stamp_sync.TIME_JUMP_BACK_NS`) start the stream over: a
-warning says by how much, and the synchroniser, the waiting sets and the tracks start afresh
-(the body shapes are kept).
-
-Keeping up (:class:`~hmocap_ros.frame_sets.FrameSetQueue`): the subscriptions only
-feed the synchroniser, whose complete sets wait in a queue; a steady-clock timer every
-``4 ms`` tracks one set once no input has arrived for ``5 ms`` and ``5 ms`` have passed since
-the last set was done (rclpy's executor serves a due timer before the subscriptions, so this
-lets the masks that queued up while the tracker worked come in first), or once the oldest set
-has waited ``50 ms`` whatever the input does. With ``latest_only`` (live) the tracker takes
-the newest set and skips the older ones, so its latency stays about one processing time
-instead of growing while it cannot keep up; the frames skipped, and those that never came
-complete (dropped from a subscription's bounded queue, ``queue_depth``), are counted in the
-diagnostics, and the tracker's motion model accounts for the time between the sets it
-tracks (:mod:`hmocap_ros.tracking.body_tracker`). With ``latest_only:=false`` every set is
-tracked, in stamp order: for bag replays that must answer every frame (also raise
-``queue_depth`` so the subscriptions keep every mask).
-
-Live with ``kf-hpf`` (the default method): the extremity node also takes the newest frame set
-when it falls behind, so some sets never get detections; while that node is there and its
-detections keep coming (within 5 s, or its first within 5 s of the first frame set), such a
-set is skipped (and counted) rather than tracked on the silhouettes alone,
-so the poses come at the keypoints' rate, each within ``budget_ms`` (the keypoint fit at once,
-the filter on the uncertain blocks with the particles the budget pays; docs/tracking.md sec.
-2.5).
-
-Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``,
-``queue_depth``, ``latest_only``, ``publish_tf``, ``seed``, ``body_id``, ``max_people`` and
-every setting of :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
-(``startup.height_margin``; listed below; the YAML nests them in groups).
-
-Several people (``max_people``): one tracker per person
-(:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); the first body is the one a
-single tracker would follow (the person the cameras see best when the track starts), the
-others are ``body_id`` numbered on (``b0``, ``b1``, ...). Each followed person costs
-a filter run per frame.
-
-A dropped camera is tracked on the remaining views; a frame without a person publishes
-nothing but diagnostics and an empty ``humans/bodies/tracked``; a fit that collapses
-re-initialises from the visual hull.
+The topics in full, synchronisation and keeping up with live cameras: docs/tracking.md,
+section 7; the method, its choices and results: sections 1-5. Parameters: ``--help`` prints
+them after this text; defaults in config/body_tracker.yaml.
 """
 
 from __future__ import annotations
