@@ -6,8 +6,8 @@ the views' landmarks are triangulated robustly into
 
 The crop is the one the network was trained on, as MediaPipe's ``PoseLandmarkCpu`` graph makes
 it (:mod:`.keypoint_roi`): a square turned so that the body stands upright, 1.25 times the
-body's circle (MediaPipe's scale; docs/tracking.md, sec. 4, "Keypoints against the peer"
-says why not a tighter one). Each view keeps a track; its crop comes, in this order, from
+body's circle (MediaPipe's scale; docs/tracking.md, section 3.7, says why not a tighter one).
+Each view keeps a track; its crop comes, in this order, from
 
 1. **the view's previous landmarks** (the track): the auxiliary points 33 (hips' centre) and 34
    (scale point) of the last frame set whose pose presence score reached ``min_pose_score``
