@@ -5,8 +5,9 @@ sets and runs :class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline
 ``detector`` ``keypoints`` (a 2D landmark network per view on the crop MediaPipe's pipeline
 gives it: from the view's previous landmarks, the previous skeleton or a pose detector;
 triangulated robustly over the views) or ``skin`` (the thesis' skin-colour detector on the
-oriented surface of the carved hull, eq. 2.16-2.18). body_tracker's ``dd-hpf`` consumes the
-detections.
+oriented surface of the carved hull, eq. 2.16-2.18). body_tracker's ``kf-hpf`` and ``dd-hpf``
+consume the detections. The detectors, their choices and results: docs/tracking.md, sections
+2.4, 3.7 and 4.3.
 
 Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``.
@@ -22,14 +23,9 @@ Publications (with the stamp of the frame set):
   detections with their scores. For RViz/Foxglove.
   ``diagnostics`` (diagnostic_msgs/DiagnosticArray): frame sets, detections, views, wall ms
   per set and CPU ms per set (the process's CPU time while it detects: every worker thread).
-Synchronisation: a frame set is complete when every camera's (image, foreground) pair of its
-stamp (within ``slop_ms``) is there, or ``max_wait_ms`` after its newest pair with at least
-``min_views_to_sync`` views (the others are detected without them). Complete sets wait in a
-:class:`~hmocap_ros.frame_sets.FrameSetQueue`: with ``latest_only`` (live) the node detects on
-the newest and skips the older ones (counted in the diagnostics), so its latency stays about
-one detection time when the cameras are faster than the detector; with ``latest_only:=false``
-it detects on every set in stamp order (slow bag replays). Stamps that go back by
-more than half a second (a bag replayed again) start the frame sets over, with a warning.
+Synchronisation and keeping up (``slop_ms``, ``max_wait_ms``, ``min_views_to_sync``,
+``latest_only``) as in body_tracker, over (image, foreground) pairs: docs/tracking.md,
+section 7. Parameters: ``--help`` prints them after this text.
 
 Bad input (a wrong encoding or size, a view missing, no rig yet) is logged and the frame or view
 left out; a keypoint model file that is missing or corrupt is logged with its path and how to

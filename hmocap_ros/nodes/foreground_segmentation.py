@@ -19,9 +19,8 @@ Publications:
   milliseconds per frame and state (learning or segmenting) per camera.
 Services:
   ``~/relearn`` (std_srvs/Trigger): forget the background of every camera and learn it again.
-Parameters: ``cameras``, ``queue_depth``, ``image_reliability``, ``diagnostics_period``, ``relearn_after_size_errors``
-and every field of
-:class:`~hmocap_ros.segmentation.ForegroundParams` (``foreground_segmentation --help``).
+The method, its choices and results: docs/segmentation.md. Parameters: ``--help`` prints them
+after this text; defaults in config/foreground_segmentation.yaml.
 
 Frames of the wrong encoding or of a size other than the one learnt are refused with a
 logged error; after ``relearn_after_size_errors`` consecutive size errors the camera

@@ -17,11 +17,10 @@ gestures`` writes to a bag):
   processed frame, empty when no gesture is seen.
   ``gestures/probability`` (sensor_msgs/Image mono8, 0-255 = density 0-1; only with
   ``publish_probability``): the smoothed density of the best class, for Foxglove/RViz.
-Parameters: ``model_file`` (may be changed at run time: the new forest is loaded, or the
-change is refused with the reason; the file is watched every ``watch_period_s`` and loaded
-again when it is written, e.g. by ``gesture_trainer``; a gesture it taught is detected at its
-taught threshold with ``use_taught_thresholds``), ``publish_probability``, ``queue_depth``, ``image_reliability`` and every field of
-:class:`~hmocap_ros.gestures.DetectorParams` (``gesture_detection --help``).
+``model_file`` may be changed at run time (the new forest is loaded, or the change is refused
+with the reason); the file is watched every ``watch_period_s`` and loaded again when it is
+written, e.g. by ``gesture_trainer``. The method, its choices and results: docs/gestures.md
+("The node"). Parameters: ``--help`` prints them after this text.
 
 Depth in the wrong unit is warned of once: when the median valid depth of a frame, read with
 ``depth_unit_m``, lies outside 0.2 to 8 m (raw 1/8 mm SR300/SR305 values published as 16UC1

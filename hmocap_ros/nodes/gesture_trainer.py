@@ -32,10 +32,8 @@ Publications:
   queue between its arrival and its processing); WARN when frames were skipped in the period
   or the lag exceeds ``max_lag_s``.
 
-Parameters: ``forest_file``, ``save_when_taught``, ``publish_feedback``, ``queue_depth``,
-``image_reliability``, ``diagnostics_period``, ``max_lag_s``, ``seed``, ``camera_info_timeout_s``,
-``camera_timeout_s`` and every field of
-:class:`~hmocap_ros.gestures.trainer.TrainerParams` (``gesture_trainer --help``).
+The session, its choices and results: docs/gestures_interactive.md. Parameters: ``--help``
+prints them after this text.
 
 Bad input is logged (throttled) and the node keeps running: a wrong encoding, data shorter
 than its step, a teach request for a forest file that does not exist (or exists, for a new
