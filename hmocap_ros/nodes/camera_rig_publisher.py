@@ -18,9 +18,10 @@ Publications:
   Only with ``publish_tf``.
   ``<camera>/camera_info`` (sensor_msgs/CameraInfo, reliable, keep last ``queue_depth``):
   intrinsics, stamp and frame of each image.
-Parameters: see :class:`CameraRigPublisherConfig` (``camera_rig_publisher --help``).
 ``rig_file`` and ``cameras`` may be changed at run time: the new rig is loaded and published
-again (``camera_rig`` and ``/tf_static``), or the change is refused with the reason.
+again (``camera_rig`` and ``/tf_static``), or the change is refused with the reason. The rig
+file: docs/calibration.md; the frames: docs/viewing.md ("Frames"). Parameters: ``--help``
+prints them after this text.
 """
 
 from __future__ import annotations
