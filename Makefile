@@ -12,10 +12,11 @@ export PYTHONUNBUFFERED = 1
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test test-fresh test-jazzy test-slow test-mutants test-faults test-multihost bench clean help
+.PHONY: setup demo test lint test-fresh test-jazzy test-slow test-mutants test-faults test-multihost bench clean help
 help:
 	@echo "make demo       set up if needed, run the demo on the shipped data"
 	@echo "make test       set up if needed, run the test suite"
+	@echo "make lint       ruff (pyflakes, pycodestyle, import order, bugbear) and mypy"
 	@echo "make test-fresh what CI runs: a clean clone of HEAD, set up from nothing, then make test"
 	@echo "                (HMOCAP_FRESH_LOAD=1: one core busy; HMOCAP_FRESH_OTHER_CPU=1: an AVX2 CPU's rounding)"
 	@echo "make test-jazzy the test suite with ROS 2 Jazzy's numpy 1.26, OpenCV 4.6, SciPy 1.11 (.venv-jazzy)"
@@ -34,6 +35,11 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q -p no:cacheprovider
+
+lint: setup
+	@$(PY) -m pip install -q -r requirements-lint.txt
+	$(PY) -m ruff check .
+	$(PY) -m mypy
 
 test-fresh:
 	@bash tools/test_fresh.sh
