@@ -273,7 +273,9 @@ def summary(results: dict, ns) -> list:
     out = []
     for k in range(ns.sessions):
         rows = [results[g][k] for g in ns.gestures]
-        mean = lambda key: float(np.mean([r[key] for r in rows]))  # noqa: E731
+        def mean(key, rows=rows):
+            return float(np.mean([r[key] for r in rows]))
+
         out.append({"minutes": rows[0]["minutes"], "iml_same_subject": mean("iml_same_subject"),
                     "offline_same_subject": mean("offline_same_subject"),
                     "iml_other_people": mean("iml_other_people"), "offline_other_people": mean("offline_other_people"),

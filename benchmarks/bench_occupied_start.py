@@ -104,7 +104,7 @@ def main() -> int:
         r = row["results"]
         base = r["empty/empty_room"]["mean_mm"]
 
-        def cell(key):
+        def cell(key, r=r, base=base):
             value = r[key]["mean_mm"]
             return f"{value:.1f} ({100 * (value / base - 1):+.0f} %)"
 

@@ -14,6 +14,7 @@ import argparse
 import os
 import platform
 import time
+from functools import partial
 
 import numba
 import numpy as np
@@ -194,10 +195,9 @@ def main(argv=None):
         for threads in (1, 2):
             numba.set_num_threads(threads)
             for front in (False, True):
-                fresh = timed(lambda: render_silhouettes(uv, body_f, height, width,
-                                                         front_only=front))
-                reused = timed(lambda: render_silhouettes(uv, body_f, height, width,
-                                                          front_only=front, out=buffer))
+                fresh = timed(partial(render_silhouettes, uv, body_f, height, width, front_only=front))
+                reused = timed(partial(render_silhouettes, uv, body_f, height, width, front_only=front,
+                                       out=buffer))
                 print(f"  threads={threads} front_only={front!s:5}: {n_masks / reused:8.0f} "
                       f"masks/s into a reused buffer, {n_masks / fresh:8.0f} allocating")
 
@@ -212,7 +212,7 @@ def main(argv=None):
         numba.set_num_threads(threads)
         for front in (False, True):
             for name, bx in (("whole image", None), ("upper-body box", boxes)):
-                dt = timed(lambda: xor_counts(uv, body_f, observed, bx, front_only=front))
+                dt = timed(partial(xor_counts, uv, body_f, observed, bx, front_only=front))
                 print(f"xor_counts B={B} x M=4 at {width}x{height} threads={threads} "
                       f"front_only={front!s:5} {name:14}: {dt * 1e3:7.1f} ms "
                       f"= {B * 4 / dt:7.0f} masks/s")

@@ -508,9 +508,9 @@ def test_schedules_spend_about_equal_evaluations(model):
     assert make_schedule("apf", skel).n_weightings == 14
     # partitioned sampling: the kernel of layer l diffuses block l + 1 at sigma0
     sigma0 = body_sigma0(skel)
-    for l in range(6):
-        nxt = skel.group_dofs(BODY_BLOCKS[l + 1])
-        np.testing.assert_allclose(hpf.filter.stds[l][nxt], sigma0[nxt])
+    for layer in range(6):
+        nxt = skel.group_dofs(BODY_BLOCKS[layer + 1])
+        np.testing.assert_allclose(hpf.filter.stds[layer][nxt], sigma0[nxt])
     with pytest.raises(ValueError):
         make_schedule("pso", skel)
 
@@ -546,8 +546,8 @@ def test_a_second_sweep_weighs_every_block_again_at_a_finer_std(model):
                                    SWEEP_DECAY * sigma0[torso])
         # the first sweep is the one-sweep schedule's (its kernels and boxes)
         assert two.boxed[:block_layers] == one.boxed[:block_layers]
-        for l in range(len(BODY_BLOCKS) - 1):
-            np.testing.assert_allclose(two.filter.stds[l], one.filter.stds[l])
+        for layer in range(len(BODY_BLOCKS) - 1):
+            np.testing.assert_allclose(two.filter.stds[layer], one.filter.stds[layer])
     with pytest.raises(ValueError, match="sweeps"):
         make_schedule("hpf", skel, sweeps=0)
 

@@ -1,5 +1,7 @@
 """Tests of hmocap_ros.geometry against OpenCV and synthetic scenes with known geometry."""
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -261,5 +263,5 @@ def test_validation_errors():
     camera = PinholeCamera("cam", 640, 480, K, D=(0.1, 0.01))
     assert camera.D.shape == (5,) and camera.D[1] == 0.01  # padded to the model's length
     assert not camera.K.flags.writeable
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         camera.name = "other"  # frozen

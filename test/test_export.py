@@ -74,7 +74,7 @@ def tracker_bag(request, tmp_path_factory):
               "body_1": (f"{ns}humans/bodies/body_1/joint_states", f"{ns}humans/bodies/body_1/body_shape")}
     truth = {}
     with BagWriter(path) as bag:
-        for body, (js_topic, shape_topic) in topics.items():
+        for body, (_js_topic, shape_topic) in topics.items():
             bag.add_topic(shape_topic, "hmocap_interfaces/msg/BodyShape", LATCHED)
             shape = sample_shape(rng)
             params = sample_pose(model.skeleton, rng, TRACKER_FRAMES, scale=1.0,

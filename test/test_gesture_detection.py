@@ -150,7 +150,7 @@ def test_walls_and_clutter_rarely_trigger_a_detection():
     rng = np.random.default_rng(21)
     det = GestureDetector(forest, toy_detector_params(SHAPE))
     scenes_with_detections = 0
-    for k in range(24):
+    for _scene in range(24):
         clean, _ = toy_frame(rng, SHAPE, 0, person=False, n_clutter=8, noise=False)
         det.reset()
         found = [det.update(add_sensor_noise(rng, clean / 1000.0), j * FRAME_NS) for j in range(3)]

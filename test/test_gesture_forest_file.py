@@ -30,7 +30,7 @@ def online_forest() -> Forest:
     """A small online-style forest: a split root whose leaves keep candidate tests and statistics."""
     rng = np.random.default_rng(0)
     trees = []
-    for t in range(3):
+    for _ in range(3):
         tree = Tree(feature=rng.uniform(-40, 40, (3, 4)).astype(np.float32),
                     threshold=rng.uniform(-0.2, 0.2, 3).astype(np.float32),
                     left=np.array([1, -1, -1], np.int32), right=np.array([2, -1, -1], np.int32),

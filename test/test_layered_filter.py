@@ -173,7 +173,7 @@ def test_lpf_run_is_deterministic_batched_and_reports_layers():
                               layers_per_block=2)
     x0 = np.random.default_rng(7).normal(0.0, 0.5, (100, 8))
     a = lpf_run(x0, lpf, weight_fn, np.random.default_rng(11))
-    assert calls == [(l, (100, 8)) for l in range(5)]  # one batch call per layer
+    assert calls == [(layer, (100, 8)) for layer in range(5)]  # one batch call per layer
     b = lpf_run(x0, lpf, weight_fn, np.random.default_rng(11))
     c = lpf_run(x0, lpf, weight_fn, np.random.default_rng(12))
     np.testing.assert_array_equal(a.particles, b.particles)
@@ -233,9 +233,9 @@ def test_lpf_rejects_bad_input():
     with pytest.raises(ValueError, match="shape"):
         lpf_run(np.zeros((10, 4)), lpf, quadratic_cost(np.zeros(3)), rng)
     with pytest.raises(ValueError, match="weight_fn returned shape"):
-        lpf_run(np.zeros((10, 3)), lpf, lambda x, l: np.zeros(5), rng)
+        lpf_run(np.zeros((10, 3)), lpf, lambda x, layer: np.zeros(5), rng)
     with pytest.raises(ValueError, match="no finite cost"):
-        lpf_run(np.zeros((10, 3)), lpf, lambda x, l: np.full(10, np.nan), rng)
+        lpf_run(np.zeros((10, 3)), lpf, lambda x, layer: np.full(10, np.nan), rng)
     with pytest.raises(ValueError, match="dims out of range"):
         LayeredFilter(layers=(Layer(dims=[5]),), sigma0=np.ones(3))
 

@@ -195,7 +195,7 @@ def main(argv=None) -> int:
     work = Path(ns.workdir)
     joints = list(LANDMARKS)
     rows, per_joint_all = [], []
-    for i, (label, clip, start, seconds) in enumerate(SEQUENCES):
+    for i, (label, clip, _start, seconds) in enumerate(SEQUENCES):
         for distractors in (False, True):
             stem = bag_stem(clip, seconds, bag_seed(i, distractors), distractors)
             bag, report = work / f"{stem}.mcap", work / f"{stem}_{ns.detector}.json"
@@ -248,7 +248,7 @@ def main(argv=None) -> int:
                  f"{_label(m, ns.detector)}, same 12 joints" for m in methods) + " | " + " | ".join(
                  f"{_label(m, ns.detector)}, 19 joints" for m in methods) + " |",
              "|---|---|---|---|" + "---|" * (2 * len(methods))]
-    for label, seconds, distractors, mean, std, cover, ms, ours12, ours19 in rows:
+    for label, seconds, distractors, mean, std, cover, _ms, ours12, ours19 in rows:
         lines.append(f"| {label} ({seconds:g} s) | {'distractors' if distractors else 'clean'} | "
                      f"{mean:.1f} ({std:.1f}) | {100 * cover:.0f} % | "
                      + " | ".join(f"{ours12[m]:.1f}" for m in methods) + " | "

@@ -175,13 +175,13 @@ def layer_diffusion_stds(layer_dims: Sequence[np.ndarray], sigma0: np.ndarray,
     out = np.zeros((len(layer_dims), d))
     entered = np.full(d, -1)  # layer at which each dimension last entered, -1: never
     prev = np.zeros(d, dtype=bool)
-    for l, dims in enumerate(layer_dims):
+    for li, dims in enumerate(layer_dims):
         cur = np.zeros(d, dtype=bool)
         cur[dims] = True
         entering = cur & ~prev
-        entered[entering] = l
+        entered[entering] = li
         sampled = entered >= 0
-        out[l, sampled] = nu ** (l - entered[sampled]) * sigma0[sampled]
+        out[li, sampled] = nu ** (li - entered[sampled]) * sigma0[sampled]
         prev = cur
     return out
 
@@ -313,19 +313,19 @@ class LayeredFilter:
                 v = np.broadcast_to(np.asarray(v, dtype=np.float64), (d,))
                 object.__setattr__(self, name, v)
         dims = []
-        for l, layer in enumerate(self.layers + (self.final,)):
+        for li, layer in enumerate(self.layers + (self.final,)):
             if layer.dims is not None and layer.dims.size and \
                     (layer.dims[0] < 0 or layer.dims[-1] >= d):
-                raise ValueError(f"layer {l}: dims out of range for D={d}")
+                raise ValueError(f"layer {li}: dims out of range for D={d}")
             if layer.std is not None and layer.std.shape != (d,):
-                raise ValueError(f"layer {l}: std has shape {layer.std.shape}, expected ({d},)")
+                raise ValueError(f"layer {li}: std has shape {layer.std.shape}, expected ({d},)")
             dims.append(np.arange(d) if layer.dims is None else layer.dims)
         stds = np.empty((len(self.layers) + 1, d))
         stds[:-1] = layer_diffusion_stds(dims[:-1], sigma0, self.nu)
         stds[-1] = sigma0
-        for l, layer in enumerate(self.layers + (self.final,)):
+        for li, layer in enumerate(self.layers + (self.final,)):
             if layer.std is not None:
-                stds[l] = layer.std
+                stds[li] = layer.std
         object.__setattr__(self, "stds", stds)
 
     @property
@@ -439,16 +439,16 @@ def lpf_run(particles: np.ndarray, lpf: LayeredFilter, weight_fn: WeightFn,
         raise ValueError(f"first layer weighs {steps[0].n_particles} particles, got {x.shape[0]}")
     filtered = np.zeros(lpf.n_dims, dtype=bool)
     diags = []
-    for l, layer in enumerate(steps):
-        final = l == len(steps) - 1
+    for li, layer in enumerate(steps):
+        final = li == len(steps) - 1
         if final:
             filtered[:] = True
             n_out = steps[0].n_particles
         else:
             filtered[np.arange(lpf.n_dims) if layer.dims is None else layer.dims] = True
-            n_out = steps[l + 1].n_particles
+            n_out = steps[li + 1].n_particles
         weighted = x
-        x, weights, diag = gpf_run(weighted, weight_fn, lpf.stds[l], rng, layer, l, filtered,
+        x, weights, diag = gpf_run(weighted, weight_fn, lpf.stds[li], rng, layer, li, filtered,
                                    n_out, lpf.lower, lpf.upper)
         diags.append(diag)
     return LayeredRunResult(estimate=diags[-1].estimate, particles=x, weighted_particles=weighted,
