@@ -120,5 +120,6 @@ def gesture_fields(gesture) -> tuple[np.ndarray | None, dict]:
     p = gesture.position
     point = np.array([p.x, p.y, p.z], dtype=np.float64)
     valid = gesture.position_valid and np.all(np.isfinite(point))
-    return (point if valid else None), {"name": str(gesture.name), "class_id": int(gesture.class_id), "score": float(gesture.score),
-                   "volume": float(gesture.volume), "u": float(gesture.u), "v": float(gesture.v)}
+    return (point if valid else None), {"name": str(gesture.name), "class_id": int(gesture.class_id),
+                                        "score": float(gesture.score), "volume": float(gesture.volume),
+                                        "u": float(gesture.u), "v": float(gesture.v)}
