@@ -30,6 +30,7 @@ from __future__ import annotations
 import shutil
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -58,8 +59,9 @@ def _cameras(bag: Path) -> list[str]:
                       if t.endswith("/image_raw") and info.msgtype == "sensor_msgs/msg/Image")
 
 
-def _by_stamp(bag: Path, topic_list: list[str]) -> dict[str, dict[int, object]]:
-    out: dict[str, dict[int, object]] = {t: {} for t in topic_list}
+def _by_stamp(bag: Path, topic_list: list[str]) -> dict[str, dict[int, Any]]:
+    """The messages of each topic by their header stamp."""
+    out: dict[str, dict[int, Any]] = {t: {} for t in topic_list}
     with BagReader(bag) as reader:
         present = [t for t in topic_list if t in reader.topics()]
         for m in reader.messages(present):
@@ -111,9 +113,9 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
     got = _by_stamp(out_bag, ["/skeleton", "/diagnostics", "/extremities", *fg_topics])
     f1 = []
     for cam, fg_topic in zip(cameras, fg_topics, strict=True):
-        gt = truth[topics.gt_silhouette(cam)]
-        pairs = [(image_to_numpy(m) > 0, image_to_numpy(gt[s]) > 0) for s, m in got[fg_topic].items()
-                 if s in gt and (image_to_numpy(gt[s]) > 0).sum() > 0]
+        silhouettes = truth[topics.gt_silhouette(cam)]
+        pairs = [(image_to_numpy(m) > 0, image_to_numpy(silhouettes[s]) > 0) for s, m in got[fg_topic].items()
+                 if s in silhouettes and (image_to_numpy(silhouettes[s]) > 0).sum() > 0]
         if pairs:
             f1.append(float(np.mean(mask_scores(*map(np.stack, zip(*pairs, strict=True))).f1)))
     n_images = len(truth[topics.gt_silhouette(cameras[0])])

@@ -41,7 +41,7 @@ class FramePeriod:
     #: shortest frame period taken for one (1 ms: 1,000 frames per second)
     MIN_PERIOD_NS = 1_000_000
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._stamps: list[int] = []  # sorted, distinct
 
     def add(self, stamp_ns: int) -> None:
@@ -135,9 +135,10 @@ class FrameSetQueue:
     def ready(self, now_ns: int, idle_since_ns: int, last_input_ns: int) -> bool:
         """Whether the node should take a set now (module constants): ``idle_since_ns``, when
         it finished its last set; ``last_input_ns``, when its last input arrived (monotonic)."""
-        if not self._pending or now_ns - idle_since_ns < DRAIN_NS:
+        oldest_ns = self.oldest_arrival_ns()
+        if oldest_ns is None or now_ns - idle_since_ns < DRAIN_NS:  # None: nothing pending
             return False
-        return now_ns - last_input_ns >= QUIET_NS or now_ns - self.oldest_arrival_ns() >= MAX_HOLD_NS
+        return now_ns - last_input_ns >= QUIET_NS or now_ns - oldest_ns >= MAX_HOLD_NS
 
     def take(self, idle_since_ns: int, now_ns: int) -> PickedSet | None:
         """The next set to track (None when none waits). ``idle_since_ns``: when the tracker

@@ -45,10 +45,14 @@ def _is_group(f: Field) -> bool:
 
 
 def _default(f: Field):
-    return f.default if f.default is not MISSING else f.default_factory()
+    if f.default is not MISSING:
+        return f.default
+    if not callable(f.default_factory):
+        raise TypeError(f"parameter field {f.name!r} has no default")
+    return f.default_factory()
 
 
-def flat_fields(cls, prefix: str = "") -> Iterator[tuple[str, Field, object, object]]:
+def flat_fields(cls, prefix: str = "") -> Iterator[tuple[str, Field, typing.Any, typing.Any]]:
     """Every leaf of ``cls`` as ``(dotted name, field, default, type)``, groups expanded in
     declaration order."""
     hints = typing.get_type_hints(cls)
@@ -110,7 +114,7 @@ def field_overrides(cls, items, what: str = "parameter") -> dict:
     list field takes comma-separated numbers. ValueError names a malformed item or an unknown
     key (``what``: how the message calls the fields)."""
     known = {name: default for name, _, default, _ in flat_fields(cls)}
-    out = {}
+    out: dict[str, typing.Any] = {}
     for item in items or []:
         if "=" not in item:
             raise ValueError(f"expected KEY=VALUE, got {item!r}")

@@ -20,7 +20,7 @@ try:  # numba is a dependency of the package, but keep the numpy path importable
     import numba
     from numba import njit, prange
 except ImportError:  # pragma: no cover
-    numba = None
+    numba = None  # type: ignore[assignment]  # None marks numba absent: the numpy backend runs alone
 
 # numba's default "workqueue" threading layer aborts on concurrent parallel launches from
 # several Python threads (e.g. a multi-threaded rclpy executor): serialise the kernel.

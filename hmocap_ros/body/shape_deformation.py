@@ -37,10 +37,17 @@ class ShapeFactors(Protocol):
     """The per-entity factors the deformation reads: a
     :class:`~hmocap_ros.body.anthropometry.BodyShape`."""
 
-    bone_scale: np.ndarray  # (E,) or (B, E)
-    radial_scale: np.ndarray  # (E,) or (B, E)
-    global_scale: float | np.ndarray  # float or (B,)
-    entity_names: tuple
+    @property
+    def bone_scale(self) -> np.ndarray: ...  # (E,) or (B, E)
+
+    @property
+    def radial_scale(self) -> np.ndarray: ...  # (E,) or (B, E)
+
+    @property
+    def global_scale(self) -> float | np.ndarray: ...  # float or (B,)
+
+    @property
+    def entity_names(self) -> tuple: ...
 
     @property
     def batched(self) -> bool: ...

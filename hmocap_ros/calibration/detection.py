@@ -13,6 +13,7 @@ differently from the configured board (other square counts or sizes).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -41,6 +42,8 @@ class CornerDetection:
 
 #: Whether this OpenCV has the ChArUco detector class (4.7 and later).
 HAS_CHARUCO_DETECTOR = hasattr(cv2.aruco, "CharucoDetector")
+#: The aruco module for its functions before 4.7 (Ubuntu 24.04 ships 4.6), absent from the 4.7+ type stubs.
+_ARUCO_BEFORE_4_7: Any = cv2.aruco
 
 
 class CornerDetector:
@@ -49,7 +52,8 @@ class CornerDetector:
     def __init__(self, spec: BoardSpec):
         self.spec = spec
         self._board = spec.cv_board()
-        params = cv2.aruco.DetectorParameters() if HAS_CHARUCO_DETECTOR else cv2.aruco.DetectorParameters_create()
+        params = (cv2.aruco.DetectorParameters() if HAS_CHARUCO_DETECTOR
+                  else _ARUCO_BEFORE_4_7.DetectorParameters_create())
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE  # the chessboard corners are refined
         params.minMarkerPerimeterRate = 0.01
         self._params = params
@@ -65,11 +69,11 @@ class CornerDetector:
         if self._detector is not None:
             corners, ids, _marker_corners, marker_ids = self._detector.detectBoard(grey)
             return corners, ids, marker_ids
-        marker_corners, marker_ids, _rejected = cv2.aruco.detectMarkers(
+        marker_corners, marker_ids, _rejected = _ARUCO_BEFORE_4_7.detectMarkers(
             grey, self._board.dictionary, parameters=self._params)
         if marker_ids is None or len(marker_ids) == 0:
             return None, None, None
-        _count, corners, ids = cv2.aruco.interpolateCornersCharuco(
+        _count, corners, ids = _ARUCO_BEFORE_4_7.interpolateCornersCharuco(
             marker_corners, marker_ids, grey, self._board, minMarkers=1)
         return corners, ids, marker_ids
 

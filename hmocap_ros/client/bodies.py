@@ -111,9 +111,7 @@ def skeleton_points(msg) -> tuple[str, tuple[str, ...], np.ndarray, np.ndarray |
                          "message ignored")
     positions = np.array([(p.x, p.y, p.z) for p in msg.positions], dtype=np.float64).reshape(-1, 3)
     confidence = np.asarray(msg.confidence, dtype=np.float64)
-    if len(confidence) != len(names):
-        confidence = None
-    return body_id, names, positions, confidence
+    return body_id, names, positions, (confidence if len(confidence) == len(names) else None)
 
 
 def gesture_fields(gesture) -> tuple[np.ndarray | None, dict]:
@@ -121,7 +119,7 @@ def gesture_fields(gesture) -> tuple[np.ndarray | None, dict]:
     ``position_valid`` is false or the point is not finite) and its other fields."""
     p = gesture.position
     point = np.array([p.x, p.y, p.z], dtype=np.float64)
-    if not gesture.position_valid or not np.all(np.isfinite(point)):
-        point = None
-    return point, {"name": str(gesture.name), "class_id": int(gesture.class_id), "score": float(gesture.score),
-                   "volume": float(gesture.volume), "u": float(gesture.u), "v": float(gesture.v)}
+    valid = gesture.position_valid and np.all(np.isfinite(point))
+    return (point if valid else None), {"name": str(gesture.name), "class_id": int(gesture.class_id),
+                                        "score": float(gesture.score), "volume": float(gesture.volume),
+                                        "u": float(gesture.u), "v": float(gesture.v)}

@@ -21,7 +21,7 @@ __all__ = ["StaticFrames", "rig_frame_transforms"]
 class StaticFrames:
     """Static transforms by child frame, composed on demand (``lookup``)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.parents: dict[str, FrameTransform] = {}
         self._cache: dict[tuple[str, str], np.ndarray | None] = {}
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from hmocap_ros.client.geometry import BoxPlace, PointPlace
@@ -42,11 +43,11 @@ def parse_place(name: str, spec) -> PointPlace | BoxPlace:
     raise ValueError(f"{name}: expected {{point: [x, y, z]}} or {{box: {{min: [...], max: [...]}}}}, got {spec!r}")
 
 
-def _numbers(value) -> list[float]:
+def _numbers(value) -> np.ndarray:
     if not isinstance(value, (list, tuple)) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                                       for v in value):
         raise ValueError(f"expected a list of numbers, got {value!r}")
-    return [float(v) for v in value]
+    return np.array([float(v) for v in value], dtype=np.float64)
 
 
 def read_places(path, section: str, frame_id: str) -> tuple[dict, list[str]]:

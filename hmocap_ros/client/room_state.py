@@ -26,6 +26,7 @@ The guarantees (docs/client.md):
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from hmocap_ros.client.bodies import BadMessage, Body, Gesture, gesture_fields, skeleton_points
 from hmocap_ros.client.frames import StaticFrames, rig_frame_transforms
@@ -50,7 +51,7 @@ class RoomState:
         self.frames = StaticFrames()
         self.bodies: dict[str, Body] = {}
         self.gestures: tuple[Gesture, ...] = ()
-        self._pending: dict[str, tuple[object, int]] = {}
+        self._pending: dict[str, tuple[Any, int]] = {}  # Skeleton messages waiting for their frame
         self._lost_at: dict[str, int] = {}
         self._newest_stamp: int | None = None
         self._last_heard: int | None = None

@@ -87,7 +87,7 @@ def _depth_first(parents: np.ndarray) -> list:
 def _hierarchy(model, joints: np.ndarray, ends: np.ndarray) -> list:
     """HIERARCHY lines for rest joints (J, 3) and end sites (E, 3) in file units."""
     parents = np.asarray(model.parents)
-    end_of = {}
+    end_of: dict[int, list[int]] = {}
     for e, p in enumerate(model.end_site_parents):
         end_of.setdefault(int(p), []).append(e)
     lines = ["HIERARCHY"]

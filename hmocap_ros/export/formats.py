@@ -59,7 +59,7 @@ def _render_bvh(motion: BodyMotion, _out: Path) -> Export:
     if shape is None:
         raise ExportError(f"{motion.bag}: no body shape of {motion.body_id} ({motion.source}) for the BVH "
                           f"offsets; {_topics_line(motion)}")
-    notes = ()
+    notes: tuple[str, ...] = ()
     if n_shapes > 1:
         notes = ((f"the body shape of {motion.body_id} changes during the recording ({n_shapes} shapes); "
                   "the BVH offsets are those of the shape of most frames"),)

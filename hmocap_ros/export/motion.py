@@ -123,10 +123,10 @@ class BodyMotion:
 
 def _in_stamp_order(stamps: list, *arrays) -> tuple:
     """Sort by stamp and keep the first message of each stamp."""
-    stamps = np.asarray(stamps, dtype=np.int64)
-    order = np.argsort(stamps, kind="stable")
-    keep = order[np.concatenate([[True], np.diff(stamps[order]) != 0])] if len(order) else order
-    return (stamps[keep],) + tuple(np.asarray(a)[keep] for a in arrays)
+    stamp_array = np.asarray(stamps, dtype=np.int64)
+    order = np.argsort(stamp_array, kind="stable")
+    keep = order[np.concatenate([[True], np.diff(stamp_array[order]) != 0])] if len(order) else order
+    return (stamp_array[keep],) + tuple(np.asarray(a)[keep] for a in arrays)
 
 
 def _read_skeletons(reader, topic: str, body_id: str | None) -> tuple:

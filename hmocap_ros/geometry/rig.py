@@ -297,6 +297,7 @@ def rig_to_dict(rig: Rig) -> dict:
     """The YAML structure of ``rig`` (plain Python types), inverse of :func:`rig_from_dict`."""
     cameras = []
     for camera in rig.cameras:
+        assert camera.rectification is not None and camera.projection is not None  # filled by __post_init__
         cameras.append({
             "name": camera.name,
             "frame_id": camera.frame_id,

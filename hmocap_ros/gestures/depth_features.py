@@ -81,7 +81,7 @@ def depth_to_millimetres(depth: np.ndarray, fmt: DepthFormat, background_depth_m
     return mm.astype(np.uint16)
 
 
-def stack_metres(frame: np.ndarray, background_depth_m: float) -> np.ndarray:
+def stack_metres(frame: np.ndarray, background_depth_m: float | np.floating) -> np.ndarray:
     """One frame of a training stack (float32 metres or uint16 mm) as float32 metres."""
     if frame.dtype == np.uint16:
         out = frame.astype(np.float32) * MM

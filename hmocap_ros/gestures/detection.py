@@ -127,7 +127,7 @@ def node_detections(candidates: list, params: DetectorParams, thresholds: dict |
 def suppress_other_classes(detections: list, radius_px_m: float) -> list:
     """Best score first; drops a detection within ``radius_px_m / depth`` pixels of a better one
     of another class (the votes of one hand shape spill over to similar classes nearby)."""
-    kept = []
+    kept: list = []
     for det in sorted(detections, key=lambda d: -d.score):
         if all(math.hypot(det.u - k.u, det.v - k.v) >= radius_px_m / k.depth_m for k in kept):
             kept.append(det)
@@ -149,6 +149,8 @@ class GestureDetector:
     it is unknown (None) the camera is taken to be the training camera at this image width
     (focal scaled by width / training width). ``active_params`` are the scaled parameters in use.
     """
+
+    forest: Forest
 
     def __init__(self, forest: Forest, params: DetectorParams | None = None, focal_px: float | None = None):
         self.params = params if params is not None else DetectorParams()
@@ -245,6 +247,7 @@ class GestureDetector:
 
     def _localize(self, class_id: int, stamp_ns: int) -> Detection | None:
         p = self.active_params
+        assert self.density is not None  # update() has just computed it
         dens = self.density[:, :, class_id - 1]
         flat_max = int(np.argmax(dens))
         gy, gx = divmod(flat_max, dens.shape[1])
@@ -272,6 +275,7 @@ class GestureDetector:
         """Median depth of the grid pixels within 2 cells of the maximum that voted for the class,
         else of the valid ones; None when there are none."""
         y0, y1, x0, x1 = max(gy - 2, 0), gy + 3, max(gx - 2, 0), gx + 3
+        assert self.class_map is not None and self.grid_depth is not None  # update() has just voted
         cls = self.class_map[y0:y1, x0:x1]
         dep = self.grid_depth[y0:y1, x0:x1]
         for sel in (cls == class_id, cls >= 0):

@@ -66,7 +66,7 @@ def _balanced_bag(rng: np.random.Generator, by_class: list, per_class: np.ndarra
     return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
-def _tqdm_progress(desc: str = "trees"):
+def _tqdm_progress(desc: str = "trees") -> Callable[[TreeReport], None]:
     from tqdm import tqdm
 
     bar = None
@@ -135,7 +135,7 @@ def train_forest_on_samples(samples: SampleSet, params: ForestParams, features: 
         report = TreeReport(m, params.n_trees, int(bag.size), int(n_carried), tree.n_nodes, tree.n_leaves,
                             tree.max_depth, time.perf_counter() - t0, tree_err, forest_err)
         reports.append(report)
-        if progress:
+        if callable(progress):
             progress(report)
     seconds = time.perf_counter() - t_start
     meta = {"training": {

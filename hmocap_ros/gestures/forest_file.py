@@ -119,7 +119,7 @@ def save_forest(forest: Forest, path) -> Path:
         "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "meta": forest.meta,
     }
-    arrays = {
+    arrays: dict[str, np.ndarray] = {
         "header": np.frombuffer(json.dumps(header, default=_json_default).encode("utf-8"), np.uint8),
         "tree_offsets": np.concatenate([[0], np.cumsum([t.n_nodes for t in forest.trees])]).astype(np.int64),
         "pending_offsets": np.concatenate([[0], np.cumsum([p.node.size for p in pendings])]).astype(np.int64),
@@ -133,7 +133,7 @@ def save_forest(forest: Forest, path) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+            np.savez_compressed(fh, allow_pickle=False, **arrays)  # numeric arrays only
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -242,7 +242,7 @@ def load_forest(path) -> Forest:
         if kind == "online" or pb > pa:
             pending = PendingTests(*(pend[f"pending_{f}"][pa:pb].copy()
                                      for f in ("node", "feature", "threshold", "counts")))
-        tree = Tree(*(node[f][a:b].copy() for f in _NODE_ARRAYS), pending=pending)
+        tree = Tree(**{f: node[f][a:b].copy() for f in _NODE_ARRAYS}, pending=pending)
         try:
             tree.validate(c)
         except ValueError as err:

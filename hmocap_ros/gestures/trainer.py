@@ -330,7 +330,9 @@ class Trainer:
             raise ValueError("the camera's focal length is needed (focal_px) for a forest without one")
         if focal_px is not None and trained and abs(float(trained) - float(focal_px)) > 1e-6 * float(focal_px):
             raise ValueError(f"the forest was grown at fx {trained:g} px, the camera has {focal_px:g} px")
-        self.focal_px = float(focal_px if focal_px is not None else trained)
+        focal = focal_px if focal_px is not None else trained
+        assert focal is not None  # a forest without a focal length raised above
+        self.focal_px = float(focal)
         scaled = OnlineTrainParams(features=self.params.features, patches=self.params.patches,
                                    online=self.params.online).for_focal(self.focal_px)
         if isinstance(forest, Forest):
@@ -344,7 +346,7 @@ class Trainer:
         self.round = 0
         self._state_start: int | None = None
         self._rehearsed: tuple = ()
-        self._snapshot = None
+        self._snapshot: tuple[OnlineForest | None, float | None, float | None] | None = None
         self.th_pos: float | None = None
         self.th_neg: float | None = None
         self.detector: GestureDetector | None = None
@@ -352,7 +354,7 @@ class Trainer:
         self.restarts = 0
         self._last_stamp: int | None = None
         self._period = 0
-        self._session_snapshot = None
+        self._session_snapshot: tuple[OnlineForest | None, float | None, float | None] | None = None
         self._presence: SceneMotion | None = None
         self.record = bool(record)
         self.recording: list[RecordedFrame] = []
@@ -371,6 +373,7 @@ class Trainer:
         return blend_threshold(self.th_pos, self.th_neg, self.params.rho)
 
     def _refresh_detector(self) -> None:
+        assert self.online is not None  # called only once there is a forest
         forest = self.online.to_forest()
         if self.detector is None:
             det = replace(self.params.detector, min_score=0.0)
@@ -380,6 +383,7 @@ class Trainer:
 
     def forest(self) -> Forest:
         """The forest as it stands (kind online), with the thresholds and the generator's state."""
+        assert self.online is not None, "no forest yet: start teaching a gesture first"
         f = self.online.to_forest()
         f.meta["online"]["rng_state"] = self.rng.bit_generator.state
         return f
@@ -437,7 +441,7 @@ class Trainer:
         self.round = 0
         self._state_start = None
 
-    def _enter(self, state: str, stamp_ns: int) -> None:
+    def _enter(self, state: str, stamp_ns: int | None) -> None:
         self.state = state
         self._state_start = stamp_ns
 
@@ -446,6 +450,7 @@ class Trainer:
         if self._state_start is None and self.state not in ("idle", "done"):
             self._state_start = stamp_ns  # started before any frame: the session begins now
         while self.state not in ("idle", "done"):
+            assert self._state_start is not None  # set just above, and by every _enter below
             end = self._state_start + int(round(self._duration(self.state) * 1e9))
             if stamp_ns < end:
                 return
@@ -476,6 +481,7 @@ class Trainer:
         learnt (not in the first third of its slot, while the user gets into it)."""
         if self.state != "rehearse" or not self._rehearsed or self.params.rehearse_s <= 0:
             return "", False
+        assert self._state_start is not None  # _advance has started the state
         t = (stamp_ns - self._state_start) * 1e-9
         slot = min(int(t // self.params.rehearse_s), len(self._rehearsed) - 1)
         return self._rehearsed[slot], t - slot * self.params.rehearse_s >= self.params.rehearse_s / 3.0
@@ -484,6 +490,7 @@ class Trainer:
         """End of the last round: keep the threshold (and its parts th+, th-), or, when the
         session saw nobody in the box, put the forest back as it was before the session.
         Returns whether the gesture was taught."""
+        assert self._presence is not None and self._session_snapshot is not None  # set by start()
         if not self._presence.somebody:
             forest, self.th_pos, self.th_neg = self._session_snapshot
             self.online = forest
@@ -493,6 +500,7 @@ class Trainer:
                 self.detector = None
             return False
         th = self.threshold
+        assert self.online is not None  # start() made or kept one
         if th is not None:
             self.online.meta.setdefault("gesture_thresholds", {})[self.gesture] = th
             self.online.meta.setdefault("gesture_threshold_parts", {})[self.gesture] = [self.th_pos, self.th_neg]
@@ -518,12 +526,14 @@ class Trainer:
         if self.online is None:
             return self._status(stamp_ns, box, (), 0)
         cls = self.online.class_names.index(self.gesture) if self.gesture in self.online.class_names else 0
+        assert self.detector is not None  # made with the forest (_refresh_detector)
         detections = tuple(self.detector.update(depth, stamp_ns))
         samples = 0
         in_session = self.state not in ("idle", "done")
         if in_session:
             bg = np.float32(self.online.features.background_depth_m)
             metres = depth_to_metres(depth, self.params.detector.depth_format, float(bg))
+            assert self._presence is not None  # set by start()
             self._presence.see(metres, stamp_ns)
         if self.state in LEARNING_STATES:
             dens = self.detector.density[:, :, cls - 1] if self.detector.density is not None else None
@@ -566,6 +576,7 @@ class Trainer:
 
     def _keep(self, metres: np.ndarray, stamp_ns: int, gesture: str, box: tuple) -> None:
         """Append the frame to :attr:`recording` as uint16 millimetres (invalid = 0)."""
+        assert self.online is not None  # frames are kept only while teaching
         bg = np.float32(self.online.features.background_depth_m)
         mm = np.where(metres < bg, np.rint(metres * 1000.0), 0.0)
         self.recording.append(RecordedFrame(np.clip(mm, 0, 65535).astype(np.uint16), int(stamp_ns), gesture,
@@ -576,6 +587,7 @@ class Trainer:
         frame with this forest: at the same grid step its votes are those
         :func:`~hmocap_ros.gestures.hard_negatives.frame_negatives` would compute, and are used
         as they are (one forest evaluation per frame instead of two)."""
+        assert self.online is not None and self.detector is not None  # called while teaching
         op, det = self.online.params, self.detector
         if det.class_map is None or det.active_params.stride != op.stride:
             xs, ys, _ = frame_negatives(self.online.flat(), metres, op, self.rng)
@@ -584,12 +596,14 @@ class Trainer:
         density = vote_density(det.class_map, len(self.online.class_names) - 1, op.parzen_sigma_px / op.stride)
         counts = negative_counts(density, op.n_frame_negatives)
         if op.negatives == "hard":
+            assert det.grid_depth is not None  # voted together with class_map
             return hard_negative_pixels(density, det.grid_depth, metres, op.stride, counts,
                                         op.hard_half_size_px_m, bg, self.rng)
         return random_negative_pixels(metres, int(counts.sum()), bg, self.rng)
 
     def _box_max(self, dens: np.ndarray, box: tuple) -> float:
         """Maximum of a density grid (gh, gw) over the grid cells inside the box."""
+        assert self.detector is not None  # the density comes from it
         p = self.detector.active_params
         off, s = self.detector.grid_offset, p.stride
         u, v, half = box

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from typing import Any
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from rosbags.highlevel import AnyReader
-from rosbags.interfaces import QosDurability
+from rosbags.interfaces import ConnectionExtRosbag2, QosDurability
 
 from .msg_factory import stamp_to_ns
 from .summaryless_mcap import summaryless_view
@@ -98,7 +99,7 @@ class BagMessage:
     topic: str
     msgtype: str
     log_time_ns: int
-    msg: object
+    msg: Any  # a rosbags message of the type ``msgtype``, or its CDR bytes when read raw
 
 
 class BagReader:
@@ -114,7 +115,9 @@ class BagReader:
         elif self.path.is_dir() and not (self.path / "metadata.yaml").is_file():
             raise unreadable(self.path, "a folder without metadata.yaml")
         try:
-            self._reader = AnyReader([self.summaryless or self.path], default_typestore=hmocap_typestore())
+            # rosbags reads an MCAP file through exists(), is_dir(), suffix and open() only, all SealedMcap has
+            self._reader = AnyReader([self.summaryless or self.path],  # type: ignore[list-item]
+                                     default_typestore=hmocap_typestore())
         except Exception as err:  # rosbags raises several error types for what is not a bag
             raise unreadable(self.path, _reason(err)) from err
 
@@ -157,7 +160,7 @@ class BagReader:
         out = {}
         for topic, info in self._reader.topics.items():
             latched = any(
-                getattr(c.ext, "offered_qos_profiles", None)
+                isinstance(c.ext, ConnectionExtRosbag2)
                 and any(q.durability == QosDurability.TRANSIENT_LOCAL for q in c.ext.offered_qos_profiles)
                 for c in info.connections
             )
@@ -214,7 +217,7 @@ class BagReader:
         slop_ns: int = 0,
         allow_partial: bool = False,
         min_topics: int | None = None,
-    ) -> Iterator[tuple[int, dict[str, object]]]:
+    ) -> Iterator[tuple[int, dict[str, Any]]]:
         """Synchronised sets ``(stamp_ns, {topic: msg})`` over ``topics`` by ``header.stamp``.
 
         Exact stamps when ``slop_ns`` is 0, else approximate matching within the slop.

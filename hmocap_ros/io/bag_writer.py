@@ -216,7 +216,8 @@ def mcap_rosbag2_metadata(info: dict) -> dict[str, str]:
 def open_mcap_writer(stream: SealedMcapFile, compress: bool = True,
                      chunk_size: int = 1 << 20) -> McapWriter:
     """A started ``mcap`` writer with the ros2 profile, its header already on disk."""
-    writer = McapWriter(stream, chunk_size=chunk_size,
+    writer = McapWriter(stream,  # type: ignore[arg-type]  # a stream for write() and tell(), all the Writer calls
+                        chunk_size=chunk_size,
                         compression=CompressionType.ZSTD if compress else CompressionType.NONE)
     writer.start(profile="ros2", library="hmocap_ros")
     stream.flush()
@@ -296,13 +297,13 @@ class BagWriter:
             return
         if msgtype not in self.typestore.fielddefs:
             raise BagWriteError(f"unknown message type {msgtype!r} for topic {topic!r}")
-        self._check_open()
+        mcap, _ = self._check_open()
         if msgtype not in self._schemas:
             msgdef, _ = self.typestore.generate_msgdef(msgtype, ros_version=2)
             encoding = "ros2idl" if msgdef.startswith("=" * 80 + "\nIDL: ") else "ros2msg"
-            self._schemas[msgtype] = self._mcap.register_schema(msgtype, encoding, msgdef.encode())
+            self._schemas[msgtype] = mcap.register_schema(msgtype, encoding, msgdef.encode())
         qos_list = dump_qos_v9([_rosbags_qos(qos)])
-        channel_id = self._mcap.register_channel(
+        channel_id = mcap.register_channel(
             topic, "cdr", self._schemas[msgtype],
             {"offered_qos_profiles": yaml.safe_dump(qos_list, sort_keys=False).strip()},
         )
@@ -310,7 +311,7 @@ class BagWriter:
 
     def write(self, topic: str, msg, stamp_ns: int, msgtype: str | None = None) -> None:
         """Write one message: a rosbags dataclass, or raw CDR ``bytes`` with ``msgtype`` given."""
-        self._check_open()
+        mcap, stream = self._check_open()
         if isinstance(msg, (bytes, bytearray, memoryview)):
             if msgtype is None and topic not in self._channels:
                 raise BagWriteError(f"raw data for new topic {topic!r} needs its msgtype")
@@ -319,16 +320,17 @@ class BagWriter:
             msgtype = msgtype or typename_of(msg)
             raw = bytes(self.typestore.serialize_cdr(msg, msgtype))
         if topic not in self._channels:
+            assert msgtype is not None  # raw data for a new topic raised above
             self.add_topic(topic, msgtype)
         channel = self._channels[topic]
         stamp_ns = int(stamp_ns)
-        self._guard(self._mcap.add_message, channel.channel_id, stamp_ns, raw, stamp_ns)
+        self._guard(mcap.add_message, channel.channel_id, stamp_ns, raw, stamp_ns)
         channel.count += 1
         self._unflushed += 1
         self._start_ns = min(self._start_ns, stamp_ns)
         self._end_ns = max(self._end_ns, stamp_ns)
-        if self._stream.pending:  # the writer closed a full chunk
-            self._guard(self._stream.flush)
+        if stream.pending:  # the writer closed a full chunk
+            self._guard(stream.flush)
         self.flush_if_due()
 
     def flush_if_due(self) -> None:
@@ -341,9 +343,9 @@ class BagWriter:
 
     def flush(self) -> None:
         """Append the open chunk to the file and push it to the disk."""
-        self._check_open()
-        self._guard(self._mcap.flush)
-        self._guard(self._stream.sync)
+        mcap, stream = self._check_open()
+        self._guard(mcap.flush)
+        self._guard(stream.sync)
         self._unflushed = 0
         self._last_flush = time.monotonic()
 
@@ -359,6 +361,7 @@ class BagWriter:
             return
         info = rosbag2_info(self.mcap_path.name, self._topic_records(), self._start_ns, self._end_ns)
         try:
+            assert self._mcap is not None  # open() made it with the stream
             self._mcap.add_metadata("rosbag2", mcap_rosbag2_metadata(info))
             self._mcap.finish()
             stream.close()
@@ -372,11 +375,14 @@ class BagWriter:
         return [TopicRecord(topic, ch.msgtype, ch.qos, ch.count, ch.type_hash)
                 for topic, ch in self._channels.items()]
 
-    def _check_open(self) -> None:
+    def _check_open(self) -> tuple[McapWriter, SealedMcapFile]:
+        """The open writer and its stream; BagWriteError when the bag is closed or failed."""
         if self._stream is None:
             raise BagWriteError("the bag is not open (use it as a context manager)")
         if self._failed:
             raise BagWriteError(f"writing {self.path} failed before; the bag is closed as last flushed")
+        assert self._mcap is not None  # open() made it with the stream
+        return self._mcap, self._stream
 
     def _guard(self, func, *args):
         try:

@@ -274,8 +274,9 @@ class RclpyFactory:
     def __repr__(self) -> str:
         return "RclpyFactory()"
 
-    def message_class(self, typename: str) -> type:
-        """Return the rclpy class for ``typename`` ("pkg/msg/Name"), importing its module."""
+    def message_class(self, typename: str) -> Any:
+        """Return the rclpy class for ``typename`` ("pkg/msg/Name"), importing its module (a
+        generated class: the interface packages carry no type information)."""
         typename = normalize_typename(typename)
         cls = self._classes.get(typename)
         if cls is None:
@@ -326,7 +327,7 @@ def _rclpy_value(where: str, field_type: str, value: Any) -> Any:
                 return value
             flat = _as_flat_array(value, _PRIMITIVE_DTYPES[element], where, copy=False)
             out = array.array(typecode)  # frombytes copies: the message owns its data
-            out.frombytes(flat.view(np.uint8))
+            out.frombytes(flat.view(np.uint8).data)
             return out
         if element == "octet" and isinstance(value, (bytes, bytearray, np.ndarray)):
             raw = _as_flat_array(value, np.dtype(np.uint8), where).tobytes()

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -43,7 +43,7 @@ def pointcloud2_dtype(fields: Any, point_step: int, is_bigendian: bool = False) 
         PointCloudConversionError: unknown datatype, empty or duplicate name, a field past
             ``point_step``, or overlapping fields.
     """
-    order = ">" if is_bigendian else "<"
+    order: Literal[">", "<"] = ">" if is_bigendian else "<"
     names, formats, offsets = [], [], []
     spans = []
     for field in fields:
@@ -174,6 +174,7 @@ def _pointfields(dtype: np.dtype, factory: Any) -> tuple[list, np.dtype]:
     Raises:
         PointCloudConversionError: a field type that PointField cannot express.
     """
+    assert dtype.names is not None and dtype.fields is not None  # the caller checked it is structured
     fields = []
     little_fields = {}
     for name in dtype.names:
@@ -210,10 +211,12 @@ def _pointfields(dtype: np.dtype, factory: Any) -> tuple[list, np.dtype]:
 
 def _all_finite(points: np.ndarray) -> bool:
     """True iff every floating-point value of the structured array is finite (``is_dense``)."""
+    names, fields = points.dtype.names, points.dtype.fields
+    assert names is not None and fields is not None  # a structured array
     return all(
         bool(np.all(np.isfinite(points[name])))
-        for name in points.dtype.names
-        if points.dtype.fields[name][0].base.kind == "f"
+        for name in names
+        if fields[name][0].base.kind == "f"
     )
 
 

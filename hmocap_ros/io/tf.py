@@ -104,7 +104,7 @@ def rotation_to_quaternion(rotation) -> tuple[float, float, float, float]:
     q /= np.linalg.norm(q)
     if q[3] < 0:
         q = -q
-    return tuple(float(v) for v in q)
+    return float(q[0]), float(q[1]), float(q[2]), float(q[3])
 
 
 def rotations_to_quaternions(rotations) -> np.ndarray:
@@ -187,8 +187,8 @@ class FrameTransform:
 def frame_transform(parent: str, child: str, rotation, translation) -> FrameTransform:
     """:class:`FrameTransform` from a child -> parent rotation matrix (3x3) and the child's
     origin in the parent frame."""
-    return FrameTransform(parent, child, tuple(np.asarray(translation, np.float64).reshape(3)),
-                          rotation_to_quaternion(rotation))
+    tx, ty, tz = np.asarray(translation, np.float64).reshape(3)
+    return FrameTransform(parent, child, (tx, ty, tz), rotation_to_quaternion(rotation))
 
 
 def camera_transform(camera, parent: str) -> FrameTransform:

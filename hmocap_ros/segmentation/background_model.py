@@ -239,9 +239,9 @@ class BackgroundModel:
         self.variance: np.ndarray | None = None
         self.raw_mask: np.ndarray | None = None
         self.shadow_mask: np.ndarray | None = None
-        self._fg_count = None
-        self._mask = None
-        self._gain_buf = None
+        self._fg_count: np.ndarray | None = None
+        self._mask: np.ndarray | None = None
+        self._gain_buf: np.ndarray | None = None
 
     @property
     def is_learning(self) -> bool:
@@ -278,6 +278,7 @@ class BackgroundModel:
         self._gain_buf = np.empty(((h + step - 1) // step) * ((w + step - 1) // step), np.float32)
 
     def _learn(self, frame: np.ndarray) -> np.ndarray:
+        assert self.variance is not None and self.shape is not None  # allocated by the first frame
         self.frames_learned += 1
         learn_step(frame, self.frames_learned, self.mean, self.variance)
         if not self.is_learning:
@@ -299,6 +300,7 @@ class BackgroundModel:
             np.float32(p.highlight_max_brightness), np.float32(p.shadow_max_chroma ** 2), np.float32(p.shadow_chroma_sigma ** 2),
             np.float32(p.learning_rate), p.absorb_frames, np.float32(p.absorb_rate),
             self.raw_mask, self.shadow_mask)
+        assert self.raw_mask is not None  # allocated by the first frame
         self._mask = clean_mask(self.raw_mask, self._opening, self._closing, p.min_blob_area, p.max_hole_area)
         return self._mask.copy()
 

@@ -143,9 +143,9 @@ class PersonMaskedBackground:
         self.frames = 0
         self.network_runs = 0
         self._remaining = 1
-        self._since_run = None
-        self.person = None
-        self._occupied = None
+        self._since_run: int | None = None
+        self.person: np.ndarray | None = None
+        self._occupied: np.ndarray | None = None
         self._masks.reset(self._key)
 
     @property
@@ -188,6 +188,7 @@ class PersonMaskedBackground:
             probability = self._masks.probability(self._key, frame)
             self._since_run = 0
             self.network_runs += 1
+            assert self.shape is not None  # apply() allocates before it asks for the person
             self.person = np.zeros(self.shape, np.uint8)
             if probability is not None:
                 self.person[probability > p.person_threshold] = 255
@@ -228,6 +229,7 @@ class PersonMaskedBackground:
             np.float32(p.shadow_chroma_sigma ** 2), np.float32(p.learning_rate), p.absorb_frames,
             np.float32(p.absorb_rate), self.raw_mask, self.shadow_mask)
         if self._remaining:
+            assert self.person is not None  # set by _allocate
             unknown = ~self._learnt
             self.raw_mask[unknown] = self.person[unknown]
             self.shadow_mask[unknown] = 0

@@ -31,6 +31,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -38,6 +39,9 @@ import numpy as np
 from hmocap_ros.video_import.camera_fit import (CameraFitError, common_size, crop_camera,
                                                 fit_camera, rotate_camera, upright_turns)
 from hmocap_ros.video_import.videos import FrameSetReader, VideoError, VideoInfo, probe_video
+
+if TYPE_CHECKING:
+    from hmocap_ros.geometry.rig import Rig
 
 __all__ = ["BASE_STAMP_NS", "ImportOptions", "ImportPlan", "ImportResult", "VideoImportError",
            "bag_camera_name", "import_videos", "plan_import"]
@@ -86,7 +90,7 @@ class ImportPlan:
     are turned by, the notes and warnings for the user, and the size ``(width, height)`` all
     turned frames are cut to (None: none is cut)."""
 
-    rig: object
+    rig: Rig
     videos: tuple[VideoInfo, ...]
     first: tuple[int, ...]
     count: int
@@ -194,7 +198,8 @@ def plan_import(video_paths, calibration, options: ImportOptions = ImportOptions
         raise VideoImportError("no videos")
     if not 0 < options.scale <= 1:
         raise VideoImportError(f"--scale must be in (0, 1], got {options.scale:g}")
-    notes, warnings = [], []
+    notes: list[str] = []
+    warnings: list[str] = []
     try:
         videos = [probe_video(p) for p in video_paths]
         foreign = read_calibration(calibration, options.calibration_format)

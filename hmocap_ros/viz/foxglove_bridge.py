@@ -20,6 +20,10 @@ from __future__ import annotations
 
 import logging
 import threading
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from foxglove import Channel
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "FoxgloveBridge", "ros2msg_schema"]
 
@@ -46,7 +50,7 @@ def ros2msg_schema(typename: str) -> str:
 class _Listener:
     """Keeps the count of client subscriptions per topic (called from the server's threads)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.lock = threading.Lock()
         self.clients: dict[str, set[int]] = {}
 
@@ -77,11 +81,12 @@ class FoxgloveBridge:
         self._listener = _Listener()
         try:
             self.server = foxglove.start_server(name=name, host=host, port=port,
-                                                server_listener=self._listener)
+                                                # _Listener has only the protocol's subscription callbacks
+                                                server_listener=self._listener)  # type: ignore[arg-type]
         except RuntimeError as err:  # the SDK reports a taken port as a RuntimeError
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {err}") from err
         self.host = host
-        self.channels: dict[str, object] = {}
+        self.channels: dict[str, Channel] = {}
 
     @property
     def port(self) -> int:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import cv2
 import numpy as np
@@ -118,15 +119,15 @@ def _draw_skeleton(img: np.ndarray, pixels: np.ndarray, ok: np.ndarray, parents:
     for j, p in enumerate(parents):
         if 0 <= p < len(ip) and ok[j] and ok[p]:
             cv2.line(img, tuple(ip[p]), tuple(ip[j]), tuple(int(c) for c in bone_colour), thickness, cv2.LINE_AA, SHIFT)
-    for j in np.flatnonzero(ok):
-        cv2.circle(img, tuple(ip[j]), radius << SHIFT, tuple(int(c) for c in joint_colours[j]), -1, cv2.LINE_AA, SHIFT)
+    for k in np.flatnonzero(ok):
+        cv2.circle(img, tuple(ip[k]), radius << SHIFT, tuple(int(c) for c in joint_colours[k]), -1, cv2.LINE_AA, SHIFT)
 
 
 def _project(camera, points: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Pixels (N, 2) of room points at the tile's scale, and which are in front of the camera
     and near the image (a bone may leave the image, a point far outside is not drawn)."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
-    finite = np.isfinite(points).all(axis=1)
+    finite = cast(np.ndarray, np.isfinite(points).all(axis=1))  # (N,): all() over one axis of a 2-D array
     pixels, depth = camera.project(np.where(finite[:, None], points, 0.0))
     margin = 0.5 * max(camera.width, camera.height)
     near = ((pixels[:, 0] > -margin) & (pixels[:, 0] < camera.width + margin)
@@ -142,7 +143,7 @@ def camera_tile(camera, image: np.ndarray | None, bodies: Sequence[BodyDrawing],
     scale = tile_width / camera.width
     height = int(round(camera.height * scale))
     if image is None:
-        out = np.full((height, tile_width, 3), 40, np.uint8)
+        out: np.ndarray = np.full((height, tile_width, 3), 40, np.uint8)
         _text(out, "no image", (tile_width // 3, height // 2), max(0.4, tile_width / 800))
     else:
         out = cv2.resize(_rgb(image), (tile_width, height),

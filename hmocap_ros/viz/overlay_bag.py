@@ -156,8 +156,8 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
                     images.append(image_to_rgb(msgs[topic]) if topic in msgs else None)
                 except ConversionError:
                     images.append(None)
-            gt = _near(truths, gt_stamps, stamp)
-            gt = gt[0] if gt else None
+            gt_msgs = _near(truths, gt_stamps, stamp)
+            gt = gt_msgs[0] if gt_msgs else None
             bodies = [_body(msg, gt) for msg in _near(skeletons, sk_stamps, stamp)]
             ex = _near(extremities, ex_stamps, stamp)
             ex_points = (list(ex[0].labels), _points(ex[0])) if ex and len(ex[0].labels) else None
@@ -214,7 +214,7 @@ def depth_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = 
 
 def frame_rate(stamps: list[int], default: float = 25.0) -> float:
     """Frames per second of stamps (the median interval), for a video that plays in real time."""
-    steps = np.diff(np.asarray(stamps, np.int64))
+    steps: np.ndarray = np.diff(np.asarray(stamps, np.int64))
     steps = steps[steps > 0]
     return float(np.clip(1e9 / np.median(steps), 1.0, 120.0)) if len(steps) else default
 
@@ -239,7 +239,7 @@ def write_pictures(pictures: Iterator[Picture], out: Path, fps: float | None = N
                 if writer is None:
                     out.parent.mkdir(parents=True, exist_ok=True)
                     h, w = bgr.shape[:2]
-                    writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*VIDEO_SUFFIXES[out.suffix.lower()]),
+                    writer = cv2.VideoWriter(str(out), cv2.VideoWriter.fourcc(*VIDEO_SUFFIXES[out.suffix.lower()]),
                                              fps, (w - w % 2, h - h % 2))
                     if not writer.isOpened():
                         raise OverlayError(f"{out}: OpenCV cannot write this video here (no {out.suffix} "

@@ -119,6 +119,8 @@ def write_qca(calibration: ForeignCalibration, path: str | Path) -> list[Path]:
         if camera.K[0, 1] != 0:
             raise CalibrationFormatError(f"camera {camera.name!r}: a skewed camera matrix has no "
                                          f"place in a .qca file")
+        if camera.size is None:
+            raise CalibrationFormatError(f"camera {camera.name!r}: a .qca file needs the image size")
         w, h = camera.size
         element = ET.SubElement(cameras, "camera", {"active": "1", "serial": camera.name,
                                                     "model": "none", "viewrotation": "0"})

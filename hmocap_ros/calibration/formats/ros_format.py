@@ -97,6 +97,8 @@ def write_ros(calibration: ForeignCalibration, path: str | Path) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for camera in calibration.cameras:
+        if camera.size is None:
+            raise CalibrationFormatError(f"camera {camera.name!r}: a ROS camera_info file needs the image size")
         K = np.asarray(camera.K)
         D = np.pad(camera.D, (0, max(0, 5 - camera.D.size)))
         model = "plumb_bob" if D.size <= 5 else "rational_polynomial"
