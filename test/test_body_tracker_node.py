@@ -322,18 +322,21 @@ def _latency_run(tmp_path, name: str, args: list, rate: float, expect: dict | No
 
 
 def test_a_tracker_slower_than_the_cameras_skips_sets_and_keeps_its_latency_bounded(tmp_path):
-    # The 4 cameras at their real 25 fps: the tracker needs far more than 40 ms per set. Live
-    # (latest_only, the default) it tracks the newest set after each one and counts the rest;
-    # the latency of every set it tracks stays within about two processing times (the set in
-    # progress when it came, then its own). latest_only:=false answers every set, and its
-    # latency grows with the queue.
+    # The 4 cameras at a quarter of their 25 fps (frames 160 ms apart, the replay long enough
+    # that a loaded machine's late discovery costs only empty-room sets): the tracker's start-up
+    # on the first person takes seconds. Live (latest_only, the default) it tracks the newest
+    # set after each one and counts the rest; the latency of every set it tracks stays within
+    # about two processing times (the set in progress when it came, then its own).
+    # latest_only:=false answers every set, and its latency grows with the queue.
     with BagReader(DEMO_BAG) as reader:
         n_frames = reader.topics()["/cam_1/image_raw"].count
-    live = _latency_run(tmp_path, "live", [], rate=1.0)
+    # drained after its first pose: the start-up on the first person may take longer than the drain's settle
+    live = _latency_run(tmp_path, "live", [], rate=0.25, expect={"/skeleton": 1})
     every = _latency_run(tmp_path, "every", EVERY_FRAME, rate=1.0, expect={"/diagnostics": n_frames})
     frames = every["frames"]
     assert list(every["stamps"]) == frames and every["skipped_total"][-1] == 0
-    assert live["skipped_total"][-1] > 0 and len(live["stamps"]) < len(frames)
+    assert live["skipped_total"][-1] > 0 and len(live["stamps"]) < len(frames), \
+        (live["stamps"], live["seconds"], live["skipped_total"])
     # the cumulative count is the sum of the per-message counts, and with the sets tracked
     # it accounts for every frame set between the first and the last one tracked; on a loaded
     # machine a set before the first one tracked may be counted too (it came incomplete, its
