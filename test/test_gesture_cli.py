@@ -13,7 +13,7 @@ from fixtures.gesture_cli import command_args, shuffled_votes, tiny_gesture_bag
 from hmocap_ros.commands import train_gestures
 from hmocap_ros.eval import gesture_eval as ge
 from hmocap_ros.gestures import load_forest, save_forest
-from hmocap_ros.sim.gesture_set import GESTURE_CLASSES
+from hmocap_sim.gesture_set import GESTURE_CLASSES
 
 DATA = Path(ge.__file__).resolve().parents[1] / "data"
 DEMO = DATA / "demo" / "gestures_depth.mcap"

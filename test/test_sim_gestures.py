@@ -1,5 +1,5 @@
 """Tests of the gesture depth simulator: camera model agreement, Kinect noise, gesture
-geometry, ground truth, bag layout and determinism (hmocap_ros.sim.gesture_*, depth_scene)."""
+geometry, ground truth, bag layout and determinism (hmocap_sim.gesture_*, depth_scene)."""
 
 from __future__ import annotations
 
@@ -15,10 +15,11 @@ from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import camera_info_to_dict, image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.render import grid_quad
-from hmocap_ros.sim import gesture_dataset as gd
-from hmocap_ros.sim import gesture_set as gs
-from hmocap_ros.sim.depth_scene import (
+from hmocap_sim.render import grid_quad
+from hmocap_sim import gesture_dataset as gd
+from hmocap_sim import gesture_set as gs
+from hmocap_sim.params import DATA_DIR
+from hmocap_sim.depth_scene import (
     box,
     depth_camera,
     make_layout,
@@ -26,7 +27,7 @@ from hmocap_ros.sim.depth_scene import (
     render_depth,
 )
 
-DEMO = Path(gs.__file__).resolve().parents[1] / "data" / "demo" / "gestures_depth.mcap"
+DEMO = DATA_DIR / "demo" / "gestures_depth.mcap"
 
 
 @pytest.fixture(scope="module")

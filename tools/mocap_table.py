@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from hmocap_ros.eval.mocap_eval import (_json_default, evaluate, plot_errors,  # noqa: E402
                                         settings_diff, stored_params, tracker_overrides)
-from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
+from hmocap_sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
 from hmocap_ros.tracking.methods import METHODS, method_names  # noqa: E402
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"

@@ -113,7 +113,7 @@ class GestureBag:
 
 
 def _class_names(names_by_id: dict) -> tuple:
-    from hmocap_ros.sim.gesture_kinds import ALL_GESTURES, GESTURE_CLASSES
+    from hmocap_ros.gestures.classes import ALL_GESTURES, GESTURE_CLASSES
 
     n = max([len(GESTURE_CLASSES)] + list(names_by_id))
     return ("background",) + tuple(names_by_id.get(c, ALL_GESTURES[c - 1] if c <= len(ALL_GESTURES)
