@@ -115,10 +115,10 @@ COMMAND_GROUPS = {
         "Render synthetic smart-room recordings (seeded, deterministic) as MCAP bags in the documented "
         "layout, with ground truth and a PNG contact sheet.",
         {
-            "mocap": ("hmocap_sim.mocap_dataset", "multi-view RGB bag of a retargeted BVH clip, with ground truth"),
-            "gestures": ("hmocap_sim.gesture_dataset", "depth bag of gestures among clutter, with ground truth"),
-            "calibration": ("hmocap_sim.calibration_session", "multi-view bag of a ChArUco board carried through the room, with the true rig"),
-            "teacher": ("hmocap_sim.nodes.simulated_teacher", "a simulated user who follows gesture_trainer's instructions over DDS"),
+            "mocap": ("hmocap_sim.commands.mocap", "multi-view RGB bag of a retargeted BVH clip, with ground truth"),
+            "gestures": ("hmocap_sim.commands.gestures", "depth bag of gestures among clutter, with ground truth"),
+            "calibration": ("hmocap_sim.commands.calibration", "multi-view bag of a ChArUco board carried through the room, with the true rig"),
+            "teacher": ("hmocap_sim.commands.teacher", "a simulated user who follows gesture_trainer's instructions over DDS"),
         },
     ),
     "eval": (

@@ -258,14 +258,15 @@ def test_the_product_never_imports_the_simulator():
 
 
 def test_the_sim_commands_name_simulator_modules():
-    """``hmocap sim KIND`` names a module of hmocap_sim that exists; no other group does."""
+    """``hmocap sim KIND`` names a front end of hmocap_sim/commands/ that exists; no other
+    group names the simulator."""
     from hmocap_ros.cli import COMMAND_GROUPS
 
     modules = package_modules()
     kinds = COMMAND_GROUPS["sim"][2]
     assert kinds
     for kind, (module, _help) in kinds.items():
-        assert module.startswith(f"{SIMULATOR}.") and module in modules, (kind, module)
+        assert module.startswith(f"{SIMULATOR}.commands.") and module in modules, (kind, module)
     for group, (_, _, entries) in COMMAND_GROUPS.items():
         if group != "sim":
             assert not [m for m, _ in entries.values() if m.split(".")[0] == SIMULATOR], group

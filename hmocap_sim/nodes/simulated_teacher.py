@@ -1,4 +1,4 @@
-"""``hmocap sim teacher``: a simulated user who follows gesture_trainer's instructions over DDS.
+"""The simulated user of ``hmocap sim teacher``: it follows gesture_trainer's instructions over DDS.
 
 The user of :class:`~hmocap_sim.gesture_teacher.GestureTeacher` (a person in a furnished
 room of the gesture simulator) in a closed loop with a running ``gesture_trainer`` node: it
@@ -21,46 +21,15 @@ does not answer, or when the session ends without teaching (nothing moved in vie
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from types import SimpleNamespace
 
-__all__ = ["add_arguments", "main_from_args"]
+__all__ = ["TeacherError", "run_teacher"]
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--teach", metavar="GESTURE", default="",
-                        help="ask gesture_trainer to teach this gesture and run until the session is done "
-                             "(without it: follow the trainer's state until --duration or Ctrl-C)")
-    parser.add_argument("--forest", default="", help="forest file of the teach request (default: the trainer's "
-                                                     "forest_file parameter)")
-    parser.add_argument("--new-forest", action="store_true", help="start a new forest in --forest")
-    parser.add_argument("--extend", action="store_true", help="keep teaching a gesture the forest knows")
-    parser.add_argument("--hold-after", type=float, default=0.0, metavar="SECONDS",
-                        help="after the session, hold the gesture in the box this many simulated seconds")
-    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
-                        help="stop after this many simulated seconds")
-    parser.add_argument("--wait", type=float, default=2.0, metavar="SECONDS",
-                        help="wall seconds to wait for the trainer's state of each frame (0 = publish at "
-                             "the frame rate without waiting)")
-    parser.add_argument("--trainer", default="gesture_trainer",
-                        help="the trainer's name: its services and state topic are NAME/teach, NAME/state")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulated person and room")
-    parser.add_argument("--subject", type=int, default=0, help="subject id of the simulated person")
-    parser.add_argument("--layout", type=int, default=0, help="room layout id")
-    parser.add_argument("--width", type=int, default=320, help="depth image width (pixels)")
-    parser.add_argument("--height", type=int, default=240, help="depth image height (pixels)")
-    parser.add_argument("--fps", type=float, default=30.0, help="frame rate of the stamps")
-
-
-def _check(ns) -> str:
-    problems = [(ns.width < 16 or ns.height < 16, "--width and --height must be >= 16"),
-                (not ns.fps > 0, "--fps must be > 0"),
-                (ns.wait < 0 or ns.hold_after < 0, "--wait and --hold-after must be >= 0"),
-                (ns.duration is not None and not ns.duration > 0, "--duration must be > 0"),
-                ((ns.new_forest or ns.extend or ns.forest) and not ns.teach,
-                 "--forest, --new-forest and --extend go with --teach")]
-    return next((text for bad, text in problems if bad), "")
+class TeacherError(RuntimeError):
+    """The session cannot go on: nothing subscribes, the trainer refuses or does not answer,
+    or the session ends without teaching. The message is the one line to print."""
 
 
 def _status(msg) -> SimpleNamespace:
@@ -69,11 +38,10 @@ def _status(msg) -> SimpleNamespace:
                            known_gestures=tuple(msg.known_gestures), rehearsed=msg.shown_gesture)
 
 
-def main_from_args(ns: argparse.Namespace) -> int:
-    error = _check(ns)
-    if error:
-        print(f"hmocap sim teacher: {error}", file=sys.stderr)
-        return 2
+def run_teacher(ns: SimpleNamespace | argparse.Namespace) -> int:
+    """The closed loop with a running gesture_trainer (the module docstring); ``ns`` holds the
+    options of ``hmocap sim teacher`` (:mod:`hmocap_sim.commands.teacher`). Returns 0 at the
+    end of the session or of ``--duration``; raises :class:`TeacherError`."""
     import rclpy
     from hmocap_interfaces.msg import TrainerState
     from hmocap_interfaces.srv import TeachGesture
@@ -112,9 +80,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
         while pub_depth.get_subscription_count() < 1 and time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.05)
         if pub_depth.get_subscription_count() < 1:
-            print("hmocap sim teacher: nothing subscribes depth/image_raw (is gesture_trainer running?)",
-                  file=sys.stderr)
-            return 2
+            raise TeacherError("nothing subscribes depth/image_raw (is gesture_trainer running?)")
         client = node.create_client(TeachGesture, f"{ns.trainer}/teach")
         while limit is None or published < limit:
             t_frame = time.monotonic()
@@ -132,16 +98,14 @@ def main_from_args(ns: argparse.Namespace) -> int:
             if not requested and msg is not None:
                 requested = True
                 if not client.wait_for_service(timeout_sec=30.0):
-                    print(f"hmocap sim teacher: no service {ns.trainer}/teach", file=sys.stderr)
-                    return 2
+                    raise TeacherError(f"no service {ns.trainer}/teach")
                 future = client.call_async(TeachGesture.Request(gesture=ns.teach, forest_file=ns.forest,
                                                                 new_forest=ns.new_forest, extend=ns.extend))
                 rclpy.spin_until_future_complete(node, future, timeout_sec=60.0)
                 answer = future.result()
                 if answer is None or not answer.success:
                     why = answer.message if answer is not None else "no answer"
-                    print(f"hmocap sim teacher: the trainer refused to teach '{ns.teach}': {why}", file=sys.stderr)
-                    return 2
+                    raise TeacherError(f"the trainer refused to teach '{ns.teach}': {why}")
                 log.info(answer.message)
                 continue
             if done_at is not None:
@@ -155,8 +119,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
                 shown = msg.state
                 log.info(f"{msg.state} '{msg.gesture}' round {msg.round}/{msg.rounds}: {msg.instruction}")
             if ns.teach and msg.gesture == ns.teach and msg.state == "done" and "not taught" in msg.instruction:
-                print(f"hmocap sim teacher: {msg.instruction}", file=sys.stderr)
-                return 2
+                raise TeacherError(str(msg.instruction))
             if ns.teach and msg.gesture == ns.teach and msg.state == "done":
                 done_at = published
                 status = SimpleNamespace(state="testing", gesture=ns.teach, box=status.box,
