@@ -18,24 +18,6 @@ def _split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
     return argv, []
 
 
-def _cmd_record(ns, ros_args):
-    from hmocap_ros.nodes import recorder
-
-    return recorder.main_from_args(ns, ros_args)
-
-
-def _cmd_replay(ns, ros_args):
-    from hmocap_ros.nodes import replayer
-
-    return replayer.main_from_args(ns, ros_args)
-
-
-def _cmd_view(ns, ros_args):
-    from hmocap_ros.nodes import foxglove_view
-
-    return foxglove_view.main_from_args(ns, ros_args)
-
-
 def _cmd_info(ns, _ros_args):
     """The bag's summary, then the whole bag read (:meth:`BagReader.verify`): exit status 2 and
     one line naming the part that cannot be read when it is damaged."""
@@ -127,10 +109,10 @@ COMMAND_GROUPS = {
         "errors against the bag's ground truth as JSON and a plot; consistency checks a bag "
         "without ground truth against its own images.",
         {
-            "mocap": ("hmocap_ros.eval.mocap_eval", "3D joint error and speed of the body tracker on a multi-view bag"),
-            "gestures": ("hmocap_ros.eval.gesture_eval", "precision-recall and AP per gesture on a depth bag"),
-            "extremities": ("hmocap_ros.eval.extremity_eval", "precision, recall and 3D error of the extremity detection on a multi-view bag"),
-            "consistency": ("hmocap_ros.eval.consistency", "the tracked body against the images of a bag without ground truth: reprojection, silhouettes, triangulation"),
+            "mocap": ("hmocap_ros.commands.eval_mocap", "3D joint error and speed of the body tracker on a multi-view bag"),
+            "gestures": ("hmocap_ros.commands.eval_gestures", "precision-recall and AP per gesture on a depth bag"),
+            "extremities": ("hmocap_ros.commands.eval_extremities", "precision, recall and 3D error of the extremity detection on a multi-view bag"),
+            "consistency": ("hmocap_ros.commands.eval_consistency", "the tracked body against the images of a bag without ground truth: reprojection, silhouettes, triangulation"),
         },
     ),
     "detect": (
@@ -179,7 +161,7 @@ COMMAND_GROUPS = {
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The ``hmocap`` parser. Of the ``sim``/``eval``/``train`` kinds only the one ``argv`` names
     is imported (to add its options): ``hmocap record`` must not depend on the gesture trainer."""
-    from hmocap_ros.nodes import foxglove_view, recorder, replayer
+    from hmocap_ros.commands import record, replay, view
 
     argv = list(argv or [])
     parser = argparse.ArgumentParser(
@@ -198,21 +180,21 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("record", help="record topics to an MCAP bag",
                        description="Record topics to a rosbag2 MCAP bag until Ctrl-C/SIGTERM; nothing "
                                    "received is lost on stop.")
-    recorder.add_arguments(p)
-    p.set_defaults(func=_cmd_record)
+    record.add_arguments(p)
+    p.set_defaults(func=record.main_from_args)
 
     p = sub.add_parser("replay", help="publish a bag's topics with the original timing",
                        description="Publish a bag's topics with their recorded timing; latched topics "
                                    "are re-published transient-local.")
-    replayer.add_arguments(p)
-    p.set_defaults(func=_cmd_replay)
+    replay.add_arguments(p)
+    p.set_defaults(func=replay.main_from_args)
 
     p = sub.add_parser("view", help="serve the live topics to Foxglove (WebSocket, 127.0.0.1:8765)",
                        description="Serve the ROS graph's topics to Foxglove over its WebSocket protocol "
                                    "(foxglove-sdk): open ws://127.0.0.1:8765 in Foxglove and load "
                                    "config/hmocap_foxglove.json; no ROS install needed on the viewing side.")
-    foxglove_view.add_arguments(p)
-    p.set_defaults(func=_cmd_view)
+    view.add_arguments(p)
+    p.set_defaults(func=view.main_from_args)
 
     import importlib
 

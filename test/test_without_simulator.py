@@ -5,7 +5,8 @@ imported.
 The process puts a finder first on :data:`sys.meta_path` that raises ImportError for
 ``hmocap_sim`` and its submodules (as if the package were not installed), then runs the code; it
 starts in a temporary folder, so the checkout is not on its path either. A control runs the same
-way and imports the simulator, which must fail: the hiding works.
+way and imports the simulator, which must fail: the hiding works. Building the ``hmocap``
+parser loads no rclpy either (the front ends of commands/ import their node when they run).
 """
 
 from __future__ import annotations
@@ -79,3 +80,15 @@ def test_the_hmocap_command_without_the_simulator(tmp_path):
     for argv in (["--help"], ["eval", "mocap", "--help"], ["calibrate", "--help"]):
         done = run_hidden(f"import hmocap_ros.cli as c; raise SystemExit(c.main({argv!r}))\n", tmp_path)
         assert done.returncode == 0 and "usage: hmocap" in done.stdout, (argv, done.stderr)
+
+
+def test_the_hmocap_parser_imports_no_rclpy(tmp_path):
+    """The front ends in commands/ import their node only when they run: building the parser
+    (``hmocap --help``, the record/replay/view options) loads neither rclpy nor the simulator."""
+    code = ("from hmocap_ros.cli import build_parser\n"
+            "build_parser([])\n"
+            "build_parser(['eval', 'mocap'])\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'hmocap_sim')))\n")
+    done = run_hidden(code, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]", done.stdout
