@@ -13,7 +13,9 @@ them, on
 - ``geometry/`` importing anything else of the package (it is the bottom layer);
 - a module of ``hmocap_ros`` importing ``hmocap_sim`` (the ``hmocap sim`` front ends are
   ``hmocap_sim.commands.*``, which ``hmocap_ros/cli.py`` names by string and imports only when
-  that command runs).
+  that command runs);
+- an ``hmocap`` front end (``add_arguments``/``main_from_args``) outside ``commands/`` of either
+  package.
 
 A subprocess test imports ``hmocap_ros``, every node module and the ``hmocap`` command, and runs
 some nodes' ``--help``, with ``hmocap_sim`` made unimportable.
@@ -270,6 +272,37 @@ def test_the_sim_commands_name_simulator_modules():
     for group, (_, _, entries) in COMMAND_GROUPS.items():
         if group != "sim":
             assert not [m for m, _ in entries.values() if m.split(".")[0] == SIMULATOR], group
+
+
+#: The two functions of an ``hmocap`` front end (:data:`hmocap_ros.cli.COMMAND_GROUPS`).
+FRONT_END_FUNCTIONS = {"add_arguments", "main_from_args"}
+
+
+def front_end_modules() -> dict[str, set[str]]:
+    """Module -> the front-end functions (:data:`FRONT_END_FUNCTIONS`) it defines at top level."""
+    found = {}
+    for module, path in package_modules().items():
+        names = {node.name for node in ast.parse(path.read_text(), str(path)).body
+                 if isinstance(node, ast.FunctionDef) and node.name in FRONT_END_FUNCTIONS}
+        if names:
+            found[module] = names
+    return found
+
+
+def test_every_front_end_lives_in_commands():
+    """Options, printing and exit status of every ``hmocap`` command are in ``commands/`` (the
+    product's) or ``hmocap_sim/commands/`` (the simulator's); each such module has both
+    functions, and every module the ``hmocap`` table names is one of them."""
+    from hmocap_ros.cli import COMMAND_GROUPS
+
+    found = front_end_modules()
+    elsewhere = sorted(m for m in found if m.split(".")[1] != "commands")
+    assert not elsewhere, f"front ends outside commands/: {elsewhere}"
+    incomplete = sorted(m for m, names in found.items() if names != FRONT_END_FUNCTIONS)
+    assert not incomplete, f"front ends without add_arguments or main_from_args: {incomplete}"
+    named = {m for _, _, kinds in COMMAND_GROUPS.values() for m, _ in kinds.values()}
+    assert named <= set(found), sorted(named - set(found))
+    assert len(found) >= 20
 
 
 def test_the_walk_sees_cycles_and_private_names():
