@@ -1,4 +1,5 @@
-"""Benchmark of hmocap_ros.render: silhouette masks, fused XOR counts, RGB and depth frames.
+"""Benchmark of the renderers: the tracker's silhouette masks and fused XOR counts
+(hmocap_ros.render), the simulator's RGB and depth frames (hmocap_sim.render).
 
 Usage: PYTHONPATH=. .venv/bin/python benchmarks/bench_render.py [--save DIR]
 

@@ -17,7 +17,7 @@ seeded generator:
 Coordinates are the room frame of :mod:`hmocap_ros.geometry`: metres, +Y up, floor at
 y = 0; the camera looks along +Z.  :func:`render_depth` turns meshes into a z-buffer with
 :func:`hmocap_sim.render.rasterize` and into uint16 millimetres with
-:func:`hmocap_ros.render.kinect_depth` (noise growing as z^2, projector shadows, holes at
+:func:`hmocap_sim.render.kinect_depth` (noise growing as z^2, projector shadows, holes at
 depth edges, 0 = invalid, 0.5-4.5 m working range).
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Tests of hmocap_ros.render against an exact reference and known synthetic scenes."""
+"""Tests of hmocap_ros.render and hmocap_sim.render against an exact reference and known synthetic scenes."""
 
 from __future__ import annotations
 
