@@ -292,15 +292,16 @@ def front_end_modules() -> dict[str, set[str]]:
 def test_every_front_end_lives_in_commands():
     """Options, printing and exit status of every ``hmocap`` command are in ``commands/`` (the
     product's) or ``hmocap_sim/commands/`` (the simulator's); each such module has both
-    functions, and every module the ``hmocap`` table names is one of them."""
-    from hmocap_ros.cli import COMMAND_GROUPS
+    functions, and every module the ``hmocap`` tables name is one of them."""
+    from hmocap_ros.cli import COMMAND_GROUPS, COMMANDS
 
     found = front_end_modules()
     elsewhere = sorted(m for m in found if m.split(".")[1] != "commands")
     assert not elsewhere, f"front ends outside commands/: {elsewhere}"
     incomplete = sorted(m for m, names in found.items() if names != FRONT_END_FUNCTIONS)
     assert not incomplete, f"front ends without add_arguments or main_from_args: {incomplete}"
-    named = {m for _, _, kinds in COMMAND_GROUPS.values() for m, _ in kinds.values()}
+    named = ({m for _, _, kinds in COMMAND_GROUPS.values() for m, _ in kinds.values()}
+             | {entry[0] for entry in COMMANDS.values()})
     assert named <= set(found), sorted(named - set(found))
     assert len(found) >= 20
 
