@@ -7,7 +7,7 @@ gesture taught to the shipped forest; the taught thresholds on negative-only seq
 
 The protocol of thesis sec. 3.4.2, per gesture of ``--gestures``:
 
-1. **Sessions.** The simulated user (:class:`~hmocap_ros.sim.gesture_teacher.GestureTeacher`:
+1. **Sessions.** The simulated user (:class:`~hmocap_sim.gesture_teacher.GestureTeacher`:
    one subject in one room, as the thesis' single user) and the trainer
    (:class:`~hmocap_ros.gestures.trainer.Trainer`, a new forest, ``record=True``) in a closed
    loop in process: ``--sessions`` consecutive sessions of ``--session-min`` simulated minutes
@@ -23,7 +23,7 @@ The protocol of thesis sec. 3.4.2, per gesture of ``--gestures``:
    by name (gestures a forest does not know are background).
 3. **Offline** on the same frames: the recorded frames of sessions 1..k (update_positive
    frames annotated at the box centre, do_negatives frames as background), written as bags
-   (:func:`~hmocap_ros.sim.gesture_teacher.write_recording_bag`), trained with the code of
+   (:func:`~hmocap_sim.gesture_teacher.write_recording_bag`), trained with the code of
    ``hmocap train gestures`` (its defaults: 15 trees, depth 20, boosted, one mining round) and
    scored on the same bags. Times: IML = the session's simulated time (recording, annotation
    and training at once; the trainer's CPU time beside it); offline = the same recording
@@ -71,9 +71,9 @@ from hmocap_ros.gestures.forest_file import load_forest  # noqa: E402
 from hmocap_ros.gestures.trainer import SessionOnlineParams, Trainer, TrainerParams, blend_threshold  # noqa: E402
 from hmocap_ros.io import topics  # noqa: E402
 from hmocap_ros.io.bag_reader import BagReader, BagReadError  # noqa: E402
-from hmocap_ros.sim import gesture_set as gs  # noqa: E402
-from hmocap_ros.sim.gesture_dataset import generate  # noqa: E402
-from hmocap_ros.sim.gesture_teacher import GestureTeacher, write_recording_bag  # noqa: E402
+from hmocap_sim import gesture_set as gs  # noqa: E402
+from hmocap_sim.gesture_dataset import generate  # noqa: E402
+from hmocap_sim.gesture_teacher import GestureTeacher, write_recording_bag  # noqa: E402
 from iml_table import relabelled  # noqa: E402
 
 #: Thesis table 3.3 (mean of tee, silence, cross; same subject in training and test).

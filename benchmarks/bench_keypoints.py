@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Keypoint detector speed: the landmark network per inference and whole frame sets of 4 views.
 
-The scene: a simulated room rendered here (``hmocap_ros.sim``, 4 cameras at 640x480, a subject
+The scene: a simulated room rendered here (``hmocap_sim``, 4 cameras at 640x480, a subject
 with one arm raised sideways), the exact silhouettes as foreground masks. Measured:
 
 - **runtimes**: the landmark model (``pose_landmark_full.tflite``) per 256x256 inference on
@@ -43,10 +43,10 @@ SETTINGS = (2, 1)  # LiteRT threads of the detector's networks
 def render_scene():
     """(rig, 4 RGB images, 4 silhouettes) of a simulated room with one subject."""
     from hmocap_ros.body import load_body_model
-    from hmocap_ros.sim.appearance import dress, sample_appearance
-    from hmocap_ros.sim.mocap_dataset import make_rig
-    from hmocap_ros.sim.mocap_render import FrameState, MocapRenderer, RenderOptions
-    from hmocap_ros.sim.room import build_room
+    from hmocap_sim.appearance import dress, sample_appearance
+    from hmocap_sim.mocap_dataset import make_rig
+    from hmocap_sim.mocap_render import FrameState, MocapRenderer, RenderOptions
+    from hmocap_sim.room import build_room
 
     rng = np.random.default_rng(3)
     rig = make_rig(4, 640, 480)

@@ -47,7 +47,7 @@ FPS = 25.0
 
 
 def render(bags: Path, clip: tuple, variant: str) -> Path:
-    from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate
+    from hmocap_sim.mocap_dataset import MocapSimConfig, generate
 
     key, bvh, start, seconds, seed = clip
     background, still = VARIANTS[variant]

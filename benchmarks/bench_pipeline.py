@@ -72,7 +72,7 @@ def ensure_bags(ns) -> None:
     if ns.bag is None:
         ns.bag = DEFAULT_BAG
         if not DEFAULT_BAG.exists():
-            from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate
+            from hmocap_sim.mocap_dataset import MocapSimConfig, generate
 
             print(f"rendering {DEFAULT_BAG} (once)", flush=True)
             generate(MocapSimConfig(out=DEFAULT_BAG, bvh=CLIP, start=4.0, seconds=BAG_SECONDS, seed=401,
@@ -80,7 +80,7 @@ def ensure_bags(ns) -> None:
     if ns.depth_bag is None and not ns.no_gestures:
         ns.depth_bag = DEFAULT_DEPTH_BAG
         if not DEFAULT_DEPTH_BAG.exists():
-            from hmocap_ros.sim.gesture_dataset import generate as generate_gestures
+            from hmocap_sim.gesture_dataset import generate as generate_gestures
 
             print(f"rendering {DEFAULT_DEPTH_BAG} (once)", flush=True)
             generate_gestures(DEFAULT_DEPTH_BAG, seed=402, frames=int((BAG_SECONDS + 1.0) * DEPTH_FPS),

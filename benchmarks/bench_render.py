@@ -1,4 +1,5 @@
-"""Benchmark of hmocap_ros.render: silhouette masks, fused XOR counts, RGB and depth frames.
+"""Benchmark of the renderers: the tracker's silhouette masks and fused XOR counts
+(hmocap_ros.render), the simulator's RGB and depth frames (hmocap_sim.render).
 
 Usage: PYTHONPATH=. .venv/bin/python benchmarks/bench_render.py [--save DIR]
 
@@ -21,11 +22,11 @@ import numpy as np
 
 from hmocap_ros.geometry.pinhole_camera import look_at_pose
 from hmocap_ros.geometry.projection import project_batch
-from hmocap_ros.render import (DirectionalLight, Lighting, Material, PointLight,
-                               concatenate_meshes, face_range_mask, grid_quad, kinect_depth,
-                               rasterize, render_shadow_map, render_silhouettes, shade,
-                               vertex_normals, xor_counts)
-from hmocap_ros.render.sensor import add_sensor_noise, downsample
+from hmocap_ros.render import render_silhouettes, xor_counts
+from hmocap_sim.render import (DirectionalLight, Lighting, Material, PointLight, concatenate_meshes,
+                               face_range_mask, grid_quad, kinect_depth, rasterize,
+                               render_shadow_map, shade, vertex_normals)
+from hmocap_sim.render.sensor import add_sensor_noise, downsample
 
 DEFAULT_MESH = "tracking"
 ROOM = (6.0, 2.6, 5.0)  # x, y (height), z in metres; floor on y = 0, corner at the origin

@@ -4,7 +4,7 @@
 The scene of ``hmocap sim mocap``: the furnished room (about 9,500 static triangles), the
 12,000-triangle subject posed from the 13_26 clip, four cameras; per frame the shadow map,
 projection, z-buffer, shading, ground-truth silhouettes and the sensor model
-(:meth:`hmocap_ros.sim.mocap_render.MocapRenderer.render`). Timed at 640x480 and 320x240,
+(:meth:`hmocap_sim.mocap_render.MocapRenderer.render`). Timed at 640x480 and 320x240,
 with the default anti-aliasing (2x supersampling up to 320 pixels wide) and without it, on
 one numba thread and on all of them, plus the whole frame as ``hmocap sim mocap`` writes it
 (posing, rendering, messages into an MCAP bag). Figures are medians over several frames
@@ -27,11 +27,11 @@ import numba
 import numpy as np
 
 from hmocap_ros.body import load_body_model, sample_shape
-from hmocap_ros.sim import mocap_dataset as md
-from hmocap_ros.sim import mocap_subject as ms
-from hmocap_ros.sim.appearance import dress, sample_appearance
-from hmocap_ros.sim.mocap_render import FrameState, MocapRenderer, RenderOptions
-from hmocap_ros.sim.room import build_room
+from hmocap_sim import mocap_dataset as md
+from hmocap_sim import mocap_subject as ms
+from hmocap_sim.appearance import dress, sample_appearance
+from hmocap_sim.mocap_render import FrameState, MocapRenderer, RenderOptions
+from hmocap_sim.room import build_room
 
 
 def subject_frames(n: int, rig, room, rng):

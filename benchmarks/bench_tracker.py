@@ -45,7 +45,7 @@ from hmocap_ros.params import from_flat
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import render_silhouettes
 from hmocap_ros.geometry.rig import load_rig
-from hmocap_ros.sim.retarget import load_motion, place_in_room
+from hmocap_sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.body_tracker import BodyTracker
 from hmocap_ros.tracking.methods import METHODS, method_names
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams

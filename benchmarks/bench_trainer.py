@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from hmocap_ros.gestures.trainer import Trainer, TrainerParams
-from hmocap_ros.sim.gesture_teacher import GestureTeacher
+from hmocap_sim.gesture_teacher import GestureTeacher
 
 
 def main(argv=None) -> int:

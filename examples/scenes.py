@@ -105,7 +105,7 @@ def walk_poses():
     """``(model, params (2, F, D), joints (2, F, J, 3))`` of b0 walking and b1 standing, room frame."""
     from hmocap_ros.body import load_body_model, local_rotations_to_pose
     from hmocap_ros.body.anthropometry import BodyShape, apply_shape
-    from hmocap_ros.sim.retarget import load_motion
+    from hmocap_sim.retarget import load_motion
 
     model = load_body_model("tracking")
     shape = BodyShape.neutral()

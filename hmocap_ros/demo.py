@@ -148,8 +148,7 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
 
 def render(bag: Path, out: Path, truth: Path) -> Path | None:
     """``hmocap render overlay BAG --truth TRUTH --out OUT``; the video, or None (said why)."""
-    from hmocap_ros.commands.render_overlay import render_overlay
-    from hmocap_ros.viz.overlay_bag import OverlayError
+    from hmocap_ros.viz.overlay_bag import OverlayError, render_overlay
 
     try:
         count, path = render_overlay(bag, out, truth=truth)

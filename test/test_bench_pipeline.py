@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hmocap_ros.cli import _bench_arguments
+from hmocap_ros.commands.bench import split_arguments
 from hmocap_ros.eval.pipeline_stats import (core_ms_per_set, frame_period_s, header_stamp_ns, latency_ms,
                                             latency_summary, pose_errors, process_cpu_seconds, process_rss_mb,
                                             replay_timing)
@@ -70,11 +70,11 @@ def test_cpu_per_frame_set_and_the_replay_timing_line():
 
 
 def test_bench_arguments_after_the_benchmark_names_go_to_the_scripts():
-    assert _bench_arguments(["bench", "pipeline", "x.mcap", "--json", "o.json"]) == (
+    assert split_arguments(["bench", "pipeline", "x.mcap", "--json", "o.json"]) == (
         ["bench", "pipeline"], ["x.mcap", "--json", "o.json"])
-    assert _bench_arguments(["bench", "pipeline", "tracker"]) == (["bench", "pipeline", "tracker"], [])
-    assert _bench_arguments(["bench", "tracker", "--", "--frames", "3"]) == (["bench", "tracker"], ["--frames", "3"])
-    assert _bench_arguments(["bench"]) == (["bench"], [])
+    assert split_arguments(["bench", "pipeline", "tracker"]) == (["bench", "pipeline", "tracker"], [])
+    assert split_arguments(["bench", "tracker", "--", "--frames", "3"]) == (["bench", "tracker"], ["--frames", "3"])
+    assert split_arguments(["bench"]) == (["bench"], [])
 
 
 @pytest.mark.slow

@@ -22,8 +22,8 @@ from hmocap_ros.params import (field_overrides, flat_fields, flat_record, from_f
                                replace_dotted)
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import render_silhouettes
-from hmocap_ros.render.reference import silhouette_reference
-from hmocap_ros.sim.retarget import load_motion, place_in_room
+from hmocap_sim.render.reference import silhouette_reference
+from hmocap_sim.retarget import load_motion, place_in_room
 from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARAMS,
                                                           AnthropometryEstimator, Hypothesis,
                                                           shape_from_state, shape_to_state)

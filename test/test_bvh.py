@@ -1,4 +1,4 @@
-"""BVH parser, forward kinematics and retargeting onto the body (hmocap_ros.sim.bvh / retarget)."""
+"""BVH parser, forward kinematics and retargeting onto the body (hmocap_sim.bvh / retarget)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,8 +8,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import hmocap_ros
-from hmocap_ros.sim import bvh as bvh_mod
-from hmocap_ros.sim import retarget as rt
+from hmocap_sim import bvh as bvh_mod
+from hmocap_sim import retarget as rt
 
 DATA = Path(__file__).parent / "data"
 CLIPS = Path(hmocap_ros.__file__).parent / "data" / "bvh"

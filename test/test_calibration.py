@@ -16,8 +16,8 @@ from hmocap_ros.calibration.pipeline import calibrate_rig
 from hmocap_ros.calibration.room_frame import FLOOR_ROTATION
 from hmocap_ros.cli import main as hmocap
 from hmocap_ros.geometry.rig import load_rig
-from hmocap_ros.sim.calibration_path import board_poses
-from hmocap_ros.sim.mocap_rig import make_rig
+from hmocap_sim.calibration_path import board_poses
+from hmocap_sim.mocap_rig import make_rig
 
 BOARD = ["--board", "5x4", "--square", "0.3", "--marker", "0.21"]
 

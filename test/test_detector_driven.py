@@ -15,7 +15,7 @@ from hmocap_ros.params import from_flat
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import render_silhouettes
 from hmocap_ros.detection.skin import skin_probability
-from hmocap_ros.sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
+from hmocap_sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections

@@ -24,7 +24,7 @@ from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.joint_states import make_joint_state
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
 from hmocap_ros.io.typestore import hmocap_typestore
-from hmocap_ros.sim.bvh import euler_to_matrix, forward_kinematics, load_bvh
+from hmocap_sim.bvh import euler_to_matrix, forward_kinematics, load_bvh
 
 #: The BVH's End Sites (``<joint>_end`` in the reader) and the skeleton's end-site names.
 END_SITES = {"head_end": "head_top", "l_wrist_end": "l_hand_tip", "r_wrist_end": "r_hand_tip",
@@ -35,7 +35,7 @@ STAMP0 = 1_700_000_000_000_000_000
 
 @pytest.fixture(scope="module")
 def sim_bag(tmp_path_factory) -> Path:
-    from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate
+    from hmocap_sim.mocap_dataset import MocapSimConfig, generate
 
     out = tmp_path_factory.mktemp("sim") / "run.mcap"
     generate(MocapSimConfig(out=out, cameras=2, width=160, height=120, start=2.0, seconds=0.4,

@@ -1,5 +1,5 @@
 """Tests of ``hmocap train gestures`` and ``hmocap eval gestures`` (hmocap_ros.commands.train_gestures,
-hmocap_ros.eval.gesture_eval) and of the shipped gesture forest on the shipped demo bag."""
+hmocap_ros.commands.eval_gestures) and of the shipped gesture forest on the shipped demo bag."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from fixtures.gesture_cli import command_args, shuffled_votes, tiny_gesture_bag
-from hmocap_ros.commands import train_gestures
+from hmocap_ros.commands import eval_gestures, train_gestures
 from hmocap_ros.eval import gesture_eval as ge
 from hmocap_ros.gestures import load_forest, save_forest
-from hmocap_ros.sim.gesture_set import GESTURE_CLASSES
+from hmocap_sim.gesture_set import GESTURE_CLASSES
 
 DATA = Path(ge.__file__).resolve().parents[1] / "data"
 DEMO = DATA / "demo" / "gestures_depth.mcap"
@@ -48,7 +48,7 @@ def test_train_then_eval_end_to_end(tmp_path, tiny_bag, capsys, monkeypatch):
 
     out_json, out_png = tmp_path / "eval.json", tmp_path / "pr.png"
     argv = [tiny_bag, "--model", model, "--json", out_json, "--plot", out_png]
-    assert ge.main_from_args(command_args(ge, argv)) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, argv)) == 0
     result = json.loads(out_json.read_text())
     for key in ("per_class", "mean_ap", "fps", "criterion", "tolerance_px", "frames", "image_size"):
         assert key in result
@@ -116,10 +116,10 @@ def test_corrupt_model_and_missing_bag_give_clear_errors(tmp_path, capsys):
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"PK\x03\x04 not really a zip")
     argv = [DEMO, "--model", bad, "--json", tmp_path / "r.json"]
-    assert ge.main_from_args(command_args(ge, argv)) == 2
+    assert eval_gestures.main_from_args(command_args(eval_gestures, argv)) == 2
     assert "cannot load the gesture forest" in capsys.readouterr().err
     argv = [tmp_path / "none.mcap", "--model", SHIPPED, "--json", tmp_path / "r.json"]
-    assert ge.main_from_args(command_args(ge, argv)) == 2
+    assert eval_gestures.main_from_args(command_args(eval_gestures, argv)) == 2
     assert "error" in capsys.readouterr().err
     assert not (tmp_path / "r.json").exists()
 
@@ -165,7 +165,7 @@ def test_eval_gestures_without_ground_truth_writes_the_detections(tmp_path, caps
     bag = tmp_path / "realsense.mcap"
     _unannotated_copy(bag, depth_topic)
     out = tmp_path / "detections.json"
-    assert ge.main_from_args(command_args(ge, [bag, "--json", out, "--depth-topic", depth_topic])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", out, "--depth-topic", depth_topic])) == 0
     printed = capsys.readouterr()
     assert "no ground truth" in printed.out and "detections in" in printed.out and not printed.err
     result = json.loads(out.read_text())
@@ -189,7 +189,7 @@ def test_eval_gestures_without_ground_truth_writes_the_detections(tmp_path, caps
     assert labelled > 20 and hits >= 0.6 * labelled, (hits, labelled)   # a detector finding nothing: 0
     # --no-truth on the annotated bag: the same detections
     same = tmp_path / "no_truth.json"
-    assert ge.main_from_args(command_args(ge, [DEMO, "--json", same, "--no-truth"])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", same, "--no-truth"])) == 0
     assert json.loads(same.read_text())["per_frame"] == frames
 
 
@@ -199,15 +199,15 @@ def test_eval_gestures_warns_of_a_wrong_depth_unit(tmp_path, capsys):
     bag = tmp_path / "sr305.mcap"
     _unannotated_copy(bag, "/depth/image_raw", scale=8)
     out = tmp_path / "wrong.json"
-    assert ge.main_from_args(command_args(ge, [bag, "--json", out])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", out])) == 0
     err = capsys.readouterr().err
     assert "depth_unit_m 0.000125 would put it at" in err and len(err.strip().splitlines()) == 1, err
     assert "depth_unit_m" in json.loads(out.read_text())["depth_unit_warning"]
     right = tmp_path / "right.json"
-    assert ge.main_from_args(command_args(ge, [bag, "--json", right, "--param", "depth_unit_m=0.000125"])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", right, "--param", "depth_unit_m=0.000125"])) == 0
     assert not capsys.readouterr().err
     mm = tmp_path / "mm.json"
-    assert ge.main_from_args(command_args(ge, [DEMO, "--json", mm, "--no-truth"])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", mm, "--no-truth"])) == 0
     assert json.loads(right.read_text())["per_frame"] == json.loads(mm.read_text())["per_frame"]
     assert json.loads(right.read_text())["summary"]["detections"] > 10
 
@@ -237,11 +237,11 @@ def test_eval_gestures_on_a_bag_without_depth_is_one_line(tmp_path, capsys):
     bag = tmp_path / "text.mcap"
     with BagWriter(bag) as writer:
         writer.write("/note", RosbagsFactory().make("std_msgs/msg/String", data="x"), 1)
-    assert ge.main_from_args(command_args(ge, [bag, "--json", tmp_path / "r.json"])) == 2
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", tmp_path / "r.json"])) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no /depth/image_raw" in err[0] and "--depth-topic" in err[0], err
-    assert ge.main_from_args(command_args(ge, [DEMO, "--json", tmp_path / "r.json", "--depth-topic", "/other"])) == 2
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", tmp_path / "r.json", "--depth-topic", "/other"])) == 2
     assert "--no-truth" in capsys.readouterr().err
-    assert ge.main_from_args(command_args(ge, [DEMO, "--json", tmp_path / "r.json", "--param", "stride=x"])) == 2
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", tmp_path / "r.json", "--param", "stride=x"])) == 2
     assert "--param" in capsys.readouterr().err
     assert not (tmp_path / "r.json").exists()

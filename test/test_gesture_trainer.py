@@ -144,7 +144,7 @@ def test_closed_loop_teaches_a_second_gesture_and_keeps_the_first(tmp_path):
     """tee is taught, then pause in the same forest; the same frames of tee held where it was
     taught are scored before and after (a spot the session never used would test how far one
     short round generalises, not what the second gesture does to the first)."""
-    from hmocap_ros.sim.gesture_teacher import GestureTeacher, run_session
+    from hmocap_sim.gesture_teacher import GestureTeacher, run_session
 
     p = _params(rounds=1, do_gesture_s=0.4, update_positive_s=1.5, release_s=0.3, do_negatives_s=1.5,
                 testing_s=0.3, online=OnlineParams(n_trees=5, max_depth=12, n_tests=16, n_thresholds=4, alpha=40.0))
@@ -175,7 +175,7 @@ def test_closed_loop_teaches_a_second_gesture_and_keeps_the_first(tmp_path):
 
 def test_recording_keeps_the_learnt_frames_and_their_annotation(tmp_path):
     from hmocap_ros.eval.gesture_eval import read_gesture_bag
-    from hmocap_ros.sim.gesture_teacher import write_recording_bag
+    from hmocap_sim.gesture_teacher import write_recording_bag
 
     rng = np.random.default_rng(0)
     tr = Trainer(None, _params(rounds=1), np.random.default_rng(1), focal_px=100.0, record=True)

@@ -1,14 +1,24 @@
-"""The package's import graph has no loop and no module takes another's private names.
+"""The packages' import graph has no loop and no module takes another's private names; the
+product never imports the simulator.
 
-Walks ``hmocap_ros/**/*.py`` with :mod:`ast`, every import statement counted (at the top of a
-file, inside a function, under ``TYPE_CHECKING``), and fails, naming them, on
+Walks ``hmocap_ros/**/*.py`` and ``hmocap_sim/**/*.py`` with :mod:`ast`, every import statement
+counted (at the top of a file, inside a function, under ``TYPE_CHECKING``), and fails, naming
+them, on
 
 - a file cycle: modules that import one another, directly or through others;
 - a folder cycle: top-level subpackages of ``hmocap_ros`` (``detection``, ``tracking``, ...; a
   top-level module such as ``rig`` is a node of its own) that import one another;
 - a cross-module private import: ``from module import _name`` or ``module._name`` through an
   imported module, where the module is another module of the package;
-- ``geometry/`` importing anything else of the package (it is the bottom layer).
+- ``geometry/`` importing anything else of the package (it is the bottom layer);
+- a module of ``hmocap_ros`` importing ``hmocap_sim`` (the ``hmocap sim`` front ends are
+  ``hmocap_sim.commands.*``, which ``hmocap_ros/cli.py`` names by string and imports only when
+  that command runs);
+- an ``hmocap`` front end (``add_arguments``/``main_from_args``) outside ``commands/`` of either
+  package.
+
+A subprocess test imports ``hmocap_ros``, every node module and the ``hmocap`` command, and runs
+some nodes' ``--help``, with ``hmocap_sim`` made unimportable.
 
 An import names the most specific module of the package that exists: ``from a.b import c`` is an
 edge to ``a/b/c.py`` when that file exists, else to ``a/b.py`` or ``a/b/__init__.py``. A package's
@@ -26,6 +36,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "hmocap_ros"
+SIMULATOR = "hmocap_sim"
 
 
 def module_name(path: Path) -> str:
@@ -37,8 +48,9 @@ def module_name(path: Path) -> str:
 
 
 def package_modules() -> dict[str, Path]:
-    """Every module of the package by its dotted name."""
-    return {module_name(p): p for p in sorted((ROOT / PACKAGE).rglob("*.py"))}
+    """Every module of the product and of the simulator by its dotted name."""
+    return {module_name(p): p for package in (PACKAGE, SIMULATOR)
+            for p in sorted((ROOT / package).rglob("*.py"))}
 
 
 def _is_package(path: Path) -> bool:
@@ -123,7 +135,8 @@ def import_graph() -> tuple[dict[str, set[str]], list[tuple[str, str, str]]]:
 
 
 def folder_of(module: str) -> str:
-    """The top-level subpackage (or top-level module) of hmocap_ros a module belongs to."""
+    """The top-level subpackage (or top-level module) of hmocap_ros or hmocap_sim a module
+    belongs to."""
     parts = module.split(".")
     return ".".join(parts[:2])
 
@@ -238,6 +251,61 @@ def test_geometry_imports_nothing_of_the_package():
     assert not above, f"hmocap_ros.geometry imports {above}"
 
 
+def test_the_product_never_imports_the_simulator():
+    """No module of hmocap_ros imports hmocap_sim, at the top or inside a function."""
+    graph, _ = import_graph()
+    found = sorted(f"  {m} imports {t}" for m, ts in graph.items() if m.split(".")[0] == PACKAGE
+                   for t in ts if t.split(".")[0] == SIMULATOR)
+    assert not found, "the product imports the simulator:\n" + "\n".join(found)
+
+
+def test_the_sim_commands_name_simulator_modules():
+    """``hmocap sim KIND`` names a front end of hmocap_sim/commands/ that exists; no other
+    group names the simulator."""
+    from hmocap_ros.cli import COMMAND_GROUPS
+
+    modules = package_modules()
+    kinds = COMMAND_GROUPS["sim"][2]
+    assert kinds
+    for kind, (module, _help) in kinds.items():
+        assert module.startswith(f"{SIMULATOR}.commands.") and module in modules, (kind, module)
+    for group, (_, _, entries) in COMMAND_GROUPS.items():
+        if group != "sim":
+            assert not [m for m, _ in entries.values() if m.split(".")[0] == SIMULATOR], group
+
+
+#: The two functions of an ``hmocap`` front end (:data:`hmocap_ros.cli.COMMAND_GROUPS`).
+FRONT_END_FUNCTIONS = {"add_arguments", "main_from_args"}
+
+
+def front_end_modules() -> dict[str, set[str]]:
+    """Module -> the front-end functions (:data:`FRONT_END_FUNCTIONS`) it defines at top level."""
+    found = {}
+    for module, path in package_modules().items():
+        names = {node.name for node in ast.parse(path.read_text(), str(path)).body
+                 if isinstance(node, ast.FunctionDef) and node.name in FRONT_END_FUNCTIONS}
+        if names:
+            found[module] = names
+    return found
+
+
+def test_every_front_end_lives_in_commands():
+    """Options, printing and exit status of every ``hmocap`` command are in ``commands/`` (the
+    product's) or ``hmocap_sim/commands/`` (the simulator's); each such module has both
+    functions, and every module the ``hmocap`` tables name is one of them."""
+    from hmocap_ros.cli import COMMAND_GROUPS, COMMANDS
+
+    found = front_end_modules()
+    elsewhere = sorted(m for m in found if m.split(".")[1] != "commands")
+    assert not elsewhere, f"front ends outside commands/: {elsewhere}"
+    incomplete = sorted(m for m, names in found.items() if names != FRONT_END_FUNCTIONS)
+    assert not incomplete, f"front ends without add_arguments or main_from_args: {incomplete}"
+    named = ({m for _, _, kinds in COMMAND_GROUPS.values() for m, _ in kinds.values()}
+             | {entry[0] for entry in COMMANDS.values()})
+    assert named <= set(found), sorted(named - set(found))
+    assert len(found) >= 20
+
+
 def test_the_walk_sees_cycles_and_private_names():
     """The checks can fail: a made-up graph with a loop and a private import is caught."""
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
@@ -250,6 +318,8 @@ def test_the_walk_sees_cycles_and_private_names():
     assert "hmocap_ros.tracking.body_tracker" in modules
     edges, _ = imports_of("hmocap_ros.tracking.body_tracker", modules)
     assert any(e.startswith("hmocap_ros.") for e in edges)
+    edges, _ = imports_of("hmocap_sim.mocap_dataset", modules)   # the simulator's edges are seen
+    assert any(e.startswith("hmocap_sim.") for e in edges) and any(e.startswith("hmocap_ros.") for e in edges)
 
 
 if __name__ == "__main__":

@@ -42,10 +42,10 @@ def network():
 def scene():
     """A rendered frame set: rig, RGB images, silhouettes, {joint or end site: room position}."""
     from hmocap_ros.body import load_body_model
-    from hmocap_ros.sim.appearance import dress, sample_appearance
-    from hmocap_ros.sim.mocap_dataset import make_rig
-    from hmocap_ros.sim.mocap_render import FrameState, MocapRenderer, RenderOptions
-    from hmocap_ros.sim.room import build_room
+    from hmocap_sim.appearance import dress, sample_appearance
+    from hmocap_sim.mocap_dataset import make_rig
+    from hmocap_sim.mocap_render import FrameState, MocapRenderer, RenderOptions
+    from hmocap_sim.room import build_room
 
     rng = np.random.default_rng(3)
     rig = make_rig(4, 640, 480)

@@ -12,7 +12,7 @@ import pytest
 
 from fixtures.toy_depth import TOY_CLASSES, toy_detector_params, toy_frame, toy_sequence
 from fixtures.gesture_cli import command_args, shuffled_votes, tiny_gesture_bag
-from hmocap_ros.commands import train_gestures
+from hmocap_ros.commands import eval_gestures, train_gestures
 from hmocap_ros.eval import gesture_eval as ge
 from hmocap_ros.gestures.detection import GestureDetector
 from hmocap_ros.gestures.forest_file import load_forest, save_forest
@@ -219,7 +219,7 @@ def test_cli_online_train_resume_and_eval(tmp_path, tiny_bag, capsys, monkeypatc
     assert load_forest(two).n_nodes > forest.n_nodes
 
     out_json = tmp_path / "eval.json"
-    assert ge.main_from_args(command_args(ge, [tiny_bag, "--model", two, "--json", out_json])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [tiny_bag, "--model", two, "--json", out_json])) == 0
     result = json.loads(out_json.read_text())
     assert set(result["per_class"]) == set(forest.class_names[1:])
     # after two passes the forest finds its training gestures (today 0.84) where one pass finds

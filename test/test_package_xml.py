@@ -1,6 +1,6 @@
-"""package.xml declares what the package needs at run time: every module that hmocap_ros/**/*.py,
+"""package.xml declares what the package needs at run time: every module that hmocap_ros/**/*.py, hmocap_sim/**/*.py,
 launch/*.py and examples/*.py import (at the top or inside a function) outside the standard library and the
-package itself, and every ROS package whose message types they build by name
+packages themselves, and every ROS package whose message types they build by name
 (``"std_msgs/msg/Header"`` for a message factory), each by its rosdep key.
 
 A Python module is mapped to its rosdep key by :data:`MODULE_KEYS`; a ROS interface package
@@ -51,7 +51,8 @@ _TYPE_NAME = re.compile(r"^([a-z][a-z0-9_]*)/(msg|srv|action)/[A-Z]\w*$")
 
 
 def source_files() -> list[Path]:
-    return (sorted((ROOT / PACKAGE).rglob("*.py")) + sorted((ROOT / "launch").glob("*.py"))
+    return (sorted((ROOT / PACKAGE).rglob("*.py")) + sorted((ROOT / "hmocap_sim").rglob("*.py"))
+            + sorted((ROOT / "launch").glob("*.py"))
             + sorted((ROOT / "examples").glob("*.py")))
 
 
@@ -95,7 +96,7 @@ def required_keys() -> tuple[dict[str, set[str]], dict[str, set[str]]]:
     for path in source_files():
         rel = str(path.relative_to(ROOT))
         for module in imported_modules(path):
-            if module in sys.stdlib_module_names or module in (PACKAGE, "hmocap_examples", "__future__", *PIP_ONLY_MODULES):
+            if module in sys.stdlib_module_names or module in (PACKAGE, "hmocap_sim", "hmocap_examples", "__future__", *PIP_ONLY_MODULES):
                 continue
             key = rosdep_key(module)
             (needed.setdefault(key, set()) if key else unknown.setdefault(module, set())).add(rel)

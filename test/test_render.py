@@ -1,4 +1,4 @@
-"""Tests of hmocap_ros.render against an exact reference and known synthetic scenes."""
+"""Tests of hmocap_ros.render and hmocap_sim.render against an exact reference and known synthetic scenes."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import pytest
 
 from hmocap_ros.geometry.pinhole_camera import look_at_pose as look_at
 from hmocap_ros.geometry.projection import project_batch
-from hmocap_ros.render import (DirectionalLight, KinectNoise, Lighting, Material, PointLight,
-                               concatenate_meshes, depth_to_millimetres, face_range_mask,
-                               grid_quad, interpolate, kinect_depth, observed_counts, rasterize,
-                               render_shadow_map, render_silhouettes, shade, xor_counts)
-from hmocap_ros.render.depth import projector_shadow
-from hmocap_ros.render.reference import coverage_pairs, silhouette_reference, zbuffer_reference
-from hmocap_ros.render.sensor import add_sensor_noise, random_illumination
+from hmocap_ros.render import observed_counts, render_silhouettes, xor_counts
+from hmocap_sim.render import (DirectionalLight, KinectNoise, Lighting, Material, PointLight,
+                               concatenate_meshes, depth_to_millimetres, face_range_mask, grid_quad,
+                               interpolate, kinect_depth, rasterize, render_shadow_map, shade)
+from hmocap_sim.render.depth import projector_shadow
+from hmocap_sim.render.reference import coverage_pairs, silhouette_reference, zbuffer_reference
+from hmocap_sim.render.sensor import add_sensor_noise, random_illumination
 
 
 def project_points(points, K, R, t, dist=None, *, near: float = 1e-3, scale: float = 1.0):

@@ -1,5 +1,5 @@
 """Tests of the gesture depth simulator: camera model agreement, Kinect noise, gesture
-geometry, ground truth, bag layout and determinism (hmocap_ros.sim.gesture_*, depth_scene)."""
+geometry, ground truth, bag layout and determinism (hmocap_sim.gesture_*, depth_scene)."""
 
 from __future__ import annotations
 
@@ -15,10 +15,12 @@ from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import camera_info_to_dict, image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.render import grid_quad
-from hmocap_ros.sim import gesture_dataset as gd
-from hmocap_ros.sim import gesture_set as gs
-from hmocap_ros.sim.depth_scene import (
+from hmocap_sim.render import grid_quad
+from hmocap_sim import gesture_dataset as gd
+from hmocap_sim import gesture_set as gs
+from hmocap_sim.commands import gestures as sim_gestures
+from hmocap_sim.params import DATA_DIR
+from hmocap_sim.depth_scene import (
     box,
     depth_camera,
     make_layout,
@@ -26,7 +28,7 @@ from hmocap_ros.sim.depth_scene import (
     render_depth,
 )
 
-DEMO = Path(gs.__file__).resolve().parents[1] / "data" / "demo" / "gestures_depth.mcap"
+DEMO = DATA_DIR / "demo" / "gestures_depth.mcap"
 
 
 @pytest.fixture(scope="module")
@@ -383,14 +385,14 @@ def test_same_seed_same_bytes(tmp_path, small_bag):
 
 def test_cli_refuses_to_overwrite(tmp_path, capsys):
     parser = argparse.ArgumentParser()
-    gd.add_arguments(parser)
+    sim_gestures.add_arguments(parser)
     out = tmp_path / "g.mcap"
     out.write_bytes(b"x")
-    assert gd.main_from_args(parser.parse_args(["--out", str(out)])) == 2
+    assert sim_gestures.main_from_args(parser.parse_args(["--out", str(out)])) == 2
     assert "exists" in capsys.readouterr().err
     ns = parser.parse_args(["--out", str(out), "--force", "--frames", "3", "--width", "64", "--height", "48",
                             "--quiet", "--no-contact-sheet", "--subjects", "1"])
-    assert gd.main_from_args(ns) == 0
+    assert sim_gestures.main_from_args(ns) == 0
     assert gd.sidecar_paths(out)[0].exists() and not gd.sidecar_paths(out)[1].exists()
 
 

@@ -22,17 +22,17 @@ from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render.silhouette import render_silhouettes
 from hmocap_ros.geometry.rig import load_rig
 from hmocap_ros.io.rig_messages import rig_from_msg
-from hmocap_ros.sim import mocap_lighting, mocap_subject
-from hmocap_ros.sim.appearance import PersonAppearance, dress, sample_appearance
-from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate, make_rig
-from hmocap_ros.sim.params import DATA_DIR
-from hmocap_ros.sim.mocap_render import (
+from hmocap_sim import mocap_lighting, mocap_subject
+from hmocap_sim.appearance import PersonAppearance, dress, sample_appearance
+from hmocap_sim.mocap_dataset import MocapSimConfig, generate, make_rig
+from hmocap_sim.params import DATA_DIR
+from hmocap_sim.mocap_render import (
     FrameState,
     MocapRenderer,
     RenderOptions,
     camera_arrays,
 )
-from hmocap_ros.sim.room import build_room
+from hmocap_sim.room import build_room
 
 N_BG, N_MOTION = 2, 6
 

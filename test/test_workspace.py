@@ -92,6 +92,10 @@ def test_colcon_lists_both_packages_and_builds_hmocap_ros(tmp_path):
     assert {"body_tracker", "camera_rig_publisher", "foreground_segmentation", "hmocap", "light_switch",
             "presence"} <= {p.name for p in bin_dir.iterdir()}
     assert (tmp_path / "install" / "setup.bash").is_file()
+    # the simulator is a package of its own, installed beside the product by the same setup.py
+    site = next((tmp_path / "install" / "hmocap_ros" / "lib").glob("python3*/site-packages"))
+    for package in ("hmocap_ros", "hmocap_sim", "hmocap_sim/render", "hmocap_examples"):
+        assert (site / package / "__init__.py").is_file(), package
 
 
 def _keys(package_xml: Path) -> set[str]:

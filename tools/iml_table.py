@@ -5,7 +5,7 @@ offline training on exactly the frames the sessions recorded.
 Per gesture of ``--gestures``, the protocol of thesis sec. 3.4.2 with sessions of one simulated
 minute:
 
-1. The simulated user (:class:`~hmocap_ros.sim.gesture_teacher.GestureTeacher`: one subject in
+1. The simulated user (:class:`~hmocap_sim.gesture_teacher.GestureTeacher`: one subject in
    one room, as the thesis' single user) and the trainer
    (:class:`~hmocap_ros.gestures.trainer.Trainer`, a new forest per gesture, ``record=True``) run
    in a closed loop in process (no DDS) for ``--minutes`` consecutive sessions of ``--session-s``
@@ -13,7 +13,7 @@ minute:
    testing phase). The forest is saved after each session and the next one continues it.
 2. After session k the forest is scored on the held-out bag, and each session's recorded
    frames (update_positive frames annotated at the box centre, do_negatives frames as
-   background) are written as a bag (:func:`~hmocap_ros.sim.gesture_teacher.write_recording_bag`);
+   background) are written as a bag (:func:`~hmocap_sim.gesture_teacher.write_recording_bag`);
    the offline forest of k minutes is trained on sessions 1..k with the code of ``hmocap train
    gestures`` (its defaults: 15 trees, depth 20, boosted, one round of hard negative mining)
    and scored on the same bag.
@@ -54,7 +54,7 @@ from hmocap_ros.commands import train_gestures  # noqa: E402
 from hmocap_ros.eval.gesture_eval import evaluate_gestures, read_gesture_bag  # noqa: E402
 from hmocap_ros.gestures.forest_file import load_forest  # noqa: E402
 from hmocap_ros.gestures.trainer import SessionOnlineParams, Trainer, TrainerParams  # noqa: E402
-from hmocap_ros.sim.gesture_teacher import GestureTeacher, write_recording_bag  # noqa: E402
+from hmocap_sim.gesture_teacher import GestureTeacher, write_recording_bag  # noqa: E402
 
 OFFLINE_MODEL = ROOT / "hmocap_ros" / "data" / "gesture_forest.npz"
 ROUND = dict(do_gesture_s=3.0, update_positive_s=6.0, release_s=2.0, do_negatives_s=9.0)

@@ -39,9 +39,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.eval.mocap_eval import (_json_default, evaluate, plot_errors,  # noqa: E402
+from hmocap_ros.eval.mocap_eval import (json_default, evaluate, plot_errors,  # noqa: E402
                                         settings_diff, stored_params, tracker_overrides)
-from hmocap_ros.sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
+from hmocap_sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
 from hmocap_ros.tracking.methods import METHODS, method_names  # noqa: E402
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"
@@ -202,7 +202,7 @@ def main(argv=None) -> int:
                                   detector=ns.detector)
                 report["overrides"] = overrides
                 (work / name).write_text(
-                    json.dumps(report, indent=1, default=_json_default))
+                    json.dumps(report, indent=1, default=json_default))
             else:
                 print(f"reused {name}", flush=True)
             plot_errors(report, figures / f"tracking_{stem}.png",

@@ -105,8 +105,10 @@ fallback_interfaces tf2_msgs msg_defs_tf2 "about 20 s"
 fallback_interfaces hri_msgs msg_defs_hri "about 10 s"
 
 pkg=$(hash_of setup.py setup.cfg package.xml)
-if ! fresh package "$pkg" || ! "$VENV/bin/python" -c 'import hmocap_ros' 2>/dev/null; then
-  say "installing hmocap_ros (editable)"
+# checked from / (not the checkout, which is on the path of `python -c`): an editable install
+# finds only the packages that existed when it was made (hmocap_ros, hmocap_sim, hmocap_examples)
+if ! fresh package "$pkg" || ! (cd / && "$VENV/bin/python" -c 'import hmocap_ros, hmocap_sim, hmocap_examples') 2>/dev/null; then
+  say "installing hmocap_ros and hmocap_sim (editable)"
   "$VENV/bin/python" -m pip install -q --no-build-isolation --no-deps -e . \
     || die "pip install -e . failed."
   mark package "$pkg"

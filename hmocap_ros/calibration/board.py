@@ -8,12 +8,13 @@ cross y pointing away from the printed face. Inner chessboard corner ``id`` sits
 
 from __future__ import annotations
 
+import argparse
 import re
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BoardSpec", "parse_board_size"]
+__all__ = ["BoardSpec", "add_board_arguments", "board_from_args", "parse_board_size"]
 
 
 def parse_board_size(text: str) -> tuple[int, int]:
@@ -95,3 +96,22 @@ class BoardSpec:
         board = self.cv_board()
         draw = board.generateImage if hasattr(board, "generateImage") else board.draw  # OpenCV 4.6: draw
         return draw((w, h), marginSize=0, borderBits=1)
+
+
+def add_board_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--board --square --marker --dict`` (``hmocap calibrate``, ``hmocap sim calibration``)."""
+    default = BoardSpec()
+    parser.add_argument("--board", default=f"{default.columns}x{default.rows}",
+                        help=f"squares along x, then y (default {default.columns}x{default.rows})")
+    parser.add_argument("--square", type=float, default=default.square,
+                        help=f"square side in metres (default {default.square})")
+    parser.add_argument("--marker", type=float, default=default.marker,
+                        help=f"ArUco marker side in metres (default {default.marker})")
+    parser.add_argument("--dict", default=default.dictionary,
+                        help=f"OpenCV ArUco dictionary (default {default.dictionary})")
+
+
+def board_from_args(ns: argparse.Namespace) -> BoardSpec:
+    """The board of :func:`add_board_arguments`' options."""
+    cols, rows = parse_board_size(ns.board)
+    return BoardSpec(cols, rows, float(ns.square), float(ns.marker), str(ns.dict))

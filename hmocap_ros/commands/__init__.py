@@ -1,10 +1,14 @@
-"""Command glue of the ``hmocap`` tool: argument parsing, bag reading and reports around the
-algorithm modules.
+"""The front ends of the ``hmocap`` tool: options, printed summaries and exit status around the
+algorithm modules and the nodes.
 
-This is the layer above ``gestures/``, ``segmentation/`` and ``eval/``: it may import them,
-they never import it. Each command module has ``add_arguments(parser)`` and
-``main_from_args(ns)`` (:data:`hmocap_ros.cli.COMMAND_GROUPS`).
+Every ``hmocap`` subcommand of the product is a module here with ``add_arguments(parser)`` and
+``main_from_args(ns)`` (``main_from_args(ns, ros_args)`` for those that start ROS: record,
+replay, view, calibrate); :mod:`hmocap_ros.cli` lists them (:data:`~hmocap_ros.cli.COMMANDS`,
+:data:`~hmocap_ros.cli.COMMAND_GROUPS`). The work is done elsewhere: ``eval/`` keeps the evaluations
+(``evaluate``, ``evaluate_gestures``, ...), ``nodes/`` the Node classes and their ``main`` for
+``ros2 run``, imported here only inside the function that runs them, so a command's module
+imports no rclpy. ``hmocap sim``'s front ends are the simulator's (:mod:`hmocap_sim.commands`).
 
-- :mod:`~hmocap_ros.commands.train_gestures`: ``hmocap train gestures``.
-- :mod:`~hmocap_ros.commands.repair`: ``hmocap repair``.
+This is the layer above ``gestures/``, ``segmentation/``, ``eval/`` and ``nodes/``: it may
+import them, they never import it.
 """

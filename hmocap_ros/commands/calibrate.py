@@ -35,7 +35,7 @@ _MAX_FIT_PX = 3.0  # homography residual of a view of the configured board
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from hmocap_ros.sim.calibration_session import add_board_arguments
+    from hmocap_ros.calibration.board import add_board_arguments
 
     parser.add_argument("bag", nargs="?", help=".mcap file or rosbag2 directory (or --live)")
     parser.add_argument("--out", type=Path, required=True,
@@ -205,7 +205,7 @@ def _write_outputs(out: Path, rig, text: str, solution, source, room: str,
 def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path]:
     """The whole command on a bag (module docstring) but the error handling; returns the
     files written."""
-    from hmocap_ros.sim.calibration_session import board_from_args
+    from hmocap_ros.calibration.board import board_from_args
 
     spec = board_from_args(ns)
     if ns.every < 1:
@@ -270,7 +270,7 @@ def run_live_calibration(ns: argparse.Namespace, ros_args: list | None = None,
                          log=print) -> tuple[Path, Path, Path]:
     """``--live``: the session from the cameras' topics, then the same calibration."""
     from hmocap_ros.nodes.calibration_collector import collect_live
-    from hmocap_ros.sim.calibration_session import board_from_args
+    from hmocap_ros.calibration.board import board_from_args
 
     session = collect_live(ns, board_from_args(ns), ros_args or [], log)
     return calibrate_session(ns, session, "live topics", log)

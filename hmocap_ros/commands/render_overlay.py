@@ -23,59 +23,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
-import time
 from pathlib import Path
 
-__all__ = ["add_arguments", "main_from_args", "render_overlay"]
+__all__ = ["add_arguments", "main_from_args"]
 
 PROG = "hmocap render overlay"
-
-
-def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, overrides: dict | None = None,
-                   width: int | None = None, fps: float | None = None, max_frames: int | None = None,
-                   progress=None) -> tuple[int, Path]:
-    """Draw ``bag`` into ``out`` (module docstring); returns the pictures written and the path.
-    :class:`~hmocap_ros.viz.overlay_bag.OverlayError` for bad input."""
-    from hmocap_ros.viz.overlay_bag import (OverlayError, bag_kind, depth_pictures, multiview_pictures,
-                                            write_pictures)
-
-    bag = Path(bag)
-    kind = bag_kind(bag)
-    with tempfile.TemporaryDirectory(prefix="hmocap_overlay_") as tmp:
-        if track:
-            if kind != "multiview":
-                raise OverlayError(f"{bag}: --track needs a multi-view bag (a rig and camera images)")
-            from hmocap_ros.eval.bag_tracking import TrackError, track_to_bag
-
-            outputs = Path(tmp) / "tracked.mcap"
-            if progress is not None:
-                progress(f"tracking {bag.name} ...")
-            try:
-                counts = track_to_bag(bag, outputs, max_frames=max_frames, overrides=overrides, progress=progress)
-            except TrackError as err:
-                raise OverlayError(str(err)) from err
-            if not counts["with_pose"]:
-                raise OverlayError(f"{bag}: the tracker found nobody in its {counts['frame_sets']} frame sets")
-        outputs = Path(outputs) if outputs is not None else None
-        truth = Path(truth) if truth is not None else None
-        for path in (outputs, truth):
-            if path is not None and not path.exists():
-                raise OverlayError(f"{path}: does not exist")
-        if kind == "multiview":
-            pictures = multiview_pictures(bag, outputs, truth, tile_width=width or 480, max_frames=max_frames)
-        else:
-            pictures = depth_pictures(bag, outputs, truth, width=width or 640, max_frames=max_frames)
-        return write_pictures(_reported(pictures, progress), Path(out), fps)
-
-
-def _reported(pictures, progress, period_s: float = 5.0):
-    last = time.monotonic()
-    for k, picture in enumerate(pictures):
-        if progress is not None and time.monotonic() - last >= period_s:
-            last = time.monotonic()
-            progress(f"{k} pictures drawn")
-        yield picture
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -99,7 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main_from_args(ns: argparse.Namespace) -> int:
-    from hmocap_ros.viz.overlay_bag import OverlayError
+    from hmocap_ros.viz.overlay_bag import OverlayError, render_overlay
 
     if ns.width is not None and ns.width < 32:
         print(f"{PROG}: --width must be at least 32 pixels, got {ns.width}", file=sys.stderr)

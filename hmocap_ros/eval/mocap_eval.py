@@ -37,7 +37,6 @@ method.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import sys
@@ -50,10 +49,10 @@ import numpy as np
 from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
 from hmocap_ros.eval.mocap_frames import BagFrames, load_frames
 from hmocap_ros.params import field_overrides, flat_record, from_flat
-from hmocap_ros.tracking.methods import get_method, method_names
+from hmocap_ros.tracking.methods import get_method
 
-__all__ = ["BagFrames", "EvalResult", "add_arguments", "evaluate", "load_frames",
-           "main_from_args", "plot_errors", "run_method", "tracker_overrides"]
+__all__ = ["BagFrames", "EvalResult", "evaluate", "json_default", "load_frames", "plot_errors",
+           "run_method", "strict_json", "tracker_overrides", "unevaluated_methods"]
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +143,7 @@ def stored_params(method: str, overrides: dict | None = None) -> dict:
     """The settings a run of ``method`` with ``overrides`` uses, in JSON types, as a report
     read back from disk holds them: what a tool compares a stored report's params with."""
     return json.loads(json.dumps(params_record(method_params(method, overrides=overrides)),
-                                 default=_json_default))
+                                 default=json_default))
 
 
 def settings_diff(stored: dict, wanted: dict) -> list[str]:
@@ -377,7 +376,7 @@ def plot_errors(report: dict, path: str | Path, title: str | None = None) -> Non
     plt.close(fig)
 
 
-# ----------------------------------------------------------------------------- CLI
+# ----------------------------------------------------------------------------- options
 
 
 def tracker_overrides(items) -> dict:
@@ -388,85 +387,9 @@ def tracker_overrides(items) -> dict:
     return field_overrides(TrackerParams, items, "tracker parameter")
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("bag", help="bag (.mcap or rosbag2 folder) in the documented layout")
-    parser.add_argument("--method", action="append", choices=method_names(),
-                        help="tracker method; repeat to compare several (default: body_tracker's)")
-    parser.add_argument("--compare", action="store_true", help="run every method (" + ", ".join(method_names()) + ")")
-    parser.add_argument("--particles", type=int, default=0,
-                        help="particles per layer (default: the method's, ~3500 evaluations)")
-    parser.add_argument("--layers", type=int, default=0, help="APF layers (default 14)")
-    parser.add_argument("--frames", type=int, default=None,
-                        help="score at most this many frames with ground truth")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the tracker (default 0)")
-    parser.add_argument("--silhouettes", choices=("fg", "gt"), default="fg",
-                        help="fg: segment the images (default); gt: the bag's exact silhouettes")
-    parser.add_argument("--learn-from", choices=("empty_room", "person_masks"), default=None,
-                        help="how the background model learns with fg (default: empty_room when "
-                             "the bag starts with an empty room, else person_masks)")
-    parser.add_argument("--given-shape", action="store_true",
-                        help="track with the bag's true body shape (no anthropometry estimation)")
-    parser.add_argument("--param", action="append", metavar="KEY=VALUE",
-                        help="override a tracker setting by its dotted name, e.g. "
-                             "filter.sweeps=1 (repeatable; body_tracker --help lists them)")
-    parser.add_argument("--max-people", type=int, default=1,
-                        help="people followed at once (one tracker each); the subject is scored "
-                             "on the track nearest it (default 1)")
-    parser.add_argument("--detector", choices=("keypoints", "skin"), default=None,
-                        help="extremity detector of kf-hpf and dd-hpf (default: extremity_detection's)")
-    parser.add_argument("--rig", metavar="RIG.yaml", default=None,
-                        help="track with this rig (e.g. from hmocap calibrate) instead of the "
-                             "bag's /camera_rig; the truth stays the bag's")
-    parser.add_argument("--threads", type=int, default=None, help="numba threads")
-    parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
-    parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
-
-
-def main_from_args(ns: argparse.Namespace) -> int:
-    if ns.threads:
-        import numba
-
-        numba.set_num_threads(ns.threads)
-    from hmocap_ros.tracking.params import TrackerParams
-
-    methods = list(method_names()) if ns.compare else (ns.method or [TrackerParams().method])
-    methods = list(dict.fromkeys(methods))
-    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
-
-    try:
-        overrides = tracker_overrides(ns.param)
-        rig = None
-        if ns.rig:
-            from hmocap_ros.geometry.rig import load_rig
-
-            rig = load_rig(Path(ns.rig))
-        detector = ns.detector or ExtremityDetectionParams().detector
-        report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
-                          seed=ns.seed, particles=ns.particles, layers=ns.layers,
-                          overrides=overrides, given_shape=ns.given_shape,
-                          max_people=ns.max_people, rig=rig,
-                          fg_params={"learn_from": ns.learn_from} if ns.learn_from else None,
-                          detector=detector)
-        if ns.rig:
-            report["rig"] = str(ns.rig)
-    except (ValueError, OSError, RuntimeError) as err:
-        print(f"hmocap eval mocap: {err}", file=sys.stderr)
-        return 2
-    if ns.json:
-        Path(ns.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(ns.json).write_text(json.dumps(strict_json(report), indent=1, allow_nan=False,
-                                            default=_json_default))
-    if ns.plot:
-        plot_errors(report, ns.plot)
-    failed = unevaluated_methods(report)
-    if failed:
-        print(f"hmocap eval mocap: no frame evaluated ({', '.join(failed)}: no pose on any of the "
-              f"{report['frames_with_truth']} frames with ground truth)", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _json_default(obj):
+def json_default(obj):
+    """``json.dumps``' ``default``: numpy scalars and arrays as Python values, tuples as lists,
+    anything else as its string."""
     if isinstance(obj, (np.floating, np.integer)):
         return obj.item()
     if isinstance(obj, np.ndarray):

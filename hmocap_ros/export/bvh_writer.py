@@ -14,7 +14,7 @@ rest, so ``G_j = G_parent R_j`` and ``p_j = p_parent + G_parent (r_j - r_parent)
 File conventions: centimetres (import in Blender with scale 0.01 for metres), the room's axes
 (+Y up; BVH's usual up axis); angles in degrees, each channel list read as intrinsic rotations
 (``Yrotation Xrotation Zrotation`` is ``R = Ry Rx Rz``, as Blender and
-:mod:`hmocap_ros.sim.bvh` read it). The root turns in ``Yrotation Xrotation Zrotation`` (heading,
+:mod:`hmocap_sim.bvh` read it). The root turns in ``Yrotation Xrotation Zrotation`` (heading,
 then lean forward, then lean sideways), the other joints in ``Xrotation Zrotation Yrotation``
 (flexion, sideways bend, twist along the bone for spine, neck and legs), so the Euler lock
 (middle angle at +-90 degrees) lies where bodies rarely go: lying flat, or a leg or the spine
@@ -43,7 +43,7 @@ _ANGLE_FMT = "%.6f"
 
 def matrix_to_euler(r: np.ndarray, order: str) -> np.ndarray:
     """Angles (..., 3) in degrees with ``R = R_a(t0) R_b(t1) R_c(t2)`` for ``order = "abc"``
-    (three different axes), the inverse of :func:`hmocap_ros.sim.bvh.euler_to_matrix`.
+    (three different axes), the inverse of :func:`hmocap_sim.bvh.euler_to_matrix`.
 
     With (i, j, k) the axes and s = +1 for a cyclic order (XYZ, YZX, ZXY), -1 otherwise:
     R[i, k] = s sin t1, tan t0 = -s R[j, k] / R[k, k], tan t2 = -s R[i, j] / R[i, i].

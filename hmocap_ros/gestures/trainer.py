@@ -61,7 +61,7 @@ Design choices where the thesis is vague:
   annotation (the box centre in ``update_positive`` and ``rehearse``, background in
   ``do_negatives``), as the thesis' loop records them for the offline comparison of
   sec. 3.4.2 (:attr:`Trainer.recording`, written as a bag by
-  :func:`~hmocap_ros.sim.gesture_teacher.write_recording_bag`).
+  :func:`~hmocap_sim.gesture_teacher.write_recording_bag`).
 - **Cancel** puts back the forest as it was when the round began (a copy taken at each
   round's start; for the first round, before the class was added) and the averages with it.
 - **Camera**: the forest learns in the pixels of the camera it sees (its tests are

@@ -15,7 +15,6 @@ options: ``--host`` 127.0.0.1, ``--port`` 8765, ``--period``, topics).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -26,9 +25,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
-from hmocap_ros.viz.foxglove_bridge import DEFAULT_HOST, DEFAULT_PORT, FoxgloveBridge
+from hmocap_ros.viz.foxglove_bridge import FoxgloveBridge
 
-__all__ = ["FoxgloveView", "add_arguments", "main_from_args"]
+__all__ = ["FoxgloveView", "view"]
 
 #: Topics of the ROS graph itself, not offered.
 GRAPH_TOPICS = {"/rosout", "/parameter_events"}
@@ -132,22 +131,3 @@ def view(host: str, port: int, topics: list[str], period_s: float, ros_args: lis
         bridge.close()
         rclpy.try_shutdown()
     return 0
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("topics", nargs="*", help="topics to offer (default: every topic of the graph)")
-    parser.add_argument("--host", default=DEFAULT_HOST,
-                        help=f"address to listen on (default {DEFAULT_HOST}: this machine only; 0.0.0.0 "
-                             f"opens it to the network)")
-    parser.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"port (default {DEFAULT_PORT}; 0: any free)")
-    parser.add_argument("--period", type=float, default=1.0, help="seconds between looks for new topics (default 1)")
-
-
-def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
-    if not ns.period > 0:
-        print(f"hmocap view: --period must be positive, got {ns.period}", file=sys.stderr)
-        return 2
-    if not 0 <= ns.port <= 65535:
-        print(f"hmocap view: --port must be 0 to 65535, got {ns.port}", file=sys.stderr)
-        return 2
-    return view(ns.host, ns.port, ns.topics, ns.period, ros_args)

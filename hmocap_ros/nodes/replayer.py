@@ -34,8 +34,6 @@ is not positive, or ``--clock`` for a replay that holds a ``/clock`` topic itsel
 
 from __future__ import annotations
 
-import argparse
-import sys
 import time
 
 import numpy as np
@@ -45,14 +43,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 
-from hmocap_ros.io.bag_reader import BagReader, BagReadError
+from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
 
 #: History of the reliable volatile publishers: a reliable subscriber that falls behind gets
 #: the messages again from it, so it must hold a burst: two seconds of a 25 fps topic.
 VOLATILE_DEPTH = 50
-#: Frequency (Hz) of /clock with a bare ``--clock``, as ``ros2 bag play --clock``.
-DEFAULT_CLOCK_HZ = 40.0
 CLOCK_TOPIC = "/clock"
 
 
@@ -212,33 +208,3 @@ def _tick_clock_until(node: Replayer, due: float, t0: float, start_ns: int, next
         if now >= due:
             return
         time.sleep(max(0.0, min(due, next_tick) - now))
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("bag", help="bag to replay (.mcap file or rosbag2 directory)")
-    parser.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1)")
-    parser.add_argument("--loop", action="store_true", help="start again at the end")
-    parser.add_argument("--topics", nargs="+", default=None, help="replay only these topics")
-    parser.add_argument("--wait-subscribers", type=int, default=0, metavar="N",
-                        help="wait until every replayed topic has N subscribers before starting")
-    parser.add_argument("--wait-timeout", type=float, default=10.0, help="seconds to wait for subscribers")
-    parser.add_argument("--settle", type=float, default=1.0,
-                        help="with --wait-subscribers: seconds to wait after they matched, for the "
-                             "subscribers to match the replay in turn (default 1)")
-    parser.add_argument("--linger", type=float, default=0.5,
-                        help="seconds to keep publishers alive after the last message")
-    parser.add_argument("--clock", type=float, nargs="?", const=DEFAULT_CLOCK_HZ, default=None, metavar="HZ",
-                        help="publish the playback time (the bag's stamps) on /clock at HZ "
-                             f"(default {DEFAULT_CLOCK_HZ:g}), as `ros2 bag play --clock`, for nodes run "
-                             "with -p use_sim_time:=true")
-
-
-def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
-    topics = [t if t.startswith("/") else "/" + t for t in ns.topics] if ns.topics else None
-    try:
-        replay(ns.bag, ns.rate, ns.loop, topics, ns.wait_subscribers, ns.wait_timeout, ns.linger, ros_args,
-               settle=ns.settle, clock_hz=ns.clock)
-    except (BagReadError, ValueError) as err:
-        print(f"hmocap replay: {err}", file=sys.stderr)
-        return 2
-    return 0

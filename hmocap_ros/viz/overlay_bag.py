@@ -14,12 +14,16 @@ Two kinds of bag (:func:`bag_kind`):
 The outputs (skeletons, gestures) may come from another bag than the images (``outputs``: the
 recording of the nodes, or a bag that ``hmocap track`` wrote); they are matched by stamp.
 What is missing (no rig, no images, no outputs) raises :class:`OverlayError` with one line
-naming it. :func:`write_pictures` writes an MP4 (OpenCV's ``mp4v`` codec) or a folder of PNGs.
+naming it. :func:`write_pictures` writes an MP4 (OpenCV's ``mp4v`` codec) or a folder of PNGs;
+:func:`render_overlay` does the whole (tracking the bag first when asked), for the command and
+the demo.
 """
 
 from __future__ import annotations
 
 import itertools
+import tempfile
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +37,7 @@ from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.viz.overlay import Banner, BodyDrawing, DepthGesture, depth_picture, multiview_picture
 
 __all__ = ["EXTREMITIES", "GESTURES", "SKELETON", "OverlayError", "Picture", "bag_kind", "depth_pictures",
-           "multiview_pictures", "write_pictures"]
+           "multiview_pictures", "render_overlay", "write_pictures"]
 
 SKELETON = "/skeleton"
 EXTREMITIES = "/extremities"
@@ -255,3 +259,49 @@ def write_pictures(pictures: Iterator[Picture], out: Path, fps: float | None = N
     if count == 0:
         raise OverlayError(f"nothing to draw: no frame in the bag (nothing written to {out})")
     return count, out
+
+
+def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, overrides: dict | None = None,
+                   width: int | None = None, fps: float | None = None, max_frames: int | None = None,
+                   progress=None) -> tuple[int, Path]:
+    """Draw ``bag`` into ``out`` (``hmocap render overlay``, :mod:`hmocap_ros.commands.render_overlay`):
+    the skeletons and gestures of ``bag`` or of ``outputs`` (of a tracking run on the fly with
+    ``track``), the truth of ``bag`` or ``truth``; returns the pictures written and the path.
+    :class:`OverlayError` for bad input."""
+    bag = Path(bag)
+    kind = bag_kind(bag)
+    with tempfile.TemporaryDirectory(prefix="hmocap_overlay_") as tmp:
+        if track:
+            if kind != "multiview":
+                raise OverlayError(f"{bag}: --track needs a multi-view bag (a rig and camera images)")
+            from hmocap_ros.eval.bag_tracking import TrackError, track_to_bag
+
+            outputs = Path(tmp) / "tracked.mcap"
+            if progress is not None:
+                progress(f"tracking {bag.name} ...")
+            try:
+                counts = track_to_bag(bag, outputs, max_frames=max_frames, overrides=overrides, progress=progress)
+            except TrackError as err:
+                raise OverlayError(str(err)) from err
+            if not counts["with_pose"]:
+                raise OverlayError(f"{bag}: the tracker found nobody in its {counts['frame_sets']} frame sets")
+        outputs = Path(outputs) if outputs is not None else None
+        truth = Path(truth) if truth is not None else None
+        for path in (outputs, truth):
+            if path is not None and not path.exists():
+                raise OverlayError(f"{path}: does not exist")
+        if kind == "multiview":
+            pictures = multiview_pictures(bag, outputs, truth, tile_width=width or 480, max_frames=max_frames)
+        else:
+            pictures = depth_pictures(bag, outputs, truth, width=width or 640, max_frames=max_frames)
+        return write_pictures(_reported(pictures, progress), Path(out), fps)
+
+
+def _reported(pictures, progress, period_s: float = 5.0):
+    """``pictures`` passed on, with ``progress("N pictures drawn")`` every ``period_s`` seconds."""
+    last = time.monotonic()
+    for k, picture in enumerate(pictures):
+        if progress is not None and time.monotonic() - last >= period_s:
+            last = time.monotonic()
+            progress(f"{k} pictures drawn")
+        yield picture

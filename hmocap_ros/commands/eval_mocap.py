@@ -1,0 +1,94 @@
+"""``hmocap eval mocap``: replay a multi-view bag through the body tracker and score it against
+its ground truth (the evaluation: :mod:`hmocap_ros.eval.mocap_eval`). Exit status 2 with one
+line on bad input, 1 when a method posed no frame with ground truth."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from hmocap_ros.eval.mocap_eval import (evaluate, json_default, plot_errors, strict_json,
+                                        tracker_overrides, unevaluated_methods)
+from hmocap_ros.tracking.methods import method_names
+
+__all__ = ["add_arguments", "main_from_args"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="bag (.mcap or rosbag2 folder) in the documented layout")
+    parser.add_argument("--method", action="append", choices=method_names(),
+                        help="tracker method; repeat to compare several (default: body_tracker's)")
+    parser.add_argument("--compare", action="store_true", help="run every method (" + ", ".join(method_names()) + ")")
+    parser.add_argument("--particles", type=int, default=0,
+                        help="particles per layer (default: the method's, ~3500 evaluations)")
+    parser.add_argument("--layers", type=int, default=0, help="APF layers (default 14)")
+    parser.add_argument("--frames", type=int, default=None,
+                        help="score at most this many frames with ground truth")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the tracker (default 0)")
+    parser.add_argument("--silhouettes", choices=("fg", "gt"), default="fg",
+                        help="fg: segment the images (default); gt: the bag's exact silhouettes")
+    parser.add_argument("--learn-from", choices=("empty_room", "person_masks"), default=None,
+                        help="how the background model learns with fg (default: empty_room when "
+                             "the bag starts with an empty room, else person_masks)")
+    parser.add_argument("--given-shape", action="store_true",
+                        help="track with the bag's true body shape (no anthropometry estimation)")
+    parser.add_argument("--param", action="append", metavar="KEY=VALUE",
+                        help="override a tracker setting by its dotted name, e.g. "
+                             "filter.sweeps=1 (repeatable; body_tracker --help lists them)")
+    parser.add_argument("--max-people", type=int, default=1,
+                        help="people followed at once (one tracker each); the subject is scored "
+                             "on the track nearest it (default 1)")
+    parser.add_argument("--detector", choices=("keypoints", "skin"), default=None,
+                        help="extremity detector of kf-hpf and dd-hpf (default: extremity_detection's)")
+    parser.add_argument("--rig", metavar="RIG.yaml", default=None,
+                        help="track with this rig (e.g. from hmocap calibrate) instead of the "
+                             "bag's /camera_rig; the truth stays the bag's")
+    parser.add_argument("--threads", type=int, default=None, help="numba threads")
+    parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
+    parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
+
+
+def main_from_args(ns: argparse.Namespace) -> int:
+    if ns.threads:
+        import numba
+
+        numba.set_num_threads(ns.threads)
+    from hmocap_ros.tracking.params import TrackerParams
+
+    methods = list(method_names()) if ns.compare else (ns.method or [TrackerParams().method])
+    methods = list(dict.fromkeys(methods))
+    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
+
+    try:
+        overrides = tracker_overrides(ns.param)
+        rig = None
+        if ns.rig:
+            from hmocap_ros.geometry.rig import load_rig
+
+            rig = load_rig(Path(ns.rig))
+        detector = ns.detector or ExtremityDetectionParams().detector
+        report = evaluate(ns.bag, methods, silhouettes=ns.silhouettes, max_frames=ns.frames,
+                          seed=ns.seed, particles=ns.particles, layers=ns.layers,
+                          overrides=overrides, given_shape=ns.given_shape,
+                          max_people=ns.max_people, rig=rig,
+                          fg_params={"learn_from": ns.learn_from} if ns.learn_from else None,
+                          detector=detector)
+        if ns.rig:
+            report["rig"] = str(ns.rig)
+    except (ValueError, OSError, RuntimeError) as err:
+        print(f"hmocap eval mocap: {err}", file=sys.stderr)
+        return 2
+    if ns.json:
+        Path(ns.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(ns.json).write_text(json.dumps(strict_json(report), indent=1, allow_nan=False,
+                                            default=json_default))
+    if ns.plot:
+        plot_errors(report, ns.plot)
+    failed = unevaluated_methods(report)
+    if failed:
+        print(f"hmocap eval mocap: no frame evaluated ({', '.join(failed)}: no pose on any of the "
+              f"{report['frames_with_truth']} frames with ground truth)", file=sys.stderr)
+        return 1
+    return 0

@@ -1,1 +1,0 @@
-"""Synthetic smart room: body motion, cameras, rendering, MCAP bags with ground truth."""

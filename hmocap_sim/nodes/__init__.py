@@ -1,0 +1,1 @@
+"""The simulator's rclpy nodes (a simulated user over DDS)."""
