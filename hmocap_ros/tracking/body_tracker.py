@@ -69,8 +69,7 @@ from hmocap_ros.frame_sets import FramePeriod
 from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
 from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
-from hmocap_ros.tracking.body_layers import BodySchedule, pose_kernel, root_room_limits, schedule_for
-from hmocap_ros.tracking.detector_driven import DetectorDriven
+from hmocap_ros.tracking.body_layers import BodySchedule, pose_kernel, root_room_limits
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.tracking.detection_assignment import EFFECTOR_LABELS, Assigned
 from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape, size_corrections
@@ -81,6 +80,7 @@ from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
 from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
 from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult, stage_timings
+from hmocap_ros.tracking.schedules import schedule_for
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
 from hmocap_ros.detection.visual_hull import room_bounds
 
@@ -157,8 +157,8 @@ class BodyTracker:
                                                 self.schedule.n_particles, f.survival_rate,
                                                 kernel, (lo, hi), landmarks["offsets"])
             self._size_corrections = size_corrections(landmarks["size_corrections"])
-        self.driven = (DetectorDriven(model, self.schedule.layer_blocks, p.detector)
-                       if self.method.uses_detector and self.keypoint_first is None else None)
+        #: what makes the detections drive propagation (dd-hpf), else None
+        self.driven = self.method.detection_driver(model, self.schedule.layer_blocks, p.detector)
         #: why the last frame set ran the silhouette filter instead of the keypoint-first one
         self.fallback_reason = ""
         self._fallback_logged = False

@@ -18,6 +18,7 @@ import logging
 import numpy as np
 
 from hmocap_ros.detection.detections import Detections
+from hmocap_ros.detection.detectors import carries_labels
 from hmocap_ros.detection.greedy_assignment import classify
 from hmocap_ros.tracking.detection_assignment import (EFFECTOR_LABELS, HEAD_EXCLUSION,
                                                       MAX_DISTANCE, Assigned, detection_cost,
@@ -53,7 +54,7 @@ class DetectorDriven:
                ) -> Assigned:
         """The detections assigned around the predicted pose: ``joints`` (J, 3) and its
         end-effectors ``targets`` (5, 3) (module docstring)."""
-        if detections.detector == "skin":
+        if not carries_labels(detections):  # candidates by eq. 2.19 and re-acquisition
             cand = detections.positions
             assigned = np.full((len(EFFECTOR_LABELS), 3), np.nan)
             upsilon = np.asarray(MAX_DISTANCE)
