@@ -478,7 +478,7 @@ def test_the_registry_holds_the_four_methods_of_the_thesis_and_keypoint_first():
     assert apo.boxed and dd.boxed and kf.boxed and not hpf.boxed
     assert dd.uses_detector and not any(m.uses_detector for m in (apf, hpf, apo))
     assert kf.keypoint_first and kf.uses_detector
-    assert all(m.detection_driver(None, (), None) is None for m in (apf, hpf, apo, kf))
+    assert all(m.detection_driver(None, ()) is None for m in (apf, hpf, apo, kf))
     assert not any(m.keypoint_first for m in (apf, hpf, apo, dd))
     assert [m.label for m in (apf, hpf, apo, dd)] == ["APF", "HPF", "HPF+APO", "DD-HPF+"]
     assert apf.evaluations == hpf.evaluations == 3500
@@ -594,12 +594,12 @@ def test_tracker_params_are_described_and_few():
         TrackerParams(method="kalman")
     with pytest.raises(ValueError, match="mesh"):
         WeightingParams(mesh="hands")
-    with pytest.raises(ValueError, match="height_margin"):
-        StartupParams(height_margin=-0.1)
+    with pytest.raises(ValueError, match="min_views"):
+        StartupParams(min_views=0)
     with pytest.raises(ValueError, match="sweeps"):
         FilterParams(sweeps=0)
-    with pytest.raises(ValueError, match="height_column"):
-        StartupParams(height_column=-0.1)
+    with pytest.raises(ValueError, match="working_width"):
+        StartupParams(working_width=8)
 
 
 def test_dotted_settings_round_trip_and_unknown_names_are_refused():

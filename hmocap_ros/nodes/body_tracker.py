@@ -98,7 +98,7 @@ the filter on the uncertain blocks with the particles the budget pays; docs/trac
 Parameters: ``rig_file``, ``slop_ms``, ``min_views_to_sync``, ``max_wait_ms``,
 ``queue_depth``, ``latest_only``, ``publish_tf``, ``seed``, ``body_id``, ``max_people`` and
 every setting of :class:`~hmocap_ros.tracking.params.TrackerParams` by its dotted name
-(``startup.height_margin``; listed below; the YAML nests them in groups).
+(``startup.min_views``; listed below; the YAML nests them in groups).
 
 Several people (``max_people``): one tracker per person
 (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`); the first body is the one a

@@ -47,7 +47,7 @@ Choices where the thesis is vague:
   and the inter-frame kernel ``K_t`` of the final run diffuses ``Psi_0`` (the torso), so each
   block is diffused once per frame, by its own motion std, right before its own weighting.
   Alg. 3's re-diffusion of the blocks already filtered is kept with a small ``nu``
-  (``filter.refine_nu``, default 0.25; 0 turns it off): a slight local refinement of the parents,
+  (:data:`REFINE_NU` = 0.25): a slight local refinement of the parents,
   which every later whole-image layer keeps measuring.
 * ``sigma0`` (``DEFAULT_SIGMA0``): the root-mean-square frame-to-frame change of each DoF at
   25 fps over motion-capture clips that are not used for any evaluation (CMU 13_29 jumping
@@ -77,7 +77,8 @@ if TYPE_CHECKING:
     from hmocap_ros.tracking.methods.protocol import TrackingMethod
 
 __all__ = [
-    "BODY_BLOCKS", "DEFAULT_SIGMA0", "SIGMA0_FACTOR", "SWEEP_DECAY", "BodySchedule", "block_dims",
+    "BODY_BLOCKS", "DEFAULT_SIGMA0", "JUMP_FRACTION", "JUMP_SCALE", "REFINE_NU", "RESEED_FRACTION",
+    "SIGMA0_FACTOR", "SURVIVAL_RATE", "SWEEP_DECAY", "BodySchedule", "block_dims",
     "body_sigma0", "clip_body_pose", "pose_kernel", "root_room_limits",
 ]
 
@@ -87,6 +88,19 @@ SIGMA0_FACTOR = 1.5
 #: Hierarchical schedules with several sweeps: std factor of a block's kernel per sweep after
 #: the first (the second sweep searches at half the first one's std).
 SWEEP_DECAY = 0.5
+#: The tracker's particle survival rate, which sets each layer's annealing exponent beta
+#: (eq. 2.9): the share of the particles a layer keeps, a property of the method (how sharply
+#: a layer concentrates on its best fits), not of a room.
+SURVIVAL_RATE = 0.3
+#: The tracker's decay of alg. 3's re-diffusion of the blocks already filtered (module
+#: docstring): a slight local refinement of the parents.
+REFINE_NU = 0.25
+#: The tracker's kernel (:func:`pose_kernel`): the share of the particles diffused with
+#: JUMP_SCALE times the std, and the share whose limb DoFs are drawn anew within the joint
+#: limits, so that a limb can leave a wrong mode of the silhouette cost (sec. 2.4: the
+#: silhouette cost of a limb has a narrow basin, and an arm against the torso is a local
+#: minimum).
+JUMP_FRACTION, JUMP_SCALE, RESEED_FRACTION = 0.1, 4.0, 0.1
 
 #: RMS frame-to-frame change per DoF at 25 fps (metres, degrees) on the clips of the module
 #: docstring (sides pooled, rounded; the

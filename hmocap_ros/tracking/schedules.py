@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from hmocap_ros.body.skeleton import Skeleton
-from hmocap_ros.tracking.body_layers import BodySchedule, body_sigma0, pose_kernel, root_room_limits
+from hmocap_ros.tracking.body_layers import (JUMP_FRACTION, JUMP_SCALE, REFINE_NU,
+                                             RESEED_FRACTION, SURVIVAL_RATE, BodySchedule,
+                                             body_sigma0, pose_kernel, root_room_limits)
 from hmocap_ros.tracking.methods import TrackingMethod, get_method
 
 __all__ = ["make_schedule", "schedule_for"]
@@ -44,11 +46,11 @@ def make_schedule(method: str | TrackingMethod, skel: Skeleton, *,
 
 def schedule_for(params, skel: Skeleton, room_lo: np.ndarray | None = None,
                  room_hi: np.ndarray | None = None) -> BodySchedule:
-    """The schedule of a tracker's settings (:class:`~.params.TrackerParams`)."""
+    """The schedule of a tracker's settings (:class:`~.params.TrackerParams`), with the
+    tracker's annealing and kernel (:mod:`.body_layers`' constants)."""
     f = params.filter
     return make_schedule(params.tracking_method, skel, n_particles=f.particles or None,
-                         n_layers=f.layers or None, sigma_scale=f.sigma_scale,
-                         survival_rate=f.survival_rate,
-                         refine_nu=f.refine_nu, jump_fraction=f.jump_fraction,
-                         jump_scale=f.jump_scale, reseed_fraction=f.reseed_fraction,
+                         n_layers=f.layers or None, survival_rate=SURVIVAL_RATE,
+                         refine_nu=REFINE_NU, jump_fraction=JUMP_FRACTION,
+                         jump_scale=JUMP_SCALE, reseed_fraction=RESEED_FRACTION,
                          room_lo=room_lo, room_hi=room_hi, sweeps=f.sweeps)

@@ -27,5 +27,5 @@ class LayeredMethod:
     def layer_particles(self, sweeps: int) -> int:
         return self.particles
 
-    def detection_driver(self, model, layer_blocks: tuple, params):
+    def detection_driver(self, model, layer_blocks: tuple):
         return None

@@ -19,5 +19,5 @@ class DetectorDrivenMethod(HierarchicalMethod):
     boxed: bool = True
     uses_detector: bool = True
 
-    def detection_driver(self, model, layer_blocks: tuple, params) -> DetectorDriven:
-        return DetectorDriven(model, layer_blocks, params)
+    def detection_driver(self, model, layer_blocks: tuple) -> DetectorDriven:
+        return DetectorDriven(model, layer_blocks)

@@ -52,8 +52,7 @@ class TrackingMethod(Protocol):
         ``sigma0`` the per-DoF inter-frame std, ``kernel`` the diffusion kernel within the
         joint limits; ``n_layers`` None gives the method's own."""
 
-    def detection_driver(self, model, layer_blocks: tuple, params):
+    def detection_driver(self, model, layer_blocks: tuple):
         """What makes the detections drive propagation (IK particles, detection terms of
         the layers; :class:`~hmocap_ros.tracking.detector_driven.DetectorDriven`), or None
-        when this method's filter does not take them that way. ``params``: the tracker's
-        ``detector`` group."""
+        when this method's filter does not take them that way."""
