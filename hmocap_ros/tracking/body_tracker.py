@@ -86,8 +86,8 @@ from hmocap_ros.tracking.schedules import schedule_for
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
 from hmocap_ros.detection.visual_hull import room_bounds
 
-__all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "VELOCITY_GAIN", "BodyTracker", "TrackResult",
-           "TrackerParams", "TrackerState"]
+__all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "VELOCITY_GAIN", "BodyTracker",
+           "TrackResult", "TrackerParams", "TrackerState"]
 
 log = logging.getLogger(__name__)
 

@@ -37,8 +37,9 @@ def layer_weight_fn(fitness, model, schedule, vertices: list, obs: Observation, 
     """``weight_fn(particles, layer) -> costs`` of ``schedule`` on ``obs``.
 
     fitness: the :class:`~.body_fitness.SilhouetteFitness`; vertices: :func:`layer_vertices`;
-    the boxes are :mod:`.observation_boxes`' (``BOX_*``); rest: the shaped rest body. terms: per weighting a ``cost_fn(particles, joints)`` added to its
-    silhouette cost (detections, eq. 2.21) or None; or None.
+    the boxes are :mod:`.observation_boxes`' (``BOX_*``); rest: the shaped rest body.
+    terms: per weighting a ``cost_fn(particles, joints)`` added to its silhouette cost
+    (detections, eq. 2.21) or None; or None.
     """
     lengths = chain_lengths(model, rest)
 

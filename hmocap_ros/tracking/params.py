@@ -5,8 +5,8 @@
 every leaf by its dotted name (``startup.min_views``), the evaluator takes ``--param
 filter.sweeps=1``. The method's own settings, which no room changes, are constants beside
 the code that uses them, each with its reason (:mod:`.body_layers`, :mod:`.observation_boxes`,
-:mod:`.limb_proposals`, :mod:`.detector_driven`, :mod:`.startup`, :mod:`.body_tracker`). Defaults: 4 cameras at 640x480, 25 fps, about 3,500 weight
-evaluations per frame.
+:mod:`.limb_proposals`, :mod:`.detector_driven`, :mod:`.startup`, :mod:`.body_tracker`).
+Defaults: 4 cameras at 640x480, 25 fps, about 3,500 weight evaluations per frame.
 """
 from __future__ import annotations
 
