@@ -6,7 +6,7 @@ default and a description: what the setting does, its unit and range) or by :fun
 them). The same class then serves every front end without importing any of them:
 
 - a ROS node declares one parameter per leaf, named by its dotted path
-  (``startup.height_margin``), so a parameter file reads as groups
+  (``startup.min_views``), so a parameter file reads as groups
   (:mod:`hmocap_ros.nodes.common`);
 - command-line tools take ``KEY=VALUE`` overrides with dotted keys (:func:`field_overrides`,
   :func:`replace_dotted`);

@@ -13,7 +13,7 @@ from hmocap_ros.body.anthropometry import BodyShape, apply_shape
 from hmocap_ros.io import tf
 from hmocap_ros.tracking import body_frames as bf
 from hmocap_ros.frame_sets import FramePeriod, FrameSetQueue
-from hmocap_ros.tracking.body_tracker import MAX_ELAPSED_PERIODS, BodyTracker
+from hmocap_ros.tracking.body_tracker import MAX_ELAPSED_PERIODS, VELOCITY_GAIN, BodyTracker
 from hmocap_ros.tracking.params import TrackerParams
 
 PERIOD = 40_000_000
@@ -233,7 +233,7 @@ def test_motion_model_scales_with_the_periods_between_tracked_sets(tracker):
     tracker._previous_estimate[skel.translation_dofs] -= [0.05, 0.0, 0.02]
     tracker.particles = np.tile(tracker.estimate, (5, 1))
     predicted = tracker._predict()
-    gain = tracker.params.filter.velocity_gain
+    gain = VELOCITY_GAIN
     np.testing.assert_allclose(predicted[skel.translation_dofs] - tracker.estimate[skel.translation_dofs],
                                gain * 3 * np.array([0.05, 0.0, 0.02]), atol=1e-12)
     np.testing.assert_allclose(tracker.particles[:, skel.translation_dofs], predicted[skel.translation_dofs][None].repeat(5, 0))

@@ -29,12 +29,13 @@ from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARA
                                                           shape_from_state, shape_to_state)
 from hmocap_ros.tracking.params import EstimationParams
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
-from hmocap_ros.tracking.body_layers import (BODY_BLOCKS, SWEEP_DECAY, body_sigma0,
-                                             clip_body_pose, make_schedule, schedule_for)
+from hmocap_ros.tracking.body_layers import BODY_BLOCKS, SWEEP_DECAY, body_sigma0, clip_body_pose
+from hmocap_ros.tracking.schedules import make_schedule, schedule_for
 from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
 from hmocap_ros.tracking.limb_proposals import LimbProposer
 from hmocap_ros.lpf.kernels import rejection_kernel
 from hmocap_ros.tracking.methods import METHODS, TrackingMethod, get_method, method_names
+from hmocap_ros.tracking.methods.hpf import HierarchicalMethod
 from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d)
 from hmocap_ros.tracking.params import (FilterParams, ResearchParams, StartupParams,
@@ -472,10 +473,12 @@ def test_the_registry_holds_the_four_methods_of_the_thesis_and_keypoint_first():
     assert tuple(METHODS) == method_names()
     apf, hpf, apo, dd, kf = (METHODS[m] for m in method_names())
     assert all(isinstance(m, TrackingMethod) for m in METHODS.values())
-    assert not apf.hierarchical and hpf.hierarchical and apo.hierarchical and dd.hierarchical
-    assert apo.boxed and dd.boxed and not hpf.boxed and not apf.boxed
+    assert not isinstance(apf, HierarchicalMethod)
+    assert all(isinstance(m, HierarchicalMethod) for m in (hpf, apo, dd, kf))
+    assert apo.boxed and dd.boxed and kf.boxed and not hpf.boxed
     assert dd.uses_detector and not any(m.uses_detector for m in (apf, hpf, apo))
-    assert kf.keypoint_first and kf.uses_detector and kf.boxed and kf.hierarchical
+    assert kf.keypoint_first and kf.uses_detector
+    assert all(m.detection_driver(None, ()) is None for m in (apf, hpf, apo, kf))
     assert not any(m.keypoint_first for m in (apf, hpf, apo, dd))
     assert [m.label for m in (apf, hpf, apo, dd)] == ["APF", "HPF", "HPF+APO", "DD-HPF+"]
     assert apf.evaluations == hpf.evaluations == 3500
@@ -591,12 +594,12 @@ def test_tracker_params_are_described_and_few():
         TrackerParams(method="kalman")
     with pytest.raises(ValueError, match="mesh"):
         WeightingParams(mesh="hands")
-    with pytest.raises(ValueError, match="height_margin"):
-        StartupParams(height_margin=-0.1)
+    with pytest.raises(ValueError, match="min_views"):
+        StartupParams(min_views=0)
     with pytest.raises(ValueError, match="sweeps"):
         FilterParams(sweeps=0)
-    with pytest.raises(ValueError, match="height_column"):
-        StartupParams(height_column=-0.1)
+    with pytest.raises(ValueError, match="working_width"):
+        StartupParams(working_width=8)
 
 
 def test_dotted_settings_round_trip_and_unknown_names_are_refused():

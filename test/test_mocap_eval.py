@@ -259,8 +259,8 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     from hmocap_ros.tracking.body_tracker import TrackerParams
 
     table = load_tool("mocap_table")
-    default = TrackerParams().filter.velocity_gain
-    key = "filter.velocity_gain"
+    default = TrackerParams().lost.cost
+    key = "lost.cost"
     ns = argparse.Namespace(seed=0, max_people=2, methods=["hpf"], detector="keypoints")
 
     def report(gain, overrides):
@@ -290,7 +290,7 @@ def test_mocap_table_reuses_a_report_only_with_the_same_tracker_settings(tmp_pat
     # a report that lacks a setting the run uses is made again
     lacking = report(default, {})
     data = json.loads(lacking.read_text())
-    del data["methods"]["hpf"]["params"]["startup.height_margin"]
+    del data["methods"]["hpf"]["params"]["startup.min_full_views"]
     lacking.write_text(json.dumps(data))
     assert table._reusable(lacking, ns, {}) is None
 

@@ -14,7 +14,7 @@ plots and the JSON reports::
     .venv/bin/python tools/mocap_table.py                       # docs/tracking_results.md
     .venv/bin/python tools/mocap_table.py --seconds 1 --clips 13_26   # quick look
     .venv/bin/python tools/mocap_table.py --reuse               # resume an interrupted run
-    .venv/bin/python tools/mocap_table.py --param filter.velocity_gain=0.5 --out t.md
+    .venv/bin/python tools/mocap_table.py --param filter.sweeps=1 --out t.md
 
 The tracker follows up to ``--max-people`` people (default 2: the subject and the bystander
 of the distractor scenes each get a tracker, :class:`~hmocap_ros.tracking.people_tracker.

@@ -1,21 +1,12 @@
 """Extremity detection of one frame set: images and foregrounds of the rig in, 3D detections out.
 
 The ``extremity_detection`` node, the evaluator (``hmocap eval extremities``) and the tracker's
-evaluation (``hmocap eval mocap``) call :meth:`ExtremityPipeline.detect` the same way. Two
-detectors, registered in :data:`DETECTORS` and chosen by ``detector``:
-
-``skin``
-    the thesis' own (sec. 2.5.1, eq. 2.16-2.18): the skin probability of each view inside its
-    foreground (:mod:`hmocap_ros.detection.skin`) fused on the oriented surface of the
-    carved hull (:mod:`.skin_extremities`); the candidates are labelled by eq. 2.19 against the
-    last skeleton when one is given, else ``unknown`` (the tracker assigns them to its own
-    predicted pose anyway).
-``keypoints``
-    a 2D landmark network per view on the crop MediaPipe's pipeline gives it (from the view's
-    previous landmarks, the previous skeleton or a pose detector), triangulated robustly over
-    the views (:mod:`.keypoint_detector`): labelled head, hands, feet and the limb joints with
-    confidences (beyond the thesis, whose sec. 2.5 admits any part detector). Each view keeps
-    a track from frame set to frame set: :meth:`ExtremityPipeline.reset` drops them.
+evaluation (``hmocap eval mocap``) call :meth:`ExtremityPipeline.detect` the same way. The
+detector is the one :data:`~.detectors.DETECTORS` registers under ``detector``
+(:mod:`.detectors`): ``skin``, the thesis' own (sec. 2.5.1, eq. 2.16-2.18, skin colour on the
+carved hull's oriented surface, unlabelled candidates), or ``keypoints``, a 2D landmark
+network per view triangulated over the views (labelled joints with confidences). The pipeline
+checks the images' and masks' sizes and times the detector.
 
 ``previous``: the last skeleton, label -> (3,) room position (``head``, ``left_wrist``, ...;
 :func:`skeleton_labels` makes it from the body model's joints), optional for both.
@@ -29,25 +20,15 @@ from typing import Sequence
 
 import numpy as np
 
-from hmocap_ros.detection.detections import MODEL_JOINT, UNKNOWN, Detections
-from hmocap_ros.detection.greedy_assignment import classify
-from hmocap_ros.detection.keypoint_detector import KeypointDetector
+from hmocap_ros.detection.detections import MODEL_JOINT, Detections
+from hmocap_ros.detection.detectors import DETECTORS, ExtremityDetector, get_detector
 from hmocap_ros.detection.params import KeypointParams
-from hmocap_ros.detection.skin import skin_probability
-from hmocap_ros.detection.skin_extremities import SkinExtremityDetector, SkinExtremityParams
+from hmocap_ros.detection.skin_extremities import SkinExtremityParams
 from hmocap_ros.params import group, param
 
 __all__ = ["DETECTORS", "ExtremityDetectionParams", "ExtremityPipeline", "skeleton_labels"]
 
 log = logging.getLogger(__name__)
-
-#: detector name -> what it is
-DETECTORS = {
-    "skin": "skin colour fused on the hull's oriented surface (thesis eq. 2.16-2.18)",
-    "keypoints": "BlazePose landmarks per view, triangulated over the views",
-}
-#: skin labelling against the last skeleton: label, [Upsilon] (m) eq. 2.19
-_SKIN_TARGETS = (("left_hand", 0.35), ("right_hand", 0.35), ("head", 0.25))
 
 
 @dataclass(frozen=True)
@@ -61,8 +42,7 @@ class ExtremityDetectionParams:
     keypoints: KeypointParams = group(KeypointParams, "the keypoint detector")
 
     def __post_init__(self):
-        if self.detector not in DETECTORS:
-            raise ValueError(f"detector must be one of {tuple(DETECTORS)}, got {self.detector!r}")
+        get_detector(self.detector)  # ValueError naming the registered ones
 
 
 def skeleton_labels(joint_names: Sequence[str], joints: np.ndarray) -> dict:
@@ -75,21 +55,6 @@ def skeleton_labels(joint_names: Sequence[str], joints: np.ndarray) -> dict:
     return {k: np.asarray(v, float) for k, v in out.items() if np.isfinite(v).all()}
 
 
-def _skin_targets(previous: dict) -> np.ndarray | None:
-    """(3, 3) left hand, right hand, head of the last skeleton for labelling skin candidates:
-    a hand 9 cm beyond the wrist along the forearm, the head 10 cm above the head joint."""
-    need = ("left_elbow", "left_wrist", "right_elbow", "right_wrist", "head")
-    if not all(k in previous for k in need):
-        return None
-    out = []
-    for side in ("left", "right"):
-        wrist, elbow = previous[f"{side}_wrist"], previous[f"{side}_elbow"]
-        arm = wrist - elbow
-        out.append(wrist + 0.09 * arm / max(float(np.linalg.norm(arm)), 1e-6))
-    out.append(previous["head"] + np.array([0.0, 0.10, 0.0]))
-    return np.array(out)
-
-
 class ExtremityPipeline:
     """One rig's extremity detection (module docstring). ``model_path``: the keypoint
     network's file (default: the shipped one); a missing or corrupt file (or pose detector
@@ -99,20 +64,18 @@ class ExtremityPipeline:
                  model_path=None):
         self.cameras = tuple(cameras)
         self.params = p = params or ExtremityDetectionParams()
-        self.skin = SkinExtremityDetector(self.cameras, p.skin) if p.detector == "skin" else None
-        self.keypoints = (KeypointDetector(self.cameras, p.keypoints, model_path)
-                          if p.detector == "keypoints" else None)
+        #: the registered detector ``detector`` names (:mod:`.detectors`)
+        self.detector: ExtremityDetector = get_detector(p.detector)(self.cameras, p,
+                                                                    model_path)
         self.last_seconds = 0.0
 
     def reset(self) -> None:
-        """Forget the views' tracks (a recording that starts over)."""
-        if self.keypoints is not None:
-            self.keypoints.reset()
+        """Forget the detector's tracks (a recording that starts over)."""
+        self.detector.reset()
 
     def close(self) -> None:
-        """Stop the keypoint detector's worker threads."""
-        if self.keypoints is not None:
-            self.keypoints.close()
+        """Stop the detector's worker threads."""
+        self.detector.close()
 
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
                previous: dict | None = None) -> Detections:
@@ -123,32 +86,9 @@ class ExtremityPipeline:
             raise ValueError(f"expected {len(self.cameras)} images and masks, got "
                              f"{len(images)} and {len(masks)}")
         images, masks = _checked(self.cameras, images, masks)
-        if self.keypoints is not None:
-            out = self._keypoints(images, masks, previous)
-        else:
-            out = self._skin(images, masks, previous)
+        out = self.detector.detect(images, masks, previous)
         self.last_seconds = time.perf_counter() - t0
         return out
-
-    def _keypoints(self, images, masks, previous) -> Detections:
-        kp = self.keypoints.detect(images, masks, previous)
-        return Detections("keypoints", tuple(kp.labels), kp.positions, kp.scores)
-
-    def _skin(self, images, masks, previous) -> Detections:
-        maps = [skin_probability(img, mask=m) if img is not None and m is not None else None
-                for img, m in zip(images, masks)]
-        joints = (np.array(list(previous.values())) if previous else None)
-        cand = self.skin.detect(masks, maps, joints)
-        labels = [UNKNOWN] * len(cand.positions)
-        targets = _skin_targets(previous) if previous else None
-        if targets is not None and len(cand.positions):
-            upsilon = [u for _, u in _SKIN_TARGETS]
-            assigned = classify(cand.positions, targets, upsilon)
-            for (label, _), pos in zip(_SKIN_TARGETS, assigned):
-                if np.isfinite(pos).all():
-                    labels[int(np.argmin(np.linalg.norm(cand.positions - pos, axis=1)))] = label
-        return Detections("skin", tuple(labels), cand.positions, cand.scores, cand.normals,
-                          cand.surface, cand.probability)
 
 
 def _checked(cameras, images, masks) -> tuple[list, list]:

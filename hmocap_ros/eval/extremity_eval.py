@@ -95,6 +95,7 @@ def frame_truths(frames, ends: dict) -> list[dict]:
 def score_detections(detections: list, truths: list[dict], radius: float = 0.10) -> dict:
     """Per label precision, recall and 3D error of per-frame detections (module docstring);
     ``detections[k]`` is frame k's Detections or None."""
+    from hmocap_ros.detection.detectors import carries_labels
     dist: dict = {}
     found: dict = {}
     n_truth: dict = {}
@@ -104,7 +105,7 @@ def score_detections(detections: list, truths: list[dict], radius: float = 0.10)
             n_truth[lab] = n_truth.get(lab, 0) + 1
         if det is None or not truth:
             continue
-        if det.detector == "skin":
+        if not carries_labels(det):
             upper = [lab for lab in EXTREMITIES[:3] if lab in truth]
             t = np.array([truth[lab] for lab in upper]).reshape(-1, 3)
             for pos in det.positions:

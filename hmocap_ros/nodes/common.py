@@ -114,7 +114,7 @@ RESULT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 def declare_parameters(node: Node, config_cls):
     """Declare every leaf of ``config_cls`` as a parameter of ``node`` (groups by dotted
-    name, ``startup.height_margin``); return the filled dataclass."""
+    name, ``startup.min_views``); return the filled dataclass."""
     from rclpy.parameter import Parameter
 
     values = {}

@@ -305,8 +305,9 @@ class ExtremityDetectionNode(Node):
 
     def _left_out(self) -> dict:
         """Per camera, the frame sets whose keypoints left the view out (disagreeing)."""
-        keypoints = getattr(self.pipeline, "keypoints", None) if self.pipeline else None
-        return dict(keypoints.views_left_out) if keypoints is not None else {}
+        if self.pipeline is None:
+            return {}
+        return dict(getattr(self.pipeline.detector, "views_left_out", {}))
 
     def log_totals(self) -> None:
         self.get_logger().info(f"frame sets detected: {self.frames}")

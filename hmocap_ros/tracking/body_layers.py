@@ -23,6 +23,11 @@ dd-hpf     the hpf-apo schedule; the tracker adds IK particles from     8 x 438 
            layer of eq. 2.21 (sec. 2.5.2, :mod:`.ik_proposals`)
 =========  ==========================================================  ==========================
 
+This module holds what the schedules share (the blocks, ``sigma0``, the kernel within the
+joint limits, :class:`BodySchedule`); each method builds its own schedule
+(:mod:`hmocap_ros.tracking.methods`), and :func:`~.schedules.make_schedule` makes the
+schedule of a method name.
+
 Each shoulder layer samples its elbow too (the elbow layer then refines it). The table is
 one sweep (``sweeps=1``). With ``sweeps=2`` the hierarchical schedules weigh
 the seven blocks twice per frame, torso to right elbow and again (sec. 2.2.4: a layered
@@ -42,7 +47,7 @@ Choices where the thesis is vague:
   and the inter-frame kernel ``K_t`` of the final run diffuses ``Psi_0`` (the torso), so each
   block is diffused once per frame, by its own motion std, right before its own weighting.
   Alg. 3's re-diffusion of the blocks already filtered is kept with a small ``nu``
-  (``filter.refine_nu``, default 0.25; 0 turns it off): a slight local refinement of the parents,
+  (:data:`REFINE_NU` = 0.25): a slight local refinement of the parents,
   which every later whole-image layer keeps measuring.
 * ``sigma0`` (``DEFAULT_SIGMA0``): the root-mean-square frame-to-frame change of each DoF at
   25 fps over motion-capture clips that are not used for any evaluation (CMU 13_29 jumping
@@ -60,16 +65,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from hmocap_ros.body.skeleton import SWING_NORM_MAX, Skeleton
 from hmocap_ros.lpf.kernels import gaussian_kernel
-from hmocap_ros.lpf.layered_filter import Layer, LayeredFilter, annealed_filter
-from hmocap_ros.tracking.methods import TrackingMethod, get_method
+from hmocap_ros.lpf.layered_filter import LayeredFilter
+
+if TYPE_CHECKING:
+    from hmocap_ros.tracking.methods.protocol import TrackingMethod
 
 __all__ = [
-    "BODY_BLOCKS", "DEFAULT_SIGMA0", "SIGMA0_FACTOR", "SWEEP_DECAY", "BodySchedule", "block_dims",
-    "body_sigma0", "clip_body_pose", "make_schedule", "pose_kernel", "schedule_for",
+    "BODY_BLOCKS", "DEFAULT_SIGMA0", "JUMP_FRACTION", "JUMP_SCALE", "REFINE_NU", "RESEED_FRACTION",
+    "SIGMA0_FACTOR", "SURVIVAL_RATE", "SWEEP_DECAY", "BodySchedule", "block_dims",
+    "body_sigma0", "clip_body_pose", "pose_kernel", "root_room_limits",
 ]
 
 #: DoF groups of the tracking skeleton in kinematic-tree order (sec. 2.5.2).
@@ -78,6 +88,19 @@ SIGMA0_FACTOR = 1.5
 #: Hierarchical schedules with several sweeps: std factor of a block's kernel per sweep after
 #: the first (the second sweep searches at half the first one's std).
 SWEEP_DECAY = 0.5
+#: The tracker's particle survival rate, which sets each layer's annealing exponent beta
+#: (eq. 2.9): the share of the particles a layer keeps, a property of the method (how sharply
+#: a layer concentrates on its best fits), not of a room.
+SURVIVAL_RATE = 0.3
+#: The tracker's decay of alg. 3's re-diffusion of the blocks already filtered (module
+#: docstring): a slight local refinement of the parents.
+REFINE_NU = 0.25
+#: The tracker's kernel (:func:`pose_kernel`): the share of the particles diffused with
+#: JUMP_SCALE times the std, and the share whose limb DoFs are drawn anew within the joint
+#: limits, so that a limb can leave a wrong mode of the silhouette cost (sec. 2.4: the
+#: silhouette cost of a limb has a narrow basin, and an arm against the torso is a local
+#: minimum).
+JUMP_FRACTION, JUMP_SCALE, RESEED_FRACTION = 0.1, 4.0, 0.1
 
 #: RMS frame-to-frame change per DoF at 25 fps (metres, degrees) on the clips of the module
 #: docstring (sides pooled, rounded; the
@@ -223,108 +246,3 @@ def block_dims(skel: Skeleton) -> list[np.ndarray]:
         e = BODY_BLOCKS.index(f"{side}_elbow")
         dims[s] = np.union1d(dims[s], dims[e])
     return dims
-
-
-def _hierarchical(skel: Skeleton, method: TrackingMethod, n_particles: int,
-                  sigma0: np.ndarray, *, survival_rate: float, refine_nu: float, kernel,
-                  sweeps: int = 1) -> BodySchedule:
-    blocks = block_dims(skel)
-    boxed = method.boxed
-    d = skel.n_dofs
-    # the blocks weighed in order, ``sweeps`` times over the kinematic tree; without boxes
-    # the final whole-image layer is the last block's weighting
-    order = [(s, b) for s in range(sweeps) for b in range(len(blocks))]
-    if not boxed:
-        order = order[:-1]
-
-    def block_std(s: int, b: int) -> np.ndarray:
-        return (SWEEP_DECAY ** s) * sigma0[blocks[b]]
-
-    layers = []
-    last_weighed: dict[int, tuple[int, int]] = {}  # block -> (layer, sweep) it was last weighed in
-    for j, (s, b) in enumerate(order):
-        last_weighed[b] = (j, s)
-        std = np.zeros(d)
-        if refine_nu > 0:  # alg. 3 re-diffusion of the blocks filtered so far
-            for m, (k, sm) in last_weighed.items():
-                std[blocks[m]] = (refine_nu ** (j + 1 - k)) * block_std(sm, m)
-        if j + 1 < len(order):  # the kernel diffuses the next block right before it is weighed
-            s_next, b_next = order[j + 1]
-            std[blocks[b_next]] = block_std(s_next, b_next)
-        elif not boxed:
-            std[blocks[-1]] = block_std(sweeps - 1, len(blocks) - 1)
-        layers.append(Layer(dims=blocks[b], survival_rate=survival_rate,
-                            n_particles=n_particles, std=std, kernel=kernel))
-    final_std = np.zeros(d)
-    final_std[blocks[0]] = sigma0[blocks[0]]
-    final = Layer(survival_rate=survival_rate, n_particles=n_particles, std=final_std,
-                  kernel=kernel)
-    lpf = LayeredFilter(layers=tuple(layers), sigma0=sigma0, nu=max(refine_nu, 1e-6),
-                        final=final)
-    names = [(BODY_BLOCKS[b],) for _, b in order]
-    final_blocks = () if boxed else (BODY_BLOCKS[-1],)
-    return BodySchedule(method=method, filter=lpf,
-                        layer_blocks=tuple(names) + (final_blocks,),
-                        boxed=tuple([boxed] * len(order) + [False]))
-
-
-def _annealed(skel: Skeleton, method: TrackingMethod, n_particles: int, n_layers: int,
-              sigma0: np.ndarray, *, survival_rate: float, apf_alpha: float,
-              kernel) -> BodySchedule:
-    lpf = annealed_filter(sigma0, n_layers, n_particles, alpha=apf_alpha,
-                          survival_rate=survival_rate)
-    layers = tuple(Layer(beta=L.beta, survival_rate=L.survival_rate,
-                         n_particles=L.n_particles, std=L.std, kernel=kernel)
-                   for L in lpf.layers)
-    final = Layer(survival_rate=survival_rate, n_particles=n_particles, kernel=kernel)
-    lpf = LayeredFilter(layers=layers, sigma0=sigma0, final=final)
-    return BodySchedule(method, lpf, tuple(() for _ in range(n_layers)),
-                        tuple(False for _ in range(n_layers)))
-
-
-def make_schedule(method: str | TrackingMethod, skel: Skeleton, *,
-                  n_particles: int | None = None, n_layers: int | None = None,
-                  sigma_scale: float = 1.0, survival_rate: float = 0.5, apf_alpha: float = 0.7,
-                  refine_nu: float = 0.25, jump_fraction: float = 0.0, jump_scale: float = 4.0,
-                  reseed_fraction: float = 0.0, room_lo: np.ndarray | None = None,
-                  room_hi: np.ndarray | None = None, sweeps: int = 1) -> BodySchedule:
-    """The layer schedule of ``method`` (a name of :data:`~.methods.METHODS` or the method
-    itself); see the module table.
-
-    n_particles / n_layers: None gives the method's budget. ``n_layers`` only applies to the
-    APF (the hierarchical schedules have one layer per body block and sweep).
-    sweeps: hierarchical schedules weigh the blocks this many times over the kinematic tree
-    per frame (alg. 5 with each partition repeated; later sweeps diffuse a block with
-    :data:`SWEEP_DECAY` times the std of the sweep before); with ``n_particles`` None the
-    particles per layer shrink so the evaluations per frame stay those of one sweep.
-    """
-    method = get_method(method)
-    if sweeps < 1:
-        raise ValueError("sweeps must be >= 1")
-    default_layers, default_particles = method.layers, method.particles
-    if method.hierarchical and sweeps > 1:  # the same evaluations over more layers
-        layers_total = sweeps * len(BODY_BLOCKS) + default_layers - len(BODY_BLOCKS)
-        default_particles = int(round(default_layers * default_particles / layers_total))
-    n = int(n_particles or default_particles)
-    if n < 2:
-        raise ValueError("need at least 2 particles")
-    sigma0 = body_sigma0(skel, sigma_scale)
-    lo, hi = (None, None) if room_lo is None else root_room_limits(room_lo, room_hi)
-    kernel = pose_kernel(skel, lo, hi, jump_fraction, jump_scale, reseed_fraction)
-    if not method.hierarchical:
-        return _annealed(skel, method, n, int(n_layers or default_layers), sigma0,
-                         survival_rate=survival_rate, apf_alpha=apf_alpha, kernel=kernel)
-    return _hierarchical(skel, method, n, sigma0, survival_rate=survival_rate,
-                         refine_nu=refine_nu, kernel=kernel, sweeps=sweeps)
-
-
-def schedule_for(params, skel: Skeleton, room_lo: np.ndarray | None = None,
-                 room_hi: np.ndarray | None = None) -> BodySchedule:
-    """The schedule of a tracker's settings (:class:`~.params.TrackerParams`)."""
-    f = params.filter
-    return make_schedule(params.tracking_method, skel, n_particles=f.particles or None,
-                         n_layers=f.layers or None, sigma_scale=f.sigma_scale,
-                         survival_rate=f.survival_rate,
-                         refine_nu=f.refine_nu, jump_fraction=f.jump_fraction,
-                         jump_scale=f.jump_scale, reseed_fraction=f.reseed_fraction,
-                         room_lo=room_lo, room_hi=room_hi, sweeps=f.sweeps)

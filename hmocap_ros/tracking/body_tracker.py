@@ -28,7 +28,7 @@ finite cost) count as a collapsed fit. The estimated shape is kept while the per
 for fewer than ``lost.forget_shape_frames`` frames, then estimated anew for the next person.
 
 Inter-frame prediction: the thesis' kernel is a zero-mean Gaussian around the last estimate.
-Before the filter runs, the particles' pelvis position is shifted by ``filter.velocity_gain``
+Before the filter runs, the particles' pelvis position is shifted by :data:`VELOCITY_GAIN`
 times the estimate's last frame-to-frame displacement: a constant-velocity prior. A walking
 or running person moves 5-12 cm per frame, several times the Gaussian's std; limbs reverse
 too quickly for such a prior to help them.
@@ -69,23 +69,25 @@ from hmocap_ros.frame_sets import FramePeriod
 from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
 from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
-from hmocap_ros.tracking.body_layers import BodySchedule, pose_kernel, root_room_limits, schedule_for
-from hmocap_ros.tracking.detector_driven import DetectorDriven
+from hmocap_ros.tracking.body_layers import (JUMP_FRACTION, JUMP_SCALE, RESEED_FRACTION,
+                                             SURVIVAL_RATE, BodySchedule, pose_kernel,
+                                             root_room_limits)
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.tracking.detection_assignment import EFFECTOR_LABELS, Assigned
 from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape, size_corrections
 from hmocap_ros.tracking.keypoint_first import BLOCK_KEYPOINTS, KeypointFirst
 from hmocap_ros.tracking.keypoint_fit import load_keypoint_model
 from hmocap_ros.tracking.layer_weighting import fit_cost, layer_vertices, layer_weight_fn, warm_up
-from hmocap_ros.tracking.limb_proposals import LimbProposer
+from hmocap_ros.tracking.limb_proposals import PROPOSAL_FRACTION, LimbProposer
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
 from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
 from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult, stage_timings
+from hmocap_ros.tracking.schedules import schedule_for
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
 from hmocap_ros.detection.visual_hull import room_bounds
 
-__all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "BodyTracker", "TrackResult",
-           "TrackerParams", "TrackerState"]
+__all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "VELOCITY_GAIN", "BodyTracker",
+           "TrackResult", "TrackerParams", "TrackerState"]
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +104,11 @@ MAX_ELAPSED_PERIODS = 4
 #: the detector's region needs a few frames to find a person who just came in, and a silhouette
 #: start-up costs seconds of CPU per frame, which a live tracker cannot spend
 KEYPOINT_START_WAIT_S = 2.0
+#: Share of the estimate's last frame-to-frame pelvis displacement added to the particles
+#: before filtering (module docstring): 1, a constant-velocity prior for the pelvis, where the
+#: thesis' kernel is a zero-velocity Gaussian; a walking person's 5-12 cm per frame are
+#: several times that Gaussian's std.
+VELOCITY_GAIN = 1.0
 
 
 def working_scale(cameras, width: int) -> float:
@@ -148,17 +155,15 @@ class BodyTracker:
         self.research = ResearchPolicy(p.research)
         self.keypoint_first = None
         if self.method.keypoint_first:
-            f = p.filter
             lo, hi = root_room_limits(*self.room)
-            kernel = pose_kernel(self.skel, lo, hi, f.jump_fraction, f.jump_scale,
-                                 f.reseed_fraction)
+            kernel = pose_kernel(self.skel, lo, hi, JUMP_FRACTION, JUMP_SCALE, RESEED_FRACTION)
             landmarks = load_keypoint_model()
             self.keypoint_first = KeypointFirst(model, p.keypoints,
-                                                self.schedule.n_particles, f.survival_rate,
+                                                self.schedule.n_particles, SURVIVAL_RATE,
                                                 kernel, (lo, hi), landmarks["offsets"])
             self._size_corrections = size_corrections(landmarks["size_corrections"])
-        self.driven = (DetectorDriven(model, self.schedule.layer_blocks, p.detector)
-                       if self.method.uses_detector and self.keypoint_first is None else None)
+        #: what makes the detections drive propagation (dd-hpf), else None
+        self.driven = self.method.detection_driver(model, self.schedule.layer_blocks)
         #: why the last frame set ran the silhouette filter instead of the keypoint-first one
         self.fallback_reason = ""
         self._fallback_logged = False
@@ -243,7 +248,7 @@ class BodyTracker:
         rest = self.fitness.rest(shape)
         terms = self.driven.layer_terms(assigned, rest) if self.driven is not None else None
         return layer_weight_fn(self.fitness, self.model, self.schedule, self._layer_vertices,
-                               self.params.weighting, obs, rest, terms)
+                               obs, rest, terms)
 
     # ------------------------------------------------------------------ update
 
@@ -378,8 +383,8 @@ class BodyTracker:
                                            self.rng, n)
             particles = kf.first_diffusion(particles, uncertain, periods, self.rng)
             weight = layer_weight_fn(self.fitness, self.model, schedule,
-                                     kf.layer_vertices(schedule), self.params.weighting, obs,
-                                     rest, kf.terms(schedule, fit, detections, rest))
+                                     kf.layer_vertices(schedule), obs, rest,
+                                     kf.terms(schedule, fit, detections, rest))
             try:
                 res = lpf_run(particles, schedule.filter, weight, self.rng)
             except ValueError as err:
@@ -503,7 +508,7 @@ class BodyTracker:
             reference = self._predict()
             periods = min(self._elapsed[1], MAX_ELAPSED_PERIODS)
             self._diffuse_elapsed(periods)
-            if self.params.filter.proposal_fraction > 0.0 and self.estimate is not None:
+            if PROPOSAL_FRACTION > 0.0 and self.estimate is not None:
                 timings["proposals"] = self._propose(obs, reference)
             if self.driven is not None and detections is not None and reference is not None:
                 t1 = time.perf_counter()
@@ -580,7 +585,7 @@ class BodyTracker:
         # scored where the body is predicted to be (pelvis moved by its velocity), not where
         # the last frame left it: a runner's hips are 12 cm further on
         self.proposer.apply(self.particles, reference, rest, obs, self.fitness.faces,
-                            self.params.filter.proposal_fraction, self.rng,
+                            PROPOSAL_FRACTION, self.rng,
                             cost_fn=lambda x: self.fitness.costs(x, obs, rest))
         return time.perf_counter() - t1 - (self.fitness.times.weighting_seconds() - spent)
 
@@ -652,7 +657,7 @@ class BodyTracker:
         if self.estimate is None:
             return None
         predicted = self.estimate.copy()
-        gain = self.params.filter.velocity_gain
+        gain = VELOCITY_GAIN
         if self._previous_estimate is None or gain <= 0.0:
             return predicted
         dofs = self.skel.translation_dofs

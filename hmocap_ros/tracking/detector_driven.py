@@ -18,26 +18,31 @@ import logging
 import numpy as np
 
 from hmocap_ros.detection.detections import Detections
+from hmocap_ros.detection.detectors import carries_labels
 from hmocap_ros.detection.greedy_assignment import classify
 from hmocap_ros.tracking.detection_assignment import (EFFECTOR_LABELS, HEAD_EXCLUSION,
                                                       MAX_DISTANCE, Assigned, detection_cost,
                                                       reacquire_hands)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 
-__all__ = ["DetectorDriven"]
+__all__ = ["REFINE_KAPPA", "DetectorDriven"]
 
 log = logging.getLogger(__name__)
+
+#: Weight kappa (per metre) of the detection cost of eq. 2.20 in the refinement layer
+#: (eq. 2.21): two metres of hand distance weigh as much as a whole-image silhouette XOR
+#: of 1 (the costs' scale, eq. 2.8), so a hand a few cm off outweighs a few pixels.
+REFINE_KAPPA = 2.0
 
 
 class DetectorDriven:
     """The detections and IK particles of one tracker (see the module docstring).
 
     model: the tracking body; layer_blocks: per weighting of the schedule, the blocks it
-    concentrates on (the final layer's is empty); params: the tracker's ``detector`` group.
+    concentrates on (the final layer's is empty).
     """
 
-    def __init__(self, model, layer_blocks, params):
-        self.params = params
+    def __init__(self, model, layer_blocks):
         self.ik = IKProposer(model)
         names = list(model.joint_names)
         self.n_joints = len(names)
@@ -53,7 +58,7 @@ class DetectorDriven:
                ) -> Assigned:
         """The detections assigned around the predicted pose: ``joints`` (J, 3) and its
         end-effectors ``targets`` (5, 3) (module docstring)."""
-        if detections.detector == "skin":
+        if not carries_labels(detections):  # candidates by eq. 2.19 and re-acquisition
             cand = detections.positions
             assigned = np.full((len(EFFECTOR_LABELS), 3), np.nan)
             upsilon = np.asarray(MAX_DISTANCE)
@@ -84,9 +89,9 @@ class DetectorDriven:
         """Per weighting, ``cost_fn(particles, joints) -> (N,)`` added to its silhouette cost,
         or None: on the final layer, eq. 2.20's hand term (the refinement layer, eq. 2.21).
         None when nothing was detected."""
-        if assigned is None or self.params.refine_kappa <= 0 or not len(assigned.detections):
+        if assigned is None or not len(assigned.detections):
             return None
-        kappa, ik = self.params.refine_kappa, self.ik
+        kappa, ik = REFINE_KAPPA, self.ik
         detected = assigned.assigned
 
         def refinement(particles: np.ndarray, joints: np.ndarray) -> np.ndarray:

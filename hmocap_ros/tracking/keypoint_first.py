@@ -101,7 +101,7 @@ MAX_RESIDUAL = 0.08
 EXPLAINED_STD = 0.5
 #: weight (per metre) of the keypoint term of every layer, and the largest distance (m) one
 #: keypoint adds to it: a keypoint the check kept wrongly costs a bounded amount (the values
-#: of the thesis' refinement layer, eq. 2.21, ``detector.refine_kappa``)
+#: of the thesis' refinement layer, eq. 2.21, :data:`~.detector_driven.REFINE_KAPPA`)
 KAPPA, CAP = 2.0, 0.25
 
 

@@ -18,7 +18,8 @@ import numpy as np
 
 from hmocap_ros.render.silhouette import observed_counts
 from hmocap_ros.tracking.body_fitness import Observation, serial_below
-from hmocap_ros.tracking.observation_boxes import (LAYER_ANCHORS, chain_lengths, layer_boxes,
+from hmocap_ros.tracking.observation_boxes import (BOX_MARGIN, BOX_REACH, BOX_SPREAD,
+                                                   LAYER_ANCHORS, chain_lengths, layer_boxes,
                                                    layer_vertex_indices, part_boxes_3d,
                                                    reach_box)
 
@@ -31,14 +32,14 @@ def layer_vertices(model, schedule) -> list:
             for blocks, boxed in zip(schedule.layer_blocks, schedule.boxed)]
 
 
-def layer_weight_fn(fitness, model, schedule, vertices: list, weighting, obs: Observation,
-                    rest, terms=None):
+def layer_weight_fn(fitness, model, schedule, vertices: list, obs: Observation, rest,
+                    terms=None):
     """``weight_fn(particles, layer) -> costs`` of ``schedule`` on ``obs``.
 
     fitness: the :class:`~.body_fitness.SilhouetteFitness`; vertices: :func:`layer_vertices`;
-    weighting: the tracker's ``weighting`` settings (box reach, spread, margin); rest: the
-    shaped rest body. terms: per weighting a ``cost_fn(particles, joints)`` added to its
-    silhouette cost (detections, eq. 2.21) or None; or None.
+    the boxes are :mod:`.observation_boxes`' (``BOX_*``); rest: the shaped rest body.
+    terms: per weighting a ``cost_fn(particles, joints)`` added to its silhouette cost
+    (detections, eq. 2.21) or None; or None.
     """
     lengths = chain_lengths(model, rest)
 
@@ -49,11 +50,10 @@ def layer_weight_fn(fitness, model, schedule, vertices: list, weighting, obs: Ob
             block = schedule.layer_blocks[layer][0]
             if block in LAYER_ANCHORS:
                 anchor = joints[:, model.joint_index(LAYER_ANCHORS[block][0])]
-                lo, hi = reach_box(anchor.mean(axis=0), lengths[block], weighting.box_reach,
-                                   weighting.box_margin)
+                lo, hi = reach_box(anchor.mean(axis=0), lengths[block], BOX_REACH,
+                                   BOX_MARGIN)
             else:
-                lo, hi = part_boxes_3d(verts, vertices[layer], weighting.box_spread,
-                                       weighting.box_margin)
+                lo, hi = part_boxes_3d(verts, vertices[layer], BOX_SPREAD, BOX_MARGIN)
             boxes = layer_boxes(lo, hi, obs.K, obs.R, obs.t, obs.D, obs.width, obs.height)
         cost = fitness.costs_from_verts(verts, obs, boxes)
         if terms is not None and terms[layer] is not None:

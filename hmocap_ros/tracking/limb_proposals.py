@@ -43,8 +43,12 @@ from hmocap_ros.body.skeleton import SWING_NORM_MAX, pose_to_local_rotations
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import render_silhouettes
 
-__all__ = ["LIMBS", "LimbProposalParams", "LimbProposer"]
+__all__ = ["LIMBS", "PROPOSAL_FRACTION", "LimbProposalParams", "LimbProposer"]
 
+#: Share of the particles that, per arm and frame, take their arm DoFs from these proposals
+#: (the tracker, its start-up and its fresh searches): the rest keep the Gaussian kernel, so
+#: the proposals add modes the silhouettes show without replacing the filter's own.
+PROPOSAL_FRACTION = 0.35
 #: limb -> (swing DoFs, other DoFs, proximal chain, distal chain); chains name joints or
 #: end sites, the proximal one starts at the joint the swing turns.
 LIMBS = {

@@ -33,8 +33,16 @@ from functools import lru_cache
 from hmocap_ros.geometry.distortion import coefficients8, monotonic_radius2
 from hmocap_ros.geometry.projection import project_one_view
 
-__all__ = ["LAYER_ANCHORS", "LAYER_PARTS", "box_corners", "chain_lengths", "layer_boxes",
-           "layer_vertex_indices", "part_boxes_3d", "reach_box"]
+__all__ = ["BOX_MARGIN", "BOX_REACH", "BOX_SPREAD", "LAYER_ANCHORS", "LAYER_PARTS",
+           "box_corners", "chain_lengths", "layer_boxes", "layer_vertex_indices",
+           "part_boxes_3d", "reach_box"]
+
+#: The boxes of the tracker's layers (eq. 2.15 leaves their size open): a limb layer's box
+#: reaches BOX_REACH times the length of the chain it moves around the joint it rotates, so
+#: that any pose the layer's particles try stays inside; the torso's spans BOX_SPREAD standard
+#: deviations of the particles' part positions around the mean part; both with a BOX_MARGIN
+#: (m) for the silhouettes' blur at the working resolution.
+BOX_REACH, BOX_SPREAD, BOX_MARGIN = 1.05, 2.0, 0.05
 
 LAYER_PARTS = {
     "torso": ("pelvis", "spine", "chest", "neck", "head", "l_clavicle", "r_clavicle"),

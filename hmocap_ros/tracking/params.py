@@ -1,9 +1,12 @@
 """Settings of the body tracker: one frozen dataclass of groups, each handed down whole.
 
-:class:`TrackerParams` holds the method and seven groups; the ``body_tracker`` node
-declares every leaf by its dotted name (``startup.height_margin``), the evaluator takes
-``--param filter.sweeps=1``. Defaults: 4 cameras at 640x480, 25 fps, about 3,500 weight
-evaluations per frame.
+:class:`TrackerParams` holds the method and seven groups of what a room's user sets
+(budgets, working resolutions, start and loss rules); the ``body_tracker`` node declares
+every leaf by its dotted name (``startup.min_views``), the evaluator takes ``--param
+filter.sweeps=1``. The method's own settings, which no room changes, are constants beside
+the code that uses them, each with its reason (:mod:`.body_layers`, :mod:`.observation_boxes`,
+:mod:`.limb_proposals`, :mod:`.detector_driven`, :mod:`.startup`, :mod:`.body_tracker`).
+Defaults: 4 cameras at 640x480, 25 fps, about 3,500 weight evaluations per frame.
 """
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ from hmocap_ros.params import group, param
 from hmocap_ros.tracking.keypoint_first import KeypointFirstParams
 from hmocap_ros.tracking.methods import get_method, method_names
 
-__all__ = ["DetectorParams", "EstimationParams", "FilterParams", "HullParams", "LostParams", "ResearchParams",
+__all__ = ["EstimationParams", "FilterParams", "HullParams", "LostParams", "ResearchParams",
            "StartupParams", "TRACKER_MESHES", "TrackerParams", "WeightingParams"]
 
 #: Shipped meshes a tracker can render its particles with (``weighting.mesh``).
@@ -30,7 +33,8 @@ def _check(checks) -> None:
 
 @dataclass(frozen=True)
 class FilterParams:
-    """The layered particle filter (alg. 1-5) and its kernels."""
+    """The layered particle filter's budget (alg. 1-5); its kernels and annealing are the
+    constants of :mod:`.body_layers`."""
 
     particles: int = param(0, "Particles per layer; 0: the method's budget (about 3,500 weight "
                               "evaluations per frame over its layers).")
@@ -41,49 +45,19 @@ class FilterParams:
                            "others are filtered, at half the kernel std, with the particles "
                            "per layer cut so the evaluations per frame stay the same "
                            "(hpf-apo: 15 x 234); 1: one layer per block as in the thesis.")
-    survival_rate: float = param(0.3, "Particle survival rate in (0, 1] that sets each layer's "
-                                      "annealing exponent beta (eq. 2.9).")
-    refine_nu: float = param(0.25, "Hierarchical methods: decay in [0, 1) of the re-diffusion "
-                                   "of the blocks already filtered (alg. 3); 0: none.")
-    sigma_scale: float = param(1.0, "Factor (> 0) on the per-DoF inter-frame motion std sigma0 "
-                                    "(body_layers.MOTION_RMS).")
-    jump_fraction: float = param(0.1, "Fraction in [0, 1] of the particles that each kernel "
-                                      "diffuses with jump_scale times the std, so that a joint "
-                                      "can leave a wrong mode of the silhouette cost; 0: plain "
-                                      "Gaussian.")
-    jump_scale: float = param(4.0, "Std factor (>= 1) of the wide component of the kernel.")
-    reseed_fraction: float = param(0.1, "Fraction in [0, 1] of the particles whose limb DoFs "
-                                        "being diffused are drawn uniformly within the joint "
-                                        "limits, so that a lost limb can be found again.")
-    velocity_gain: float = param(1.0, "Fraction in [0, 1] of the estimate's last "
-                                      "frame-to-frame pelvis displacement added to the "
-                                      "particles before filtering (1: constant velocity; 0: "
-                                      "the thesis' zero-velocity Gaussian).")
-    proposal_fraction: float = param(0.35, "Fraction in [0, 1] of the particles that, per arm "
-                                           "and frame, take their arm DoFs from "
-                                           "silhouette-driven proposals (limb_proposals); 0: "
-                                           "Gaussian only.")
 
     def __post_init__(self):
         _check([
             (self.particles >= 0 and self.layers >= 0, "filter.particles, filter.layers must "
                                                        "be >= 0"),
             (self.sweeps >= 1, "filter.sweeps must be >= 1"),
-            (0.0 < self.survival_rate <= 1.0, "filter.survival_rate must lie in (0, 1]"),
-            (0.0 <= self.refine_nu < 1.0, "filter.refine_nu must lie in [0, 1)"),
-            (self.sigma_scale > 0.0, "filter.sigma_scale must be > 0"),
-            (0.0 <= self.jump_fraction <= 1.0 and self.jump_scale >= 1.0,
-             "need 0 <= filter.jump_fraction <= 1 and filter.jump_scale >= 1"),
-            (0.0 <= self.reseed_fraction <= 1.0, "filter.reseed_fraction must lie in [0, 1]"),
-            (0.0 <= self.velocity_gain <= 1.0, "filter.velocity_gain must lie in [0, 1]"),
-            (0.0 <= self.proposal_fraction <= 1.0,
-             "filter.proposal_fraction must lie in [0, 1]"),
         ])
 
 
 @dataclass(frozen=True)
 class WeightingParams:
-    """The silhouette weighting (eq. 2.8) and the observation boxes (eq. 2.15)."""
+    """The silhouette weighting (eq. 2.8); the observation boxes (eq. 2.15) are
+    :mod:`.observation_boxes`' constants."""
 
     working_width: int = param(160, "Width (pixels, >= 16) at which silhouettes are compared: "
                                     "the masks are reduced by the scale that takes the rig's "
@@ -94,32 +68,12 @@ class WeightingParams:
                                   "'tracking_coarse' (1,000, about one per silhouette pixel "
                                   "at 160x120: about twice as fast per frame, a few mm less "
                                   "accurate).")
-    box_reach: float = param(1.05, "Observation boxes of the limb layers: half-size (> 0) as a "
-                                   "multiple of the length of the chain the layer moves, "
-                                   "around the joint it rotates (eq. 2.15).")
-    box_spread: float = param(2.0, "Observation boxes around parts (torso layer): standard "
-                                   "deviations of the particles' part positions added around "
-                                   "the mean part.")
-    box_margin: float = param(0.05, "Observation boxes: margin (m) around the parts.")
 
     def __post_init__(self):
         _check([
             (self.working_width >= 16, "weighting.working_width must be >= 16"),
             (self.mesh in TRACKER_MESHES, f"weighting.mesh must be one of {TRACKER_MESHES}"),
-            (self.box_reach > 0.0, "weighting.box_reach must be > 0"),
-            (self.box_spread >= 0.0 and self.box_margin >= 0.0,
-             "weighting.box_spread and weighting.box_margin must be >= 0"),
         ])
-
-
-@dataclass(frozen=True)
-class DetectorParams:
-    """Detector-driven tracking (``dd-hpf``, sec. 2.5)."""
-
-    refine_kappa: float = param(2.0, "Weight kappa (per metre, >= 0) of the detection cost of "
-                                     "eq. 2.20 in the refinement layer (eq. 2.21).")
-    def __post_init__(self):
-        _check([(self.refine_kappa >= 0.0, "detector.refine_kappa must be >= 0")])
 
 
 @dataclass(frozen=True)
@@ -147,19 +101,6 @@ class StartupParams:
     particles: int = param(250, "Particles per layer (>= 2) of the start-up filter.")
     working_width: int = param(320, "Width (pixels, >= 16) of the start-up weighting's "
                                     "silhouettes (as weighting.working_width).")
-    rejection_tau: float = param(0.7, "Acceptance ratio tau in (0, 1] of the "
-                                      "rejection-sampling shape kernel (eq. 2.13).")
-    height_margin: float = param(0.03, "During the start-up frames: when the followed visual "
-                                       "hull's top stands more than this (m) above the top of "
-                                       "a start-up hypothesis' body (both read in the column "
-                                       "over its head, height_column), its global scale and "
-                                       "pelvis height grow by their ratio (the segmentation "
-                                       "can lose the head in the frame a track starts on); 0: "
-                                       "off.")
-    height_column: float = param(0.15, "Radius (m, on the floor) of the column around each "
-                                       "start-up hypothesis' head top in which the hull's top "
-                                       "and the body's are read, so that a hand raised beside "
-                                       "the head tops neither; 0: the highest points.")
 
     def __post_init__(self):
         # a list from ROS or the command line; kept as a tuple so the params stay immutable
@@ -170,9 +111,6 @@ class StartupParams:
             (self.frames >= 1 and self.particles >= 2,
              "startup.frames >= 1, startup.particles >= 2"),
             (self.working_width >= 16, "startup.working_width must be >= 16"),
-            (0.0 < self.rejection_tau <= 1.0, "startup.rejection_tau must lie in (0, 1]"),
-            (self.height_margin >= 0.0, "startup.height_margin must be >= 0"),
-            (self.height_column >= 0.0, "startup.height_column must be >= 0"),
             (not r or (len(r) == 4 and np.isfinite(r).all() and r[0] < r[2] and r[1] < r[3]),
              "startup.track_region must be empty or [x_min, z_min, x_max, z_max] with "
              "min < max"),
@@ -290,9 +228,8 @@ class TrackerParams:
                                   "sweeps), 'dd-hpf' (hpf-apo driven by hand detections: IK "
                                   "particles and the refinement layer, sec. 2.5). kf-hpf and "
                                   "dd-hpf take the extremity detections.")
-    filter: FilterParams = group(FilterParams, "layered particle filter and kernels")
-    weighting: WeightingParams = group(WeightingParams, "silhouette weighting and boxes")
-    detector: DetectorParams = group(DetectorParams, "detector-driven tracking")
+    filter: FilterParams = group(FilterParams, "layered particle filter budget")
+    weighting: WeightingParams = group(WeightingParams, "silhouette weighting")
     keypoints: KeypointFirstParams = group(KeypointFirstParams, "keypoint-first tracking")
     startup: StartupParams = group(StartupParams, "start-up and anthropometry")
     hull: HullParams = group(HullParams, "visual hull")

@@ -28,6 +28,7 @@ import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.detection.detections import Detections
+from hmocap_ros.detection.detectors import carries_labels
 from hmocap_ros.tracking.body_tracker import BodyTracker
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.result import TrackResult
@@ -104,7 +105,7 @@ class PeopleTracker:
             others = [t.position for j, t in enumerate(self.trackers) if j != k]
             others = np.array([p for p in others if p is not None]).reshape(-1, 3)
             mine = detections if (k == 0 or detections is None
-                                  or detections.detector == "skin") else None
+                                  or not carries_labels(detections)) else None
             results.append(tracker.update(masks, stamp_ns, mine,
                                           exclude=others if len(others) else None,
                                           budget_s=budget_s))

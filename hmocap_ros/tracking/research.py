@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator
+from hmocap_ros.tracking.limb_proposals import PROPOSAL_FRACTION
 from hmocap_ros.tracking.params import EstimationParams, ResearchParams, TrackerParams
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS
 
@@ -124,7 +125,7 @@ def fresh_search(params: TrackerParams, fitness, finder, rng: np.random.Generato
     hull = finder.same_person(obs, pelvis)  # the person tracked, nobody else
     if hull is None or hull.top < params.hull.min_height:
         return None
-    pf = params.filter.proposal_fraction
+    pf = PROPOSAL_FRACTION
     search = AnthropometryEstimator(
         fitness, EstimationParams(n_particles=params.startup.particles, frames=1,
                                   estimate_shape=False, proposal_fraction=pf),

@@ -16,6 +16,8 @@ import numpy as np
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator
 from hmocap_ros.tracking.body_fitness import Observation
+from hmocap_ros.tracking.body_layers import SURVIVAL_RATE
+from hmocap_ros.tracking.limb_proposals import PROPOSAL_FRACTION
 from hmocap_ros.tracking.observation_boxes import layer_boxes
 from hmocap_ros.tracking.params import EstimationParams, TrackerParams
 from hmocap_ros.detection.visual_hull import visual_hull
@@ -27,6 +29,13 @@ log = logging.getLogger(__name__)
 #: How far (m, on the floor) the tracked person's hull (start-up) or a fresh search's pose
 #: may lie from where the person was; farther is somebody else.
 SAME_PERSON_RADIUS = 0.5
+#: During the start-up frames: when the followed visual hull's top stands more than
+#: HEIGHT_MARGIN (m) above the top of a start-up hypothesis' body, both read in a column of
+#: radius HEIGHT_COLUMN (m) over its head (so that a hand raised beside the head tops
+#: neither), its global scale and pelvis height grow by their ratio: the segmentation can
+#: lose the head in the frame a track starts on, and the thesis' estimation (sec. 2.3) would
+#: keep the shrunken body.
+HEIGHT_MARGIN, HEIGHT_COLUMN = 0.03, 0.15
 
 
 class HullFinder:
@@ -87,7 +96,7 @@ class StartUp:
 
     def __init__(self, params: TrackerParams, fitness, rng: np.random.Generator, room,
                  shape: BodyShape | None, proposer, obs: Observation, hull):
-        s, f = params.startup, params.filter
+        s = params.startup
         self.params = params
         self.centroid = hull.centroid.copy()
         self.step = np.zeros(3)
@@ -95,12 +104,11 @@ class StartUp:
         est_params = EstimationParams(
             n_particles=s.particles,
             frames=s.frames if (s.estimate_shape and shape is None) else 1,
-            estimate_shape=s.estimate_shape, rejection_tau=s.rejection_tau,
-            survival_rate=f.survival_rate,
-            proposal_fraction=f.proposal_fraction)
+            estimate_shape=s.estimate_shape, survival_rate=SURVIVAL_RATE,
+            proposal_fraction=PROPOSAL_FRACTION)
         self.estimator = AnthropometryEstimator(fitness, est_params, rng, room=room,
                                                 fixed_shape=shape,
-                                                proposer=proposer if f.proposal_fraction > 0
+                                                proposer=proposer if PROPOSAL_FRACTION > 0
                                                 else None)
         self.estimator.start(obs, hull)
 
@@ -114,7 +122,7 @@ class StartUp:
     def follow(self, obs: Observation, finder: HullFinder, translation_dofs) -> None:
         """Move the hypotheses with the visual hull's centroid (a runner crosses a metre
         during a four-frame start-up, far beyond the start-up's diffusion), and grow them
-        to the hull's height (``startup.height_margin``)."""
+        to the hull's height (:data:`HEIGHT_MARGIN`)."""
         hull = finder.same_person(obs, self.centroid)
         if hull is None:
             self.step = np.zeros(3)
@@ -128,14 +136,11 @@ class StartUp:
         for hyp in self.estimator.hypotheses:
             hyp.particles[:, translation_dofs] += step
             hyp.estimate[translation_dofs] += step
-        s = self.params.startup
-        if s.height_margin > 0.0:
-            grown = self.estimator.grow_to(hull, s.height_margin, s.height_column)
-            if any(f != 1.0 for f in grown):
-                log.info("start-up: the visual hull's top stands above the body (%s; the "
-                         "whole hull's top %.2f m); scale x %s",
-                         "over its head" if s.height_column > 0.0 else "highest points",
-                         hull.top, ", ".join(f"{f:.3f}" for f in grown))
+        grown = self.estimator.grow_to(hull, HEIGHT_MARGIN, HEIGHT_COLUMN)
+        if any(f != 1.0 for f in grown):
+            log.info("start-up: the visual hull's top stands above the body (over its head; "
+                     "the whole hull's top %.2f m); scale x %s",
+                     hull.top, ", ".join(f"{f:.3f}" for f in grown))
 
     def finish(self, n_particles: int, rng: np.random.Generator, skel):
         """The first tracked frame's state: ``(estimate, particles, previous estimate,

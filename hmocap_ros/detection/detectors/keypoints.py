@@ -1,0 +1,38 @@
+"""A 2D landmark network per view, triangulated over the views
+(:mod:`hmocap_ros.detection.keypoint_detector`): labelled head, hands, feet and limb joints."""
+from __future__ import annotations
+
+from hmocap_ros.detection.detections import Detections
+from hmocap_ros.detection.keypoint_detector import KeypointDetector
+
+__all__ = ["KeypointsDetector"]
+
+
+class KeypointsDetector:
+    """The landmark network on the crop MediaPipe's pipeline gives it (from the view's
+    previous landmarks, the previous skeleton or a pose detector), triangulated robustly over
+    the views, with confidences (beyond the thesis, whose sec. 2.5 admits any part detector).
+    Each view keeps a track from frame set to frame set (:meth:`reset` drops them). Settings:
+    ``params.keypoints``; ``model_path`` the landmark network (None: the shipped one)."""
+
+    name = "keypoints"
+    description = "BlazePose landmarks per view, triangulated over the views"
+    labelled = True
+
+    def __init__(self, cameras, params, model_path=None):
+        self.network = KeypointDetector(tuple(cameras), params.keypoints, model_path)
+
+    @property
+    def views_left_out(self) -> dict:
+        """Per camera name, the frame sets whose landmarks disagreed with the others."""
+        return self.network.views_left_out
+
+    def reset(self) -> None:
+        self.network.reset()
+
+    def close(self) -> None:
+        self.network.close()
+
+    def detect(self, images, masks, previous=None) -> Detections:
+        kp = self.network.detect(images, masks, previous)
+        return Detections(self.name, tuple(kp.labels), kp.positions, kp.scores)
