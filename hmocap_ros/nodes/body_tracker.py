@@ -63,8 +63,8 @@ DETECTIONS = "extremities"
 #: live kf-hpf skips a frame set without detections while the extremity topic has a publisher
 #: and detections came this recently, or none yet since the first frame set this recently (the
 #: extremity node starts later than the masks, and takes the newest set when it falls behind:
-#: its latency reaches 2.5 s on a loaded 2-core machine); longer without any, the frame sets are
-#: tracked on the silhouettes
+#: its latency reaches seconds on a loaded machine, docs/tracking.md section 7); longer without
+#: any, the frame sets are tracked on the silhouettes
 KEYPOINTS_ALIVE_NS = 5_000_000_000
 #: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, keep last 100)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)

@@ -144,8 +144,8 @@ class ResearchParams:
     every: int = param(25, "Every this many tracked frames a fresh start-up search (heading "
                            "search with limb proposals and Powell fits from the visual hull, "
                            "at the estimated shape) is weighed against the frame's estimate; "
-                           "the filter is re-seeded from it when it fits better (1.5-2 s on "
-                           "that frame on 2 cores); 0: off.")
+                           "the filter is re-seeded from it when it fits better (the search "
+                           "costs seconds on that frame: docs/tracking.md, section 3.2); 0: off.")
     backwards_frames: int = param(5, "Frames over which the pelvis' travel is measured: when it "
                                      "moved faster than backwards_step and the body faces away "
                                      "from the travel by more than facing_limit, a fresh "
