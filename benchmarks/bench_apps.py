@@ -21,10 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.processes import loopback_dds_env
-
 from hmocap_examples import scenes
 from hmocap_examples.drive import drive_light_switch, drive_presence, light_reactions, reaction_ms
+from hmocap_ros.processes import loopback_dds_env
 
 
 def main(argv=None) -> int:

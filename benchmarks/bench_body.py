@@ -17,8 +17,15 @@ import time
 
 import numpy as np
 
-from hmocap_ros.body import (forward_kinematics, load_body_model, pose_to_local_rotations,
-                             sample_pose, sample_shape, skin_vertices, skinning_matrices)
+from hmocap_ros.body import (
+    forward_kinematics,
+    load_body_model,
+    pose_to_local_rotations,
+    sample_pose,
+    sample_shape,
+    skin_vertices,
+    skinning_matrices,
+)
 
 
 def best_time(fn, repeats: int) -> float:

@@ -46,6 +46,7 @@ from hmocap_ros.gestures.params import FeatureParams, PatchParams, TrainParams
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # test fixtures
 from fixtures.toy_depth import TOY_CLASSES, focal_scale, toy_sequence  # noqa: E402
+
 from hmocap_sim.gesture_dataset import generate  # noqa: E402
 
 

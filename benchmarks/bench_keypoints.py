@@ -32,8 +32,14 @@ import time
 import cv2
 import numpy as np
 
-from hmocap_ros.detection import (KeypointDetector, KeypointParams, PoseDetector, PoseLandmarkNetwork,
-                                  box_roi, foreground_box)
+from hmocap_ros.detection import (
+    KeypointDetector,
+    KeypointParams,
+    PoseDetector,
+    PoseLandmarkNetwork,
+    box_roi,
+    foreground_box,
+)
 from hmocap_ros.detection.keypoint_network import DEFAULT_MODEL, INPUT_SIZE
 from hmocap_ros.detection.keypoint_roi import crop_transform
 

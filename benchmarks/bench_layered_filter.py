@@ -16,10 +16,18 @@ import time
 
 import numpy as np
 
-from hmocap_ros.lpf import (Layer, annealed_filter, annealed_weights,
-                                 beta_for_survival_rate, gaussian_kernel, gpf_run,
-                                 hierarchical_filter, layered_resample, lpf_run,
-                                 systematic_resample_indices)
+from hmocap_ros.lpf import (
+    Layer,
+    annealed_filter,
+    annealed_weights,
+    beta_for_survival_rate,
+    gaussian_kernel,
+    gpf_run,
+    hierarchical_filter,
+    layered_resample,
+    lpf_run,
+    systematic_resample_indices,
+)
 
 
 def best_time(fn, repeats: int) -> float:

@@ -50,8 +50,16 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.eval.pipeline_stats import (core_ms_per_set, frame_period_s, header_stamp_ns, latency_ms,
-                                            latency_summary, pose_errors, process_cpu_seconds, replay_timing)
+from hmocap_ros.eval.pipeline_stats import (
+    core_ms_per_set,
+    frame_period_s,
+    header_stamp_ns,
+    latency_ms,
+    latency_summary,
+    pose_errors,
+    process_cpu_seconds,
+    replay_timing,
+)
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
 from hmocap_ros.io.msg_factory import stamp_to_ns

@@ -23,9 +23,20 @@ import numpy as np
 from hmocap_ros.geometry.pinhole_camera import look_at_pose
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import render_silhouettes, xor_counts
-from hmocap_sim.render import (DirectionalLight, Lighting, Material, PointLight, concatenate_meshes,
-                               face_range_mask, grid_quad, kinect_depth, rasterize,
-                               render_shadow_map, shade, vertex_normals)
+from hmocap_sim.render import (
+    DirectionalLight,
+    Lighting,
+    Material,
+    PointLight,
+    concatenate_meshes,
+    face_range_mask,
+    grid_quad,
+    kinect_depth,
+    rasterize,
+    render_shadow_map,
+    shade,
+    vertex_normals,
+)
 from hmocap_sim.render.sensor import add_sensor_noise, downsample
 
 DEFAULT_MESH = "tracking"

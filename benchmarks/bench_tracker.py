@@ -39,17 +39,16 @@ import numpy as np
 from hmocap_ros.body import load_body_model, local_rotations_to_pose
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
-from hmocap_ros.tracking.body_tracker import working_scale
 from hmocap_ros.eval.mocap_eval import tracker_overrides
-from hmocap_ros.params import from_flat
 from hmocap_ros.geometry.projection import project_batch
-from hmocap_ros.render import render_silhouettes
 from hmocap_ros.geometry.rig import load_rig
-from hmocap_sim.retarget import load_motion, place_in_room
-from hmocap_ros.tracking.body_tracker import BodyTracker
+from hmocap_ros.params import from_flat
+from hmocap_ros.render import render_silhouettes
+from hmocap_ros.tracking.body_tracker import BodyTracker, working_scale
 from hmocap_ros.tracking.methods import METHODS, method_names
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker
+from hmocap_sim.retarget import load_motion, place_in_room
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -33,12 +33,19 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from hmocap_ros.geometry.rotations import quaternion_to_matrix
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
-from hmocap_ros.geometry.rotations import quaternion_to_matrix
-from hmocap_ros.io.tf import (DEFAULT_FIXED_FRAME, TF_MESSAGE_TYPE, TF_STATIC_TOPIC, FrameTransform, Y_UP_TO_Z_UP,
-                              frame_transform, tf_message)
+from hmocap_ros.io.tf import (
+    DEFAULT_FIXED_FRAME,
+    TF_MESSAGE_TYPE,
+    TF_STATIC_TOPIC,
+    Y_UP_TO_Z_UP,
+    FrameTransform,
+    frame_transform,
+    tf_message,
+)
 
 DATA = Path(__file__).resolve().parents[1] / "hmocap_ros" / "data"
 DEPTH_BAG = DATA / "demo" / "gestures_depth.mcap"

@@ -51,13 +51,13 @@ class CalibrationSimConfig:
 def generate(config: CalibrationSimConfig, log=print) -> tuple[Path, Path, int]:
     """Render and write one session (module docstring); returns the bag, the rig YAML and the
     number of frames."""
+    from hmocap_ros.geometry.rig import load_rig
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_writer import LATCHED, whole_bag
     from hmocap_ros.io.conversions import numpy_to_image
     from hmocap_ros.io.msg_factory import RosbagsFactory
-    from hmocap_ros.io.typestore import hmocap_typestore
-    from hmocap_ros.geometry.rig import load_rig
     from hmocap_ros.io.rig_messages import rig_to_msg
+    from hmocap_ros.io.typestore import hmocap_typestore
     from hmocap_sim.calibration_path import board_poses
     from hmocap_sim.calibration_render import BoardRenderer
     from hmocap_sim.mocap_outputs import clear_outputs, output_paths, save_rig_yaml

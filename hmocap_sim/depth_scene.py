@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hmocap_ros.geometry import PinholeCamera, look_at
+from hmocap_ros.geometry.projection import project_batch
 from hmocap_sim.render import (
     KinectNoise,
     concatenate_meshes,
@@ -35,7 +36,6 @@ from hmocap_sim.render import (
     kinect_depth,
     rasterize,
 )
-from hmocap_ros.geometry.projection import project_batch
 
 #: Kinect v1 depth intrinsics at 640x480 (focal length in pixels).
 KINECT_FX = 575.0

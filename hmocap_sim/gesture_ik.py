@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hmocap_ros.body.skeleton import clip_pose, pose_to_local_rotations
-from hmocap_sim.gesture_body import Kinematics, Subject, hand_axes, kinematics, unit
 from hmocap_ros.gestures.classes import ALL_GESTURES, class_id
+from hmocap_sim.gesture_body import Kinematics, Subject, hand_axes, kinematics, unit
 
 RESTARTS = 4
 RESTART_ERROR_M = 0.02

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hmocap_ros.gestures.classes import ALL_GESTURES
 from hmocap_sim.gesture_body import (
     FORWARD,
     SIDES,
@@ -25,7 +26,6 @@ from hmocap_sim.gesture_body import (
     unit,
 )
 from hmocap_sim.gesture_ik import PoseSpec, Task
-from hmocap_ros.gestures.classes import ALL_GESTURES
 from hmocap_sim.gesture_pose import (
     PoseContext,
     arm_dofs,

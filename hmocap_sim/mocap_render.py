@@ -34,9 +34,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from hmocap_sim.render.meshes import vertex_normals
 from hmocap_ros.geometry.pinhole_camera import look_at_pose
 from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.geometry.rig import camera_arrays  # noqa: F401 (re-exported)
+from hmocap_sim.appearance import PERSON_MATERIALS, PersonLook
+from hmocap_sim.render.meshes import vertex_normals
 from hmocap_sim.render.rasterize import rasterize
 from hmocap_sim.render.shading import (
     DirectionalLight,
@@ -47,8 +49,6 @@ from hmocap_sim.render.shading import (
     shade,
 )
 from hmocap_sim.render.shadow import ShadowMap
-from hmocap_ros.geometry.rig import camera_arrays  # noqa: F401 (re-exported)
-from hmocap_sim.appearance import PERSON_MATERIALS, PersonLook
 from hmocap_sim.room import Room, ball_mesh
 
 __all__ = ["RenderOptions", "FrameState", "RenderedFrame", "MocapRenderer", "BALL_RADIUS",
@@ -283,7 +283,7 @@ class MocapRenderer:
         """The lamp's shadow map for the scene ``vertices`` (static part cached)."""
         K, R, t, _ = self._lamp_view
         dyn = []
-        for name, (v0, v1, f0, f1) in self.ranges.items():
+        for name, (_v0, _v1, f0, f1) in self.ranges.items():
             if name == "static":
                 continue
             dyn.append(self.faces[f0:f1])

@@ -31,8 +31,8 @@ def make_rig(n_cameras: int = 4, width: int = 640, height: int = 480):
     point within a few pixels of the centre, mild barrel distortion), drawn from a fixed
     seed per camera count: a calibrated installation does not change between recordings.
     """
-    from hmocap_ros.geometry import look_at
     from hmocap_ros.config_files import find_config_file
+    from hmocap_ros.geometry import look_at
     from hmocap_ros.geometry.rig import Rig, load_rig
 
     if not 1 <= n_cameras <= 8:

@@ -59,14 +59,14 @@ from hmocap_sim.retarget_landmarks import (
 )
 from hmocap_sim.retarget_motion import Motion, heading_of, place_in_room, resample
 from hmocap_sim.retarget_rotations import (
-    joint_forward_kinematics,
     end_site_forward_kinematics,
+    joint_forward_kinematics,
+    kabsch,
     nearest_rotation,
+    swing,
     topological_order,
     unit_vectors,
     up_axis_rotation,
-    kabsch,
-    swing,
 )
 
 __all__ = [

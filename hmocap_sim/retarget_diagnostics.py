@@ -9,7 +9,7 @@ import numpy as np
 from hmocap_sim.bvh import Bvh, forward_kinematics
 from hmocap_sim.retarget_landmarks import FAMILY_LANDMARKS, bvh_point
 from hmocap_sim.retarget_motion import Motion
-from hmocap_sim.retarget_rotations import joint_forward_kinematics, end_site_forward_kinematics, unit_vectors
+from hmocap_sim.retarget_rotations import end_site_forward_kinematics, joint_forward_kinematics, unit_vectors
 
 __all__ = ["bone_direction_errors"]
 

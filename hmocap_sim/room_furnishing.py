@@ -292,7 +292,7 @@ def _plant(f: Furnishing) -> None:
     hx, hz, rng = f.spec.half_x, f.spec.half_z, f.rng
     px_, pz_ = -hx + 0.35, hz - 0.35
     f.mesh.add_mesh(cone_mesh((px_, 0.0, pz_), 0.15, 0.2, 0.42, 16), f.material["pot"])
-    for k in range(7):
+    for _ in range(7):
         ang = rng.uniform(0, 2 * math.pi)
         r = rng.uniform(0.0, 0.16)
         centre = (px_ + r * math.sin(ang), 0.55 + rng.uniform(0.0, 0.7), pz_ + r * math.cos(ang))

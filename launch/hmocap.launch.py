@@ -25,11 +25,12 @@ hmocap_ros.processes.
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+
+from launch import LaunchDescription
 
 ARGUMENTS = {
     "rig_file": ("", "Rig calibration YAML (intrinsics and camera poses in the room); empty = the "

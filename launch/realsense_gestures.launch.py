@@ -14,11 +14,12 @@ the forest's offsets are rescaled to. The gestures come out on ``/gestures`` in 
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+
+from launch import LaunchDescription
 
 CAMERA = "/camera/camera"  # <camera_namespace>/<camera_name> of rs_launch.py
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
-from hmocap_ros.io.bag_writer import LATCHED, BagWriter, BagWriteError, whole_bag
+from hmocap_ros.io.bag_writer import LATCHED, BagWriteError, BagWriter, whole_bag
 from hmocap_ros.io.conversions import image_to_numpy, numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header, stamp_to_ns
 from hmocap_ros.io.typestore import hmocap_typestore

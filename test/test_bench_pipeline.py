@@ -12,9 +12,17 @@ import numpy as np
 import pytest
 
 from hmocap_ros.commands.bench import split_arguments
-from hmocap_ros.eval.pipeline_stats import (core_ms_per_set, frame_period_s, header_stamp_ns, latency_ms,
-                                            latency_summary, pose_errors, process_cpu_seconds, process_rss_mb,
-                                            replay_timing)
+from hmocap_ros.eval.pipeline_stats import (
+    core_ms_per_set,
+    frame_period_s,
+    header_stamp_ns,
+    latency_ms,
+    latency_summary,
+    pose_errors,
+    process_cpu_seconds,
+    process_rss_mb,
+    replay_timing,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -10,9 +10,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from hmocap_ros.body.anthropometry import BodyShape, apply_shape
+from hmocap_ros.frame_sets import FramePeriod, FrameSetQueue
 from hmocap_ros.io import tf
 from hmocap_ros.tracking import body_frames as bf
-from hmocap_ros.frame_sets import FramePeriod, FrameSetQueue
 from hmocap_ros.tracking.body_tracker import MAX_ELAPSED_PERIODS, VELOCITY_GAIN, BodyTracker
 from hmocap_ros.tracking.params import TrackerParams
 

@@ -11,10 +11,24 @@ import numpy as np
 import pytest
 import trimesh
 
-from hmocap_ros.body import (ENTITY_NAMES, TABLE_2_1, BodyShape, apply_shape, entity_sizes,
-                             forward_kinematics, load_body_model, local_rotations_to_pose,
-                             pose_to_local_rotations, read_body_model, rest_pose, sample_pose,
-                             sample_shape, shape_log_prior, skin_vertices, skinning_matrices)
+from hmocap_ros.body import (
+    ENTITY_NAMES,
+    TABLE_2_1,
+    BodyShape,
+    apply_shape,
+    entity_sizes,
+    forward_kinematics,
+    load_body_model,
+    local_rotations_to_pose,
+    pose_to_local_rotations,
+    read_body_model,
+    rest_pose,
+    sample_pose,
+    sample_shape,
+    shape_log_prior,
+    skin_vertices,
+    skinning_matrices,
+)
 from hmocap_ros.body.rotations import axis_angle_matrix
 from hmocap_ros.geometry.rotations import rotvec_to_matrix
 
@@ -92,8 +106,8 @@ def test_coarse_tracking_mesh_is_the_same_body(tracking):
     landmarks and DoFs of the 2,400-triangle body, and at the working resolution (160x120)
     the same silhouette up to a sliver along its outline."""
     from hmocap_ros.geometry.projection import project_batch
-    from hmocap_ros.render import render_silhouettes
     from hmocap_ros.geometry.rig import camera_arrays, load_rig
+    from hmocap_ros.render import render_silhouettes
 
     coarse = tracking.with_mesh("tracking_coarse")
     assert coarse.name == "tracking_coarse" and len(coarse.faces) == 1000

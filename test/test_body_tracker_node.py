@@ -21,7 +21,6 @@ import json
 import sys
 
 import numpy as np
-import pytest
 
 from hmocap_ros.demo import DEMO_BAG, DEMO_RIG
 from hmocap_ros.eval.metrics import match_joints

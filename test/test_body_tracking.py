@@ -16,33 +16,33 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hmocap_ros.body import (BodyShape, entity_sizes, local_rotations_to_pose,
-                             rest_pose)
-from hmocap_ros.params import (field_overrides, flat_fields, flat_record, from_flat,
-                               replace_dotted)
+from hmocap_ros.body import BodyShape, entity_sizes, local_rotations_to_pose, rest_pose
+from hmocap_ros.detection.visual_hull import Hull, carve, room_bounds, visual_hull
 from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.lpf.kernels import rejection_kernel
+from hmocap_ros.params import field_overrides, flat_fields, flat_record, from_flat, replace_dotted
 from hmocap_ros.render import render_silhouettes
-from hmocap_sim.render.reference import silhouette_reference
-from hmocap_sim.retarget import load_motion, place_in_room
-from hmocap_ros.tracking.anthropometry_estimation import (SHAPE_KEYS, SHAPE_PARAMS,
-                                                          AnthropometryEstimator, Hypothesis,
-                                                          shape_from_state, shape_to_state)
-from hmocap_ros.tracking.params import EstimationParams
+from hmocap_ros.tracking.anthropometry_estimation import (
+    SHAPE_KEYS,
+    SHAPE_PARAMS,
+    AnthropometryEstimator,
+    Hypothesis,
+    shape_from_state,
+    shape_to_state,
+)
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness, downsample_mask
 from hmocap_ros.tracking.body_layers import BODY_BLOCKS, SWEEP_DECAY, body_sigma0, clip_body_pose
-from hmocap_ros.tracking.schedules import make_schedule, schedule_for
 from hmocap_ros.tracking.body_tracker import STATES, BodyTracker, TrackerParams
 from hmocap_ros.tracking.limb_proposals import LimbProposer
-from hmocap_ros.lpf.kernels import rejection_kernel
 from hmocap_ros.tracking.methods import METHODS, TrackingMethod, get_method, method_names
 from hmocap_ros.tracking.methods.hpf import HierarchicalMethod
-from hmocap_ros.tracking.observation_boxes import (LAYER_PARTS, layer_boxes,
-                                                   layer_vertex_indices, part_boxes_3d)
-from hmocap_ros.tracking.params import (FilterParams, ResearchParams, StartupParams,
-                                        WeightingParams)
+from hmocap_ros.tracking.observation_boxes import LAYER_PARTS, layer_boxes, layer_vertex_indices, part_boxes_3d
+from hmocap_ros.tracking.params import EstimationParams, FilterParams, ResearchParams, StartupParams, WeightingParams
 from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
+from hmocap_ros.tracking.schedules import make_schedule, schedule_for
 from hmocap_ros.tracking.startup import StartUp
-from hmocap_ros.detection.visual_hull import Hull, carve, room_bounds, visual_hull
+from hmocap_sim.render.reference import silhouette_reference
+from hmocap_sim.retarget import load_motion, place_in_room
 
 ROOT = Path(__file__).resolve().parents[1]
 CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"

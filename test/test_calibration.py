@@ -10,12 +10,12 @@ import pytest
 
 from hmocap_ros.calibration.board import BoardSpec
 from hmocap_ros.calibration.bundle_adjustment import bundle_adjust
-from hmocap_ros.geometry.rotations import rotation_angle_deg, rotvec_to_matrix
 from hmocap_ros.calibration.observations import Observations
 from hmocap_ros.calibration.pipeline import calibrate_rig
 from hmocap_ros.calibration.room_frame import FLOOR_ROTATION
 from hmocap_ros.cli import main as hmocap
 from hmocap_ros.geometry.rig import load_rig
+from hmocap_ros.geometry.rotations import rotation_angle_deg, rotvec_to_matrix
 from hmocap_sim.calibration_path import board_poses
 from hmocap_sim.mocap_rig import make_rig
 

@@ -10,12 +10,17 @@ import cv2
 import numpy as np
 import pytest
 
-from hmocap_ros.calibration.formats import (FORMATS, CalibrationFormatError, detect_format,
-                                            load_calibration_rig, read_calibration,
-                                            save_calibration_rig)
+from hmocap_ros.calibration.formats import (
+    FORMATS,
+    CalibrationFormatError,
+    detect_format,
+    load_calibration_rig,
+    read_calibration,
+    save_calibration_rig,
+)
 from hmocap_ros.calibration.formats.world_frame import guess_up, up_rotation
-from hmocap_ros.geometry import PinholeCamera, look_at
 from hmocap_ros.cli import main
+from hmocap_ros.geometry import look_at
 from hmocap_ros.geometry.rig import Rig, load_rig
 
 DATA = Path(__file__).parent / "data" / "calibration"

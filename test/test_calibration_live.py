@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hmocap_ros.geometry.rotations import rotation_angle_deg
 from hmocap_ros.calibration.live_collection import FrameSetCollector, enough_views
 from hmocap_ros.cli import main as hmocap
-from hmocap_ros.processes import NodeProcess, loopback_dds_env
 from hmocap_ros.geometry.rig import load_rig
+from hmocap_ros.geometry.rotations import rotation_angle_deg
+from hmocap_ros.processes import NodeProcess, loopback_dds_env
 
 BOARD = ["--board", "5x4", "--square", "0.3", "--marker", "0.21"]
 N_FRAMES = 22  # 1 s on the floor + 10 s carried, at 2 fps

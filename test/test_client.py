@@ -5,9 +5,21 @@ rosbags factory, as a bag holds them)."""
 import numpy as np
 import pytest
 
-from hmocap_ros.client import (Body, BoxPlace, OncePerHold, PlacesFile, PointPlace, RoomState, joint_above,
-                               nearest_hand, pointing_angle, pointing_at, pointing_ray, read_places,
-                               zones_containing)
+from hmocap_ros.client import (
+    Body,
+    BoxPlace,
+    OncePerHold,
+    PlacesFile,
+    PointPlace,
+    RoomState,
+    joint_above,
+    nearest_hand,
+    pointing_angle,
+    pointing_at,
+    pointing_ray,
+    read_places,
+    zones_containing,
+)
 from hmocap_ros.client.frames import StaticFrames
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
 from hmocap_ros.io.tf import Y_UP_TO_Z_UP, FrameTransform, tf_message

@@ -11,20 +11,18 @@ import numpy as np
 import pytest
 
 from hmocap_ros.body import rest_pose
-from hmocap_ros.params import from_flat
-from hmocap_ros.geometry.projection import project_batch
-from hmocap_ros.render import render_silhouettes
+from hmocap_ros.detection.detections import Detections
+from hmocap_ros.detection.greedy_assignment import classify
 from hmocap_ros.detection.skin import skin_probability
-from hmocap_sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
+from hmocap_ros.detection.skin_extremities import SkinExtremityDetector, SkinExtremityParams, surface_points, visibility
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.params import from_flat
+from hmocap_ros.render import render_silhouettes
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
-from hmocap_ros.detection.detections import MODEL_JOINT, Detections
-from hmocap_ros.detection.skin_extremities import (SkinExtremityDetector, SkinExtremityParams,
-                                                   surface_points, visibility)
-from hmocap_ros.detection.greedy_assignment import classify
-from hmocap_ros.tracking.detection_assignment import (MAX_DISTANCE, detection_cost,
-                                                      reacquire_hands)
+from hmocap_ros.tracking.detection_assignment import MAX_DISTANCE, detection_cost, reacquire_hands
 from hmocap_ros.tracking.ik_proposals import IKProposer
+from hmocap_sim.appearance import SHIRT_COLOURS, SKIN_TONES, TROUSER_COLOURS
 
 STAMP0 = 1_700_000_000_000_000_000
 

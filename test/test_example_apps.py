@@ -13,11 +13,10 @@ messages, never on the wall clock.
 import re
 from pathlib import Path
 
-from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.processes import loopback_dds_env
-
 from hmocap_examples import scenes
 from hmocap_examples.drive import drive_light_switch, drive_presence, light_reactions, reaction_ms
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.processes import loopback_dds_env
 
 ROOT = Path(__file__).resolve().parents[1]
 #: (ms) the issue's target for an app's reaction to the output it depends on

@@ -11,8 +11,7 @@ import pytest
 from hmocap_ros.cli import main as cli_main
 from hmocap_ros.demo import DEMO_BAG
 from hmocap_ros.detection.detections import Detections, detections_from_msg, fill_msg
-from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
-                                                     skeleton_labels)
+from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams, ExtremityPipeline, skeleton_labels
 from hmocap_ros.detection.keypoint_network import ModelFileError
 from hmocap_ros.eval.extremity_eval import frame_truths, score_detections, true_extremities
 from hmocap_ros.eval.mocap_frames import load_frames

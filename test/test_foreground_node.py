@@ -8,9 +8,9 @@ from hmocap_ros.demo import DEMO_BAG
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.segmentation import mask_scores
 from hmocap_ros.nodes.foreground_segmentation import is_colour
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
+from hmocap_ros.segmentation import mask_scores
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
 NODE = ("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",

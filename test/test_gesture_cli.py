@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from fixtures.gesture_cli import command_args, shuffled_votes, tiny_gesture_bag
+
 from hmocap_ros.commands import eval_gestures, train_gestures
 from hmocap_ros.eval import gesture_eval as ge
 from hmocap_ros.gestures import load_forest, save_forest

@@ -7,12 +7,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from fixtures.toy_depth import add_sensor_noise, toy_detector_params, toy_forest, toy_frame
 
 from hmocap_ros.gestures import DetectorParams, FeatureParams, Forest, GestureDetector, Tree
 from hmocap_ros.gestures.depth_features import depth_to_metres
 from hmocap_ros.gestures.grid_votes import forest_grid_proba, forest_grid_votes, grid_shape, pad_for_forest
 from hmocap_ros.gestures.params import DepthFormat
-from fixtures.toy_depth import add_sensor_noise, toy_detector_params, toy_forest, toy_frame
 
 SHAPE = (240, 320)
 FRAME_NS = 33_333_333

@@ -7,6 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from fixtures.toy_depth import TOY_CLASSES, toy_forest, toy_sequence, toy_train_params
 
 from hmocap_ros.gestures import (
     FeatureParams,
@@ -20,7 +21,6 @@ from hmocap_ros.gestures import (
 from hmocap_ros.gestures.forest import balanced_error, frames_to_metres
 from hmocap_ros.gestures.patches import mine_hard_negatives
 from hmocap_ros.gestures.tree_growth import information_gain
-from fixtures.toy_depth import TOY_CLASSES, toy_forest, toy_sequence, toy_train_params
 from hmocap_ros.gestures.trees import apply_tree
 
 SHAPE = (240, 320)

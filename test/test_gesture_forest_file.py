@@ -7,6 +7,7 @@ import zipfile
 
 import numpy as np
 import pytest
+from fixtures.toy_depth import toy_detector_params, toy_forest, toy_frame
 
 from hmocap_ros.gestures import (
     FeatureParams,
@@ -20,7 +21,6 @@ from hmocap_ros.gestures import (
     save_forest,
 )
 from hmocap_ros.gestures.forest_file import FORMAT_NAME, FORMAT_VERSION
-from fixtures.toy_depth import toy_detector_params, toy_forest, toy_frame
 
 SHAPE = (240, 320)
 TREE_ARRAYS = ("feature", "threshold", "left", "right", "counts", "depth")

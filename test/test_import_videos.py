@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from hmocap_ros.calibration.formats import save_calibration_rig
-from hmocap_ros.geometry import look_at, project_points, triangulate
 from hmocap_ros.cli import main
+from hmocap_ros.geometry import look_at, project_points, triangulate
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_rgb
-from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io.rig_messages import rig_from_msg
 from hmocap_ros.video_import.camera_fit import rotate_camera, upright_turns
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_body_tracking import clip_poses, render_masks, scaled_to_height, subject_shape
+from test_detector_driven import arms_out
 
 from hmocap_ros.body import ENTITY_NAMES, entity_sizes, sample_pose
 from hmocap_ros.body.anthropometry import apply_shape
@@ -18,16 +20,14 @@ from hmocap_ros.body.kinematics import end_site_positions, forward_kinematics
 from hmocap_ros.body.pose_points import PosePoints
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.detection.detections import Detections
-from hmocap_ros.params import from_flat
 from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.params import from_flat
 from hmocap_ros.render import render_silhouettes
 from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.keypoint_anthropometry import MEASURES, KeypointShape
 from hmocap_ros.tracking.keypoint_first import KeypointFirstParams, contradicted
 from hmocap_ros.tracking.keypoint_fit import KeypointFit, load_keypoint_model
-from test_body_tracking import clip_poses, render_masks, scaled_to_height, subject_shape
-from test_detector_driven import arms_out
 
 STAMP0 = 1_700_000_000_000_000_000
 

@@ -19,12 +19,21 @@ import re
 import numpy as np
 import pytest
 
-from hmocap_ros.geometry import project_points
-from hmocap_ros.detection import (DEFAULT_MODEL, KeypointDetector, KeypointParams, ModelFileError,
-                                  PoseDetector, PoseLandmarkNetwork, Roi, box_roi, foreground_box)
+from hmocap_ros.detection import (
+    DEFAULT_MODEL,
+    KeypointDetector,
+    KeypointParams,
+    ModelFileError,
+    PoseDetector,
+    PoseLandmarkNetwork,
+    Roi,
+    box_roi,
+    foreground_box,
+)
 from hmocap_ros.detection.keypoint_network import LANDMARK_NAMES, refine_from_heatmap
 from hmocap_ros.detection.keypoint_roi import alignment_roi, crop_transform
 from hmocap_ros.detection.pose_detector import DEFAULT_DETECTOR_MODEL
+from hmocap_ros.geometry import project_points
 
 # landmark -> the body model's joint of the same place
 JOINTS = {"left_shoulder": "l_shoulder", "right_shoulder": "r_shoulder", "left_elbow": "l_elbow",

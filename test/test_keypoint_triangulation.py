@@ -11,14 +11,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hmocap_ros.geometry import look_at, project_points
 from hmocap_ros.detection.keypoint_detector import foreground_box, previous_pixels
-from hmocap_ros.detection.params import KeypointParams
-from hmocap_ros.detection.keypoint_roi import box_roi, skeleton_roi
 from hmocap_ros.detection.keypoint_network import LANDMARK_NAMES, NUM_LANDMARKS, ViewLandmarks
-from hmocap_ros.detection.keypoint_triangulation import (HEAD_OFFSET, HIP_WIDENING,
-                                                         KEYPOINT_LABELS, Keypoints3D,
-                                                         triangulate_views)
+from hmocap_ros.detection.keypoint_roi import box_roi, skeleton_roi
+from hmocap_ros.detection.keypoint_triangulation import (
+    HEAD_OFFSET,
+    HIP_WIDENING,
+    KEYPOINT_LABELS,
+    Keypoints3D,
+    triangulate_views,
+)
+from hmocap_ros.detection.params import KeypointParams
+from hmocap_ros.geometry import look_at, project_points
 
 # (x, y, z) of the left landmarks (the subject's left is +x when facing +z; y up), mirrored for
 # the right ones; the nose on the midline.

@@ -6,14 +6,27 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from hmocap_ros.lpf import (Layer, LayeredFilter, annealed_filter, annealed_weights,
-                                 annealing_stds, beta_for_survival_rate, clip_to_bounds,
-                                 effective_sample_size, gaussian_kernel, gpf_run,
-                                 hierarchical_filter, identity_kernel, layer_diffusion_stds,
-                                 layered_resample, lpf_run, survival_rate,
-                                 systematic_resample_indices)
 from fixtures.synthetic_chain import BLOCK_DIMS, N_DIMS, make_chain_problem
+
+from hmocap_ros.lpf import (
+    Layer,
+    LayeredFilter,
+    annealed_filter,
+    annealed_weights,
+    annealing_stds,
+    beta_for_survival_rate,
+    clip_to_bounds,
+    effective_sample_size,
+    gaussian_kernel,
+    gpf_run,
+    hierarchical_filter,
+    identity_kernel,
+    layer_diffusion_stds,
+    layered_resample,
+    lpf_run,
+    survival_rate,
+    systematic_resample_indices,
+)
 
 
 def quadratic_cost(target: np.ndarray, scale: float = 0.1):

@@ -11,8 +11,8 @@ import pytest
 from hmocap_ros.body import rest_pose, sample_pose
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import render_silhouettes, xor_counts
-from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.render.fused_xor import xor_counts_from_vertices
+from hmocap_ros.tracking.body_fitness import SilhouetteFitness
 from hmocap_ros.tracking.limb_proposals import LIMBS, LimbProposer
 
 

@@ -12,16 +12,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from fixtures.image_free import WRISTS, image_free_baselines
+
 from hmocap_ros.body import BodyShape, load_body_model
 from hmocap_ros.cli import main as cli_main
 from hmocap_ros.eval.metrics import joint_errors, match_joints, mpjpe, summarize_errors
+from hmocap_ros.geometry.rig import Rig, load_rig
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import default_factory, make_header
-from hmocap_ros.geometry.rig import Rig, load_rig
 from hmocap_ros.io.rig_messages import rig_to_msg
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -299,8 +299,8 @@ def test_eval_tracks_with_a_given_rig(tmp_path, capsys):
     from dataclasses import replace
 
     from hmocap_ros.eval.mocap_frames import load_frames
-    from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.geometry.rig import save_rig
+    from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.rig_messages import rig_from_msg
 
     with BagReader(DEMO_BAG) as reader:

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from hmocap_ros.demo import DEMO_BAG, DEMO_RIG, run_demo
+from hmocap_ros.geometry.rig import load_rig
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header, stamp_to_ns
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
-from hmocap_ros.geometry.rig import load_rig
 
 PUBLISHER = r"""
 import sys, time, rclpy

@@ -13,8 +13,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
 from fixtures.gesture_cli import tiny_gesture_bag
+
 from hmocap_ros.cli import main as hmocap
 from hmocap_ros.commands.detect_gestures import output_topics
 from hmocap_ros.demo import DEMO_BAG

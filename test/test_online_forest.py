@@ -9,20 +9,25 @@ import json
 
 import numpy as np
 import pytest
-
-from fixtures.toy_depth import TOY_CLASSES, toy_detector_params, toy_frame, toy_sequence
 from fixtures.gesture_cli import command_args, shuffled_votes, tiny_gesture_bag
+from fixtures.toy_depth import TOY_CLASSES, toy_detector_params, toy_frame, toy_sequence
+
 from hmocap_ros.commands import eval_gestures, train_gestures
 from hmocap_ros.eval import gesture_eval as ge
 from hmocap_ros.gestures.detection import GestureDetector
 from hmocap_ros.gestures.forest_file import load_forest, save_forest
-from hmocap_ros.gestures.hard_negatives import (frame_negatives, hard_negative_pixels, negative_counts,
-                                                random_negative_pixels, vote_density)
+from hmocap_ros.gestures.hard_negatives import (
+    frame_negatives,
+    hard_negative_pixels,
+    negative_counts,
+    random_negative_pixels,
+    vote_density,
+)
 from hmocap_ros.gestures.online_forest import OnlineForest, bagging_weights, train_online_on_frames
 from hmocap_ros.gestures.online_statistics import split_decision
 from hmocap_ros.gestures.params import FeatureParams, OnlineParams, OnlineTrainParams
-from hmocap_ros.gestures.trees import Forest, Tree
 from hmocap_ros.gestures.patches import collect_samples
+from hmocap_ros.gestures.trees import Forest, Tree
 
 SHAPE = (240, 320)
 TOY = OnlineTrainParams(online=OnlineParams(n_trees=5, max_depth=12, alpha=60)).for_focal(525.0 * SHAPE[1] / 640)

@@ -4,8 +4,7 @@ from dataclasses import dataclass
 import pytest
 
 from hmocap_ros.eval.mocap_eval import tracker_overrides
-from hmocap_ros.params import (field_overrides, flat_fields, flat_record, from_flat, group,
-                               param, replace_dotted)
+from hmocap_ros.params import field_overrides, flat_fields, flat_record, from_flat, group, param, replace_dotted
 from hmocap_ros.segmentation import ForegroundParams
 from hmocap_ros.tracking.params import StartupParams, TrackerParams
 

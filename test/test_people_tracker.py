@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_body_tracking import SMALL as SMALL_BUDGET
+from test_body_tracking import STAMP0, clip_poses, render_masks, subject_shape
 
 from hmocap_ros.params import from_flat
 from hmocap_ros.tracking.body_tracker import BodyTracker, TrackerParams
 from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
-from test_body_tracking import SMALL as SMALL_BUDGET
-from test_body_tracking import STAMP0, clip_poses, render_masks, subject_shape
 
 #: the tracker tests' small budget, with the hierarchical filter
 SMALL = from_flat(TrackerParams, {**SMALL_BUDGET, "method": "hpf"})

@@ -14,8 +14,7 @@ from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy, image_to_rgb
 from hmocap_ros.io.rig_messages import rig_from_msg
-from hmocap_ros.segmentation import (ForegroundParams, PersonMaskedBackground, background_models,
-                                     mask_scores)
+from hmocap_ros.segmentation import ForegroundParams, PersonMaskedBackground, background_models, mask_scores
 
 DEMO_BAG = Path(__file__).resolve().parents[1] / "hmocap_ros" / "data" / "demo" / "mocap_4cam.mcap"
 H, W = 60, 80

@@ -10,9 +10,22 @@ import pytest
 from hmocap_ros.geometry.pinhole_camera import look_at_pose as look_at
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.render import observed_counts, render_silhouettes, xor_counts
-from hmocap_sim.render import (DirectionalLight, KinectNoise, Lighting, Material, PointLight,
-                               concatenate_meshes, depth_to_millimetres, face_range_mask, grid_quad,
-                               interpolate, kinect_depth, rasterize, render_shadow_map, shade)
+from hmocap_sim.render import (
+    DirectionalLight,
+    KinectNoise,
+    Lighting,
+    Material,
+    PointLight,
+    concatenate_meshes,
+    depth_to_millimetres,
+    face_range_mask,
+    grid_quad,
+    interpolate,
+    kinect_depth,
+    rasterize,
+    render_shadow_map,
+    shade,
+)
 from hmocap_sim.render.depth import projector_shadow
 from hmocap_sim.render.reference import coverage_pairs, silhouette_reference, zbuffer_reference
 from hmocap_sim.render.sensor import add_sensor_noise, random_illumination

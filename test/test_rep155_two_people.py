@@ -13,15 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_body_tracking import STAMP0, clip_poses, render_masks, subject_shape
 
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.bag_writer import LATCHED, BagWriter
 from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory, stamp_to_ns
+from hmocap_ros.io.rig_messages import rig_to_msg
 from hmocap_ros.io.tf import from_transform_stamped
 from hmocap_ros.processes import loopback_dds_env, replay_through_nodes
-from hmocap_ros.io.rig_messages import rig_to_msg
-from test_body_tracking import STAMP0, clip_poses, render_masks, subject_shape
 
 FRAMES = 5
 SMALL = ["-p", "method:=hpf", "-p", "filter.particles:=120", "-p", "filter.layers:=0",

@@ -13,8 +13,14 @@ import cv2
 import numpy as np
 import pytest
 
-from hmocap_ros.segmentation import BackgroundModel, ForegroundParams, compile_kernels, mask_scores
-from hmocap_ros.segmentation import background_model, mask_cleanup
+from hmocap_ros.segmentation import (
+    BackgroundModel,
+    ForegroundParams,
+    background_model,
+    compile_kernels,
+    mask_cleanup,
+    mask_scores,
+)
 from hmocap_ros.segmentation.mask_cleanup import (
     clean_mask,
     fill_small_holes,

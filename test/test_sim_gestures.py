@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,11 +14,9 @@ from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import camera_info_to_dict, image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_sim.render import grid_quad
 from hmocap_sim import gesture_dataset as gd
 from hmocap_sim import gesture_set as gs
 from hmocap_sim.commands import gestures as sim_gestures
-from hmocap_sim.params import DATA_DIR
 from hmocap_sim.depth_scene import (
     box,
     depth_camera,
@@ -27,6 +24,8 @@ from hmocap_sim.depth_scene import (
     pixel_to_optical,
     render_depth,
 )
+from hmocap_sim.params import DATA_DIR
+from hmocap_sim.render import grid_quad
 
 DEMO = DATA_DIR / "demo" / "gestures_depth.mcap"
 

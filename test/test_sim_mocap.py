@@ -14,24 +14,24 @@ import pytest
 
 from hmocap_ros.body import BodyShape, load_body_model
 from hmocap_ros.geometry import project_points
+from hmocap_ros.geometry.projection import project_batch
+from hmocap_ros.geometry.rig import load_rig
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_numpy, joint_state_to_dict
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.geometry.projection import project_batch
-from hmocap_ros.render.silhouette import render_silhouettes
-from hmocap_ros.geometry.rig import load_rig
 from hmocap_ros.io.rig_messages import rig_from_msg
+from hmocap_ros.render.silhouette import render_silhouettes
 from hmocap_sim import mocap_lighting, mocap_subject
 from hmocap_sim.appearance import PersonAppearance, dress, sample_appearance
 from hmocap_sim.mocap_dataset import MocapSimConfig, generate, make_rig
-from hmocap_sim.params import DATA_DIR
 from hmocap_sim.mocap_render import (
     FrameState,
     MocapRenderer,
     RenderOptions,
     camera_arrays,
 )
+from hmocap_sim.params import DATA_DIR
 from hmocap_sim.room import build_room
 
 N_BG, N_MOTION = 2, 6

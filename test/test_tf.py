@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from hmocap_ros.geometry.rig import Rig, load_rig, save_rig
 from hmocap_ros.geometry.rotations import quaternion_to_matrix
 from hmocap_ros.io import tf
 from hmocap_ros.io.msg_factory import RclpyFactory, RosbagsFactory, stamp_to_ns
 from hmocap_ros.io.typestore import hmocap_typestore
 from hmocap_ros.processes import NodeProcess, loopback_dds_env
-from hmocap_ros.geometry.rig import Rig, load_rig, save_rig
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG = ROOT / "config" / "rig_example.yaml"

@@ -9,7 +9,6 @@ import json
 
 import numpy as np
 import pytest
-
 from fixtures.image_free import WRISTS, image_free_baselines
 
 pytestmark = pytest.mark.slow

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import yaml
 
-from hmocap_ros.demo import _cameras, DEMO_BAG, body_topics
+from hmocap_ros.demo import DEMO_BAG, _cameras, body_topics
 from hmocap_ros.io.tf import DEFAULT_FIXED_FRAME
 from hmocap_ros.nodes.camera_rig_publisher import CameraRigPublisherConfig
 

@@ -44,11 +44,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
 from hmocap_ros.eval.gesture_eval import SWEEP_MIN_SCORE, evaluate_gestures, plot_pr, read_gesture_bag  # noqa: E402
-from hmocap_ros.gestures.params import DetectorParams  # noqa: E402
 from hmocap_ros.gestures.forest import train_forest_on_frames  # noqa: E402
 from hmocap_ros.gestures.forest_file import load_forest, save_forest  # noqa: E402
-from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
+from hmocap_ros.gestures.params import DetectorParams  # noqa: E402
 from hmocap_sim import gesture_dataset as gd  # noqa: E402
 from hmocap_sim.gesture_set import GESTURE_CLASSES  # noqa: E402
 

@@ -50,6 +50,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
 import gesture_table as gt  # noqa: E402
+
 from hmocap_ros.commands import train_gestures  # noqa: E402
 from hmocap_ros.eval.gesture_eval import evaluate_gestures, read_gesture_bag  # noqa: E402
 from hmocap_ros.gestures.forest_file import load_forest  # noqa: E402

@@ -42,8 +42,7 @@ from hmocap_ros.eval.mocap_frames import load_frames  # noqa: E402
 from hmocap_ros.io import topics  # noqa: E402
 from hmocap_ros.io.bag_reader import BagReader  # noqa: E402
 from hmocap_ros.io.msg_factory import stamp_to_ns  # noqa: E402
-from hmocap_ros.tracking.keypoint_anthropometry import (  # noqa: E402
-    MEASURES, KeypointShape, model_log_measures)
+from hmocap_ros.tracking.keypoint_anthropometry import MEASURES, KeypointShape, model_log_measures  # noqa: E402
 from hmocap_ros.tracking.keypoint_fit import KEYPOINT_MODEL_FILE, KeypointFit  # noqa: E402
 
 

@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
 import gesture_table as gt  # noqa: E402
+
 from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
 from hmocap_ros.eval.gesture_eval import evaluate_gestures, read_gesture_bag  # noqa: E402
 from hmocap_ros.gestures.forest import train_forest_on_frames  # noqa: E402

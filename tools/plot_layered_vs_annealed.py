@@ -17,11 +17,13 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import sys
+
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hmocap_ros.lpf import annealed_filter, hierarchical_filter, lpf_run  # noqa: E402
-import sys
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # test fixtures
 from fixtures.synthetic_chain import BLOCK_DIMS, make_chain_problem  # noqa: E402
 

@@ -23,9 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .kinematics import SparseWeights, end_site_positions, forward_kinematics, skin_vertices, skinning_matrices
 from .shape_deformation import ShapeFactors, apply_shape
-from .kinematics import (SparseWeights, end_site_positions, forward_kinematics, skin_vertices,
-                         skinning_matrices)
 from .skeleton import Skeleton, build_skeleton, pose_to_local_rotations, rest_pose
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"

@@ -17,8 +17,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from hmocap_ros.geometry.rotations import compose, invert, mean_rotation, rotation_angle_deg
 from hmocap_ros.calibration.observations import Observations
+from hmocap_ros.geometry.rotations import compose, invert, mean_rotation, rotation_angle_deg
 
 __all__ = ["estimate_intrinsics", "view_poses", "chain_cameras", "initial_board_poses"]
 

@@ -9,11 +9,10 @@ from typing import Callable
 import numpy as np
 
 from hmocap_ros.calibration.bundle_adjustment import BundleResult, bundle_adjust
-from hmocap_ros.geometry.rotations import compose, invert
-from hmocap_ros.calibration.initialisation import (chain_cameras, initial_board_poses,
-                                                   view_poses)
+from hmocap_ros.calibration.initialisation import chain_cameras, initial_board_poses, view_poses
 from hmocap_ros.calibration.observations import Observations
 from hmocap_ros.calibration.room_frame import room_from_camera, room_from_floor_board
+from hmocap_ros.geometry.rotations import compose, invert
 
 __all__ = ["CalibrationError", "RigSolution", "calibrate_rig"]
 

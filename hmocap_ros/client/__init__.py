@@ -11,8 +11,15 @@ the package's nodes have.
 """
 
 from hmocap_ros.client.bodies import Body, Gesture
-from hmocap_ros.client.geometry import (BoxPlace, PointPlace, joint_above, nearest_hand, pointing_angle,
-                                        pointing_at, pointing_ray)
+from hmocap_ros.client.geometry import (
+    BoxPlace,
+    PointPlace,
+    joint_above,
+    nearest_hand,
+    pointing_angle,
+    pointing_at,
+    pointing_ray,
+)
 from hmocap_ros.client.places import PlacesFile, read_places
 from hmocap_ros.client.room_state import RoomState
 from hmocap_ros.client.triggers import OncePerHold, zones_containing

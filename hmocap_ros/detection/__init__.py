@@ -11,11 +11,9 @@ the silhouette and views whose left and right are swapped weighed or left out
 """
 
 from hmocap_ros.detection.keypoint_detector import KeypointDetector, foreground_box
-from hmocap_ros.detection.keypoint_network import (DEFAULT_MODEL, LANDMARK_NAMES,
-                                                   PoseLandmarkNetwork, ViewLandmarks)
+from hmocap_ros.detection.keypoint_network import DEFAULT_MODEL, LANDMARK_NAMES, PoseLandmarkNetwork, ViewLandmarks
 from hmocap_ros.detection.keypoint_roi import Roi, box_roi
-from hmocap_ros.detection.keypoint_triangulation import (KEYPOINT_LABELS, Keypoints3D,
-                                                         triangulate_views)
+from hmocap_ros.detection.keypoint_triangulation import KEYPOINT_LABELS, Keypoints3D, triangulate_views
 from hmocap_ros.detection.params import KeypointParams
 from hmocap_ros.detection.pose_detector import PoseDetection, PoseDetector
 from hmocap_ros.detection.tflite_model import ModelFileError

@@ -40,18 +40,17 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
 from typing import Sequence
 
 import cv2
 import numpy as np
 
-from hmocap_ros.geometry import project_points
 from hmocap_ros.detection.keypoint_network import PoseLandmarkNetwork, ViewLandmarks
 from hmocap_ros.detection.keypoint_roi import Roi, box_roi, landmarks_roi, skeleton_roi
 from hmocap_ros.detection.keypoint_triangulation import Keypoints3D, triangulate_views
-from hmocap_ros.detection.pose_detector import PoseDetector
 from hmocap_ros.detection.params import KeypointParams
+from hmocap_ros.detection.pose_detector import PoseDetector
+from hmocap_ros.geometry import project_points
 
 __all__ = ["CROP_SOURCES", "KeypointDetector", "foreground_box", "previous_pixels"]
 

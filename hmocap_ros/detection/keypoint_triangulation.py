@@ -54,8 +54,8 @@ from typing import Sequence
 
 import numpy as np
 
-from hmocap_ros.geometry import ROOM_UP, project_points, reprojection_errors, triangulate
 from hmocap_ros.detection.keypoint_network import NUM_LANDMARKS, ViewLandmarks
+from hmocap_ros.geometry import ROOM_UP, project_points, reprojection_errors, triangulate
 
 __all__ = ["KEYPOINT_LABELS", "COMPOSITION", "MIRROR", "TRIANGULATED_POINTS", "Keypoints3D", "view_keypoints",
            "robust_points", "resolve_swaps", "triangulate_views"]

@@ -39,10 +39,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from hmocap_ros.geometry import Projection, project_points
-from hmocap_ros.params import param
-from hmocap_ros.geometry.rig import camera_arrays
 from hmocap_ros.detection.visual_hull import carve, coarse_people, room_bounds
+from hmocap_ros.geometry import Projection, project_points
+from hmocap_ros.geometry.rig import camera_arrays
+from hmocap_ros.params import param
 
 __all__ = ["SkinExtremityParams", "SkinCandidates", "SkinExtremityDetector", "surface_points",
            "visibility", "extremity_probability", "cluster_candidates"]

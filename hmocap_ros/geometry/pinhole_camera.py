@@ -12,8 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
-from hmocap_ros.geometry.distortion import (DISTORTION_MODELS, coefficients8, monotonic_radius2,
-                                            undistort_normalized)
+from hmocap_ros.geometry.distortion import DISTORTION_MODELS, coefficients8, monotonic_radius2, undistort_normalized
 from hmocap_ros.geometry.projection import DEFAULT_MIN_DEPTH, project_points
 from hmocap_ros.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
 

@@ -36,16 +36,17 @@ from hmocap_ros.gestures.depth_features import depth_to_metres, evaluate_tests, 
 from hmocap_ros.gestures.detection import Detection, GestureDetector
 from hmocap_ros.gestures.forest import TreeReport, train_forest, train_forest_on_frames, train_forest_on_samples
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest, read_header, save_forest
+from hmocap_ros.gestures.online_forest import OnlineForest, train_online_on_frames
 from hmocap_ros.gestures.params import (
     DepthFormat,
     DetectorParams,
     FeatureParams,
     ForestParams,
+    OnlineParams,
+    OnlineTrainParams,
     PatchParams,
     TrainParams,
 )
-from hmocap_ros.gestures.online_forest import OnlineForest, train_online_on_frames
-from hmocap_ros.gestures.params import OnlineParams, OnlineTrainParams
 from hmocap_ros.gestures.patches import SampleSet, collect_samples, mine_hard_negatives
 from hmocap_ros.gestures.tree_growth import grow_tree
 from hmocap_ros.gestures.trees import Forest, PendingTests, Tree

@@ -29,7 +29,6 @@ detection see the same numbers.
 
 from __future__ import annotations
 
-
 import numba as nb
 import numpy as np
 from numba import types

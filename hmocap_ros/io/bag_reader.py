@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from typing import Any
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import ConnectionExtRosbag2, QosDurability
@@ -24,7 +24,6 @@ from rosbags.interfaces import ConnectionExtRosbag2, QosDurability
 from .msg_factory import stamp_to_ns
 from .summaryless_mcap import summaryless_view
 from .typestore import hmocap_typestore
-
 
 _log = logging.getLogger(__name__)
 

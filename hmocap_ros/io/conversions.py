@@ -23,16 +23,30 @@ gathers their public names.
 
 from hmocap_ros.io.camera_info import CAMERA_INFO_KEYS, camera_info_to_dict, dict_to_camera_info
 from hmocap_ros.io.compressed_images import compressed_to_numpy, numpy_to_compressed
-from hmocap_ros.io.conversion_errors import (CameraInfoConversionError, CompressedImageError,
-                                             ConversionError, ImageConversionError,
+from hmocap_ros.io.conversion_errors import (
+                                             CameraInfoConversionError,
+                                             CompressedImageError,
+                                             ConversionError,
+                                             ImageConversionError,
                                              JointStateConversionError,
-                                             PointCloudConversionError)
-from hmocap_ros.io.images import (EncodingLayout, depth_image_to_metres, encoding_layout,
-                                  image_to_numpy, image_to_rgb, numpy_to_image)
+                                             PointCloudConversionError,
+)
+from hmocap_ros.io.images import (
+                                             EncodingLayout,
+                                             depth_image_to_metres,
+                                             encoding_layout,
+                                             image_to_numpy,
+                                             image_to_rgb,
+                                             numpy_to_image,
+)
 from hmocap_ros.io.joint_states import joint_state_to_dict, make_joint_state
-from hmocap_ros.io.point_clouds import (array_to_pointcloud2, pointcloud2_dtype,
-                                        pointcloud2_to_array, pointcloud2_to_xyz,
-                                        xyz_to_pointcloud2)
+from hmocap_ros.io.point_clouds import (
+                                             array_to_pointcloud2,
+                                             pointcloud2_dtype,
+                                             pointcloud2_to_array,
+                                             pointcloud2_to_xyz,
+                                             xyz_to_pointcloud2,
+)
 
 __all__ = [
     "CAMERA_INFO_KEYS",

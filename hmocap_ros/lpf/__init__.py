@@ -6,14 +6,26 @@
 - :mod:`.kernels`: transition kernels ``kernel(particles, std, rng)`` and box limits.
 """
 from hmocap_ros.lpf.kernels import Kernel, clip_to_bounds, gaussian_kernel, identity_kernel
-from hmocap_ros.lpf.layered_filter import (Layer, LayerDiagnostics, LayeredFilter,
-                                           LayeredRunResult, WeightFn, annealed_filter,
-                                           annealed_weights, annealing_stds,
-                                           beta_for_survival_rate, effective_sample_size,
-                                           gpf_run, hierarchical_filter,
-                                           layer_diffusion_stds, layered_resample, lpf_run,
-                                           survival_rate, systematic_resample_indices,
-                                           weighted_std)
+from hmocap_ros.lpf.layered_filter import (
+                                           Layer,
+                                           LayerDiagnostics,
+                                           LayeredFilter,
+                                           LayeredRunResult,
+                                           WeightFn,
+                                           annealed_filter,
+                                           annealed_weights,
+                                           annealing_stds,
+                                           beta_for_survival_rate,
+                                           effective_sample_size,
+                                           gpf_run,
+                                           hierarchical_filter,
+                                           layer_diffusion_stds,
+                                           layered_resample,
+                                           lpf_run,
+                                           survival_rate,
+                                           systematic_resample_indices,
+                                           weighted_std,
+)
 
 __all__ = [
     "Kernel", "clip_to_bounds", "gaussian_kernel", "identity_kernel", "Layer",

@@ -16,8 +16,13 @@ import numpy as np
 
 from hmocap_ros.geometry.distortion import coefficients8, monotonic_radius2
 from hmocap_ros.geometry.projection import project_one_view
-from hmocap_ros.render.silhouette import (fill_silhouette, binary_observed, clip_boxes,
-                                          count_xor_and_clear, observed_counts)
+from hmocap_ros.render.silhouette import (
+    binary_observed,
+    clip_boxes,
+    count_xor_and_clear,
+    fill_silhouette,
+    observed_counts,
+)
 
 __all__ = ["xor_counts_from_vertices"]
 

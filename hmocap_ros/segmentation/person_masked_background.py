@@ -36,8 +36,13 @@ import cv2
 import numba as nb
 import numpy as np
 
-from hmocap_ros.segmentation.background_model import (GAIN_RANGE, check_frame, check_stamp,
-                                                      classify_and_update, estimate_gain)
+from hmocap_ros.segmentation.background_model import (
+    GAIN_RANGE,
+    check_frame,
+    check_stamp,
+    classify_and_update,
+    estimate_gain,
+)
 from hmocap_ros.segmentation.mask_cleanup import clean_mask, structuring_element
 from hmocap_ros.segmentation.params import ForegroundParams
 

@@ -38,19 +38,29 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape, shape_log_prior
+from hmocap_ros.detection.visual_hull import Hull
 from hmocap_ros.lpf.kernels import rejection_kernel
 from hmocap_ros.lpf.layered_filter import beta_for_survival_rate, lpf_run
-from hmocap_ros.tracking.anthropometry_layers import (INIT_SPREAD, TABLE_2_2, init_spread,
-                                                      shape_std, startup_filters)
-from hmocap_ros.tracking.anthropometry_state import (ROOT_DOFS, SHAPE_KEYS, SHAPE_PARAMS,
-                                                     entity_size_errors, shape_from_state,
-                                                     shape_to_state)
+from hmocap_ros.tracking.anthropometry_layers import INIT_SPREAD, TABLE_2_2, init_spread, shape_std, startup_filters
+from hmocap_ros.tracking.anthropometry_state import (
+    ROOT_DOFS,
+    SHAPE_KEYS,
+    SHAPE_PARAMS,
+    entity_size_errors,
+    shape_from_state,
+    shape_to_state,
+)
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import clip_body_pose, root_room_limits
-from hmocap_ros.tracking.startup_pose import (HEADING_SEARCH_SIZES, LIMB_GRID, LIMB_STEPS,
-                                              initial_pose, powell_fit, search_headings)
 from hmocap_ros.tracking.params import EstimationParams
-from hmocap_ros.detection.visual_hull import Hull
+from hmocap_ros.tracking.startup_pose import (
+    HEADING_SEARCH_SIZES,
+    LIMB_GRID,
+    LIMB_STEPS,
+    initial_pose,
+    powell_fit,
+    search_headings,
+)
 
 __all__ = [
     "HEADING_SEARCH_SIZES", "INIT_SPREAD", "LIMB_GRID", "LIMB_STEPS", "ROOT_DOFS", "SHAPE_KEYS",

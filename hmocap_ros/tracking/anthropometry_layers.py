@@ -113,12 +113,12 @@ def layer_dims(skel, estimate_shape: bool) -> list[np.ndarray]:
     return dims
 
 
-def _layer_std(l: int, dims: list, base: np.ndarray, n_pose: int, n_anneal: int,
+def _layer_std(layer: int, dims: list, base: np.ndarray, n_pose: int, n_anneal: int,
                frame_scale: float, params: EstimationParams) -> np.ndarray:
-    """Std of layer ``l``'s kernel: it diffuses layer ``l + 1``'s dimensions (none for the
+    """Std of the kernel of ``layer``: it diffuses the next layer's dimensions (none for the
     last table 2.2 layer)."""
     std = np.zeros(len(base))
-    nxt = l + 1
+    nxt = layer + 1
     if nxt < len(TABLE_2_2):
         d = dims[nxt]
         if nxt < n_anneal:
@@ -152,10 +152,10 @@ def startup_filters(skel, params: EstimationParams, estimate_shape: bool,
     out = []
     for f in range(max(params.frames, 1)):
         scale = params.frame_decay ** f
-        layers = [Layer(dims=dims[l], beta=1.0, n_particles=params.n_particles,
-                        std=_layer_std(l, dims, base, n_pose, n_anneal, scale, params),
+        layers = [Layer(dims=dims[layer], beta=1.0, n_particles=params.n_particles,
+                        std=_layer_std(layer, dims, base, n_pose, n_anneal, scale, params),
                         kernel=kernel)
-                  for l in range(len(TABLE_2_2))]
+                  for layer in range(len(TABLE_2_2))]
         final_std = np.zeros(len(base))
         final_std[:n_pose] = body_sigma0(skel)
         if estimate_shape:

@@ -37,8 +37,8 @@ from hmocap_ros.body.anthropometry import BodyShape, ShapedRest, apply_shape
 from hmocap_ros.body.kinematics import forward_kinematics, skin_vertices, skinning_matrices
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.geometry.projection import project_batch
-from hmocap_ros.render import xor_counts
 from hmocap_ros.geometry.rig import camera_arrays
+from hmocap_ros.render import xor_counts
 from hmocap_ros.render.fused_xor import xor_counts_from_vertices
 
 __all__ = ["Observation", "SilhouetteFitness", "StageTimes", "downsample_mask", "posed_mesh",

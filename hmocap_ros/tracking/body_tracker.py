@@ -65,14 +65,21 @@ from typing import Sequence
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.detection.detections import MODEL_JOINT, Detections
+from hmocap_ros.detection.visual_hull import room_bounds
 from hmocap_ros.frame_sets import FramePeriod
 from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
-from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
-from hmocap_ros.tracking.body_layers import (JUMP_FRACTION, JUMP_SCALE, RESEED_FRACTION,
-                                             SURVIVAL_RATE, BodySchedule, pose_kernel,
-                                             root_room_limits)
-from hmocap_ros.detection.detections import MODEL_JOINT, Detections
+from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
+from hmocap_ros.tracking.body_layers import (
+    JUMP_FRACTION,
+    JUMP_SCALE,
+    RESEED_FRACTION,
+    SURVIVAL_RATE,
+    BodySchedule,
+    pose_kernel,
+    root_room_limits,
+)
 from hmocap_ros.tracking.detection_assignment import EFFECTOR_LABELS, Assigned
 from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape, size_corrections
 from hmocap_ros.tracking.keypoint_first import BLOCK_KEYPOINTS, KeypointFirst
@@ -84,7 +91,6 @@ from hmocap_ros.tracking.research import ResearchPolicy, fresh_search
 from hmocap_ros.tracking.result import STATES, TrackerState, TrackResult, stage_timings
 from hmocap_ros.tracking.schedules import schedule_for
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS, HullFinder, StartUp
-from hmocap_ros.detection.visual_hull import room_bounds
 
 __all__ = ["MAX_ELAPSED_PERIODS", "SAME_PERSON_RADIUS", "STATES", "VELOCITY_GAIN", "BodyTracker",
            "TrackResult", "TrackerParams", "TrackerState"]

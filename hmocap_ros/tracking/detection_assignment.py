@@ -19,7 +19,6 @@ end-effector, the cost the refinement layer adds (eq. 2.21).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -20,9 +20,14 @@ import numpy as np
 from hmocap_ros.detection.detections import Detections
 from hmocap_ros.detection.detectors import carries_labels
 from hmocap_ros.detection.greedy_assignment import classify
-from hmocap_ros.tracking.detection_assignment import (EFFECTOR_LABELS, HEAD_EXCLUSION,
-                                                      MAX_DISTANCE, Assigned, detection_cost,
-                                                      reacquire_hands)
+from hmocap_ros.tracking.detection_assignment import (
+    EFFECTOR_LABELS,
+    HEAD_EXCLUSION,
+    MAX_DISTANCE,
+    Assigned,
+    detection_cost,
+    reacquire_hands,
+)
 from hmocap_ros.tracking.ik_proposals import IKProposer
 
 __all__ = ["REFINE_KAPPA", "DetectorDriven"]

@@ -48,9 +48,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.lpf.layered_filter import Layer, LayeredFilter
 from hmocap_ros.params import param
-from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.tracking.body_layers import BODY_BLOCKS, BodySchedule, block_dims, body_sigma0
 from hmocap_ros.tracking.keypoint_fit import KeypointFit
 from hmocap_ros.tracking.methods import get_method

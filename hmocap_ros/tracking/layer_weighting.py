@@ -18,10 +18,17 @@ import numpy as np
 
 from hmocap_ros.render.silhouette import observed_counts
 from hmocap_ros.tracking.body_fitness import Observation, serial_below
-from hmocap_ros.tracking.observation_boxes import (BOX_MARGIN, BOX_REACH, BOX_SPREAD,
-                                                   LAYER_ANCHORS, chain_lengths, layer_boxes,
-                                                   layer_vertex_indices, part_boxes_3d,
-                                                   reach_box)
+from hmocap_ros.tracking.observation_boxes import (
+    BOX_MARGIN,
+    BOX_REACH,
+    BOX_SPREAD,
+    LAYER_ANCHORS,
+    chain_lengths,
+    layer_boxes,
+    layer_vertex_indices,
+    part_boxes_3d,
+    reach_box,
+)
 
 __all__ = ["fit_cost", "layer_vertices", "layer_weight_fn", "warm_up"]
 

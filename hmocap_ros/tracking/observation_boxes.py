@@ -26,9 +26,9 @@ whole-body re-weighting layer uses the whole images (eq. 2.8).
 """
 from __future__ import annotations
 
-import numpy as np
-
 from functools import lru_cache
+
+import numpy as np
 
 from hmocap_ros.geometry.distortion import coefficients8, monotonic_radius2
 from hmocap_ros.geometry.projection import project_one_view

@@ -6,9 +6,17 @@ from __future__ import annotations
 import numpy as np
 
 from hmocap_ros.body.skeleton import Skeleton
-from hmocap_ros.tracking.body_layers import (JUMP_FRACTION, JUMP_SCALE, REFINE_NU,
-                                             RESEED_FRACTION, SURVIVAL_RATE, BodySchedule,
-                                             body_sigma0, pose_kernel, root_room_limits)
+from hmocap_ros.tracking.body_layers import (
+    JUMP_FRACTION,
+    JUMP_SCALE,
+    REFINE_NU,
+    RESEED_FRACTION,
+    SURVIVAL_RATE,
+    BodySchedule,
+    body_sigma0,
+    pose_kernel,
+    root_room_limits,
+)
 from hmocap_ros.tracking.methods import TrackingMethod, get_method
 
 __all__ = ["make_schedule", "schedule_for"]

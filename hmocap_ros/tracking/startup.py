@@ -14,13 +14,13 @@ import logging
 import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape
+from hmocap_ros.detection.visual_hull import visual_hull
 from hmocap_ros.tracking.anthropometry_estimation import AnthropometryEstimator
 from hmocap_ros.tracking.body_fitness import Observation
 from hmocap_ros.tracking.body_layers import SURVIVAL_RATE
 from hmocap_ros.tracking.limb_proposals import PROPOSAL_FRACTION
 from hmocap_ros.tracking.observation_boxes import layer_boxes
 from hmocap_ros.tracking.params import EstimationParams, TrackerParams
-from hmocap_ros.detection.visual_hull import visual_hull
 
 __all__ = ["SAME_PERSON_RADIUS", "HullFinder", "StartUp"]
 

@@ -27,11 +27,11 @@ import numpy as np
 from scipy.optimize import minimize
 
 from hmocap_ros.body.anthropometry import ENTITY_NAMES, BodyShape
+from hmocap_ros.detection.visual_hull import Hull
 from hmocap_ros.tracking.anthropometry_state import ROOT_DOFS
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_layers import clip_body_pose
 from hmocap_ros.tracking.limb_proposals import LimbProposalParams
-from hmocap_ros.detection.visual_hull import Hull
 
 __all__ = ["HEADING_SEARCH_SIZES", "LIMB_GRID", "LIMB_STEPS", "best_on_grid", "initial_pose",
            "powell_fit", "search_headings"]

@@ -6,9 +6,16 @@ calibration (``hmocap import videos``; no rclpy).
   and turned upright.
 - :mod:`.importer`: matching videos with cameras, the frame sets, the bag.
 """
-from hmocap_ros.video_import.importer import (BASE_STAMP_NS, ImportOptions, ImportPlan,
-                                              ImportResult, VideoImportError, bag_camera_name,
-                                              import_videos, plan_import)
+from hmocap_ros.video_import.importer import (
+                                              BASE_STAMP_NS,
+                                              ImportOptions,
+                                              ImportPlan,
+                                              ImportResult,
+                                              VideoImportError,
+                                              bag_camera_name,
+                                              import_videos,
+                                              plan_import,
+)
 
 __all__ = ["BASE_STAMP_NS", "ImportOptions", "ImportPlan", "ImportResult", "VideoImportError",
            "bag_camera_name", "import_videos", "plan_import"]

@@ -36,8 +36,14 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from hmocap_ros.video_import.camera_fit import (CameraFitError, common_size, crop_camera,
-                                                fit_camera, rotate_camera, upright_turns)
+from hmocap_ros.video_import.camera_fit import (
+    CameraFitError,
+    common_size,
+    crop_camera,
+    fit_camera,
+    rotate_camera,
+    upright_turns,
+)
 from hmocap_ros.video_import.videos import FrameSetReader, VideoError, VideoInfo, probe_video
 
 if TYPE_CHECKING:
@@ -190,8 +196,7 @@ def _frames(videos: list[VideoInfo], options: ImportOptions, warnings: list) -> 
 def plan_import(video_paths, calibration, options: ImportOptions = ImportOptions()) -> ImportPlan:
     """Check the inputs and settle the frame sets (module docstring);
     :class:`VideoImportError` (one line) for anything that does not fit."""
-    from hmocap_ros.calibration.formats import (CalibrationFormatError, load_calibration_rig,
-                                                read_calibration)
+    from hmocap_ros.calibration.formats import CalibrationFormatError, load_calibration_rig, read_calibration
     from hmocap_ros.geometry.rig import Rig
 
     if not video_paths:
@@ -264,8 +269,8 @@ def _rgb(frame: np.ndarray, turns: int, camera, cut: tuple[int, int] | None = No
 def _write_latched(writer, factory, rig, stamp: int) -> None:
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_writer import LATCHED
-    from hmocap_ros.io.tf import TF_MESSAGE_TYPE, TF_STATIC_TOPIC, rig_transforms, tf_message
     from hmocap_ros.io.rig_messages import rig_to_msg
+    from hmocap_ros.io.tf import TF_MESSAGE_TYPE, TF_STATIC_TOPIC, rig_transforms, tf_message
 
     writer.add_topic(topics.CAMERA_RIG, "hmocap_interfaces/msg/CameraRig", LATCHED)
     writer.add_topic(TF_STATIC_TOPIC, TF_MESSAGE_TYPE, LATCHED)

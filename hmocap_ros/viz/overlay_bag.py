@@ -122,8 +122,8 @@ def _body(msg, truth) -> BodyDrawing:
 def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = None,
                        tile_width: int = 480, max_frames: int | None = None) -> Iterator[Picture]:
     """The pictures of a multi-view bag (module docstring); OverlayError for what is missing."""
-    from hmocap_ros.io.conversions import ConversionError, image_to_rgb
     from hmocap_ros.geometry.rig import RigError
+    from hmocap_ros.io.conversions import ConversionError, image_to_rgb
     from hmocap_ros.io.rig_messages import rig_from_msg
 
     outputs = outputs or bag

@@ -24,9 +24,19 @@ from hmocap_sim.render.lights import DirectionalLight, Lighting, PointLight
 from hmocap_sim.render.materials import MATERIAL_FIELDS, Material, material_table
 from hmocap_sim.render.meshes import face_normals
 from hmocap_sim.render.shadow import shadow_visibility
-from hmocap_sim.render.textures import (KIND_FABRIC, KIND_IMAGE, KIND_PLASTER, KIND_TILES,
-                                        KIND_WOOD, atlas_bilinear, fabric, fbm3, plaster, tiles,
-                                        wood_planks)
+from hmocap_sim.render.textures import (
+    KIND_FABRIC,
+    KIND_IMAGE,
+    KIND_PLASTER,
+    KIND_TILES,
+    KIND_WOOD,
+    atlas_bilinear,
+    fabric,
+    fbm3,
+    plaster,
+    tiles,
+    wood_planks,
+)
 
 __all__ = ["DirectionalLight", "Lighting", "MATERIAL_FIELDS", "Material", "PointLight",
            "material_table", "shade"]

@@ -25,14 +25,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from hmocap_ros.calibration.formats.foreign import (CalibrationFormatError, ForeignCalibration,
-                                                    ForeignCamera)
+from hmocap_ros.calibration.formats.foreign import CalibrationFormatError, ForeignCalibration, ForeignCamera
 from hmocap_ros.calibration.formats.opencv_format import find_pair, read_opencv, write_opencv
 from hmocap_ros.calibration.formats.qca_format import read_qca, write_qca
 from hmocap_ros.calibration.formats.ros_format import is_camera_info, read_ros, write_ros
 from hmocap_ros.calibration.formats.toml_format import read_toml, write_toml
-from hmocap_ros.calibration.formats.world_frame import (AXES, UNITS, calibration_from_rig,
-                                                        calibration_to_rig, parse_axis)
+from hmocap_ros.calibration.formats.world_frame import AXES, UNITS, calibration_from_rig, calibration_to_rig, parse_axis
 
 __all__ = ["AXES", "FORMATS", "UNITS", "CalibrationFormat", "CalibrationFormatError",
            "ForeignCalibration", "ForeignCamera", "detect_format", "load_calibration_rig",

@@ -22,8 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from hmocap_ros.calibration.formats.foreign import (CalibrationFormatError, ForeignCalibration,
-                                                    ForeignCamera)
+from hmocap_ros.calibration.formats.foreign import CalibrationFormatError, ForeignCalibration, ForeignCamera
 
 __all__ = ["find_pair", "read_opencv", "write_opencv"]
 

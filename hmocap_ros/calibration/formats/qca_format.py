@@ -31,8 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.calibration.formats.foreign import (CalibrationFormatError, ForeignCalibration,
-                                                    ForeignCamera)
+from hmocap_ros.calibration.formats.foreign import CalibrationFormatError, ForeignCalibration, ForeignCamera
 
 __all__ = ["QCA_UNITS_PER_PIXEL", "read_qca", "write_qca"]
 

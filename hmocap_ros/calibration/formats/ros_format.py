@@ -22,8 +22,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from hmocap_ros.calibration.formats.foreign import (CalibrationFormatError, ForeignCalibration,
-                                                    ForeignCamera)
+from hmocap_ros.calibration.formats.foreign import CalibrationFormatError, ForeignCalibration, ForeignCamera
 
 __all__ = ["is_camera_info", "read_ros", "write_ros"]
 
@@ -90,8 +89,8 @@ def read_ros(path: str | Path) -> ForeignCalibration:
 def write_ros(calibration: ForeignCalibration, path: str | Path) -> list[Path]:
     """One ``<name>.yaml`` per camera in the folder ``path`` (module docstring); returns the
     files written."""
+    from hmocap_ros.geometry.rig import FlowList, RigDumper, matrix_entry
     from hmocap_ros.io.tf import rotation_to_quaternion
-    from hmocap_ros.geometry.rig import FlowList, matrix_entry, RigDumper
 
     folder = Path(path)
     folder.mkdir(parents=True, exist_ok=True)

@@ -33,8 +33,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from hmocap_ros.calibration.formats.foreign import (CalibrationFormatError, ForeignCalibration,
-                                                    ForeignCamera)
+from hmocap_ros.calibration.formats.foreign import CalibrationFormatError, ForeignCalibration, ForeignCamera
 
 __all__ = ["read_toml", "write_toml"]
 

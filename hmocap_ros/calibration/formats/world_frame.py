@@ -29,8 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hmocap_ros.calibration.formats.foreign import (CalibrationFormatError, ForeignCalibration,
-                                                    ForeignCamera)
+from hmocap_ros.calibration.formats.foreign import CalibrationFormatError, ForeignCalibration, ForeignCamera
 
 __all__ = ["AXES", "MAX_UP_ANGLE_DEG", "UNITS", "calibration_from_rig", "calibration_to_rig",
            "guess_metres_per_unit", "guess_up", "parse_axis", "up_rotation"]
