@@ -165,7 +165,8 @@ def bench_detector(rig, images, masks, repeats: int) -> None:
         total = float(np.median(stages["total"]))
         parts = ", ".join(f"{k} {1e3 * np.median(v):.1f}"
                           for k, v in stages.items() if k != "total")
-        print(f"detect(), 4 views, {threads} LiteRT thread{'s' if threads > 1 else ''}: {1e3 * total:.0f} ms per frame set = "
+        print(f"detect(), 4 views, {threads} LiteRT thread{'s' if threads > 1 else ''}: "
+              f"{1e3 * total:.0f} ms per frame set = "
               f"{1.0 / total:.1f} frame sets/s, {1e3 * np.median(cpu):.0f} ms CPU of the process "
               f"(median ms: {parts}; crops from {sorted(set(sources))}; {len(result.labels)} "
               f"keypoints); first set of a track {1e3 * np.median(first_wall):.0f} ms, "
@@ -187,7 +188,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=12, help="frame sets per measurement")
     ns = p.parse_args(argv)
     print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
-          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}, OpenCV {cv2.__version__}, LiteRT {_litert_version()}", flush=True)
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}, OpenCV {cv2.__version__}, "
+          f"LiteRT {_litert_version()}", flush=True)
     t0 = time.perf_counter()
     rig, images, masks = render_scene()
     print(f"scene rendered in {time.perf_counter() - t0:.1f} s (4 views, 640x480)", flush=True)

@@ -333,7 +333,8 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu_s: dict, wal
         "out_of_order": {t: n for t, n in monitor.out_of_order.items() if t != topics.camera_image(cameras[-1])},
         **latency_summary(latency_ms(inputs, poses)),
         "mean_error_mm": float(np.mean(list(errors.values()))) if errors else float("nan"),
-        "tracker_seconds_per_frame": float(np.median(monitor.tracker_seconds)) if monitor.tracker_seconds else float("nan"),
+        "tracker_seconds_per_frame": (float(np.median(monitor.tracker_seconds)) if monitor.tracker_seconds
+                                      else float("nan")),
         "extremities": {"out": len(arrivals["/extremities"]),
                         **latency_summary(latency_ms(inputs, arrivals["/extremities"]))},
         "foreground": {c: len(arrivals[topics.camera_foreground(c)]) for c in cameras},

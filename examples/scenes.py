@@ -95,7 +95,8 @@ def gesture_scene(out: Path) -> Path:
     with BagReader(DEPTH_BAG) as reader, BagWriter(path, flush_period_s=None) as bag:
         _write_tf_static(bag, factory, [room_to_world(), depth_camera_transform()], first)
         for m in reader.messages(["/depth/image_raw", "/depth/camera_info"], raw=True):
-            if not first <= m.log_time_ns <= last or (m.topic == "/depth/camera_info" and m.log_time_ns < first + NO_CAMERA_INFO_NS):
+            early_info = m.topic == "/depth/camera_info" and m.log_time_ns < first + NO_CAMERA_INFO_NS
+            if not first <= m.log_time_ns <= last or early_info:
                 continue
             bag.write(m.topic, m.msg, m.log_time_ns, msgtype=m.msgtype)
     return path

@@ -327,7 +327,8 @@ class StampSynchronizer:
         """Move the oldest pending frame of ``key`` to the expired pool."""
         self._stamps[key].pop(0)
         frame = self._frames[key].pop(0)
-        bisect.insort(self._expired, dataclasses.replace(frame, reason=reason), key=lambda f: (f.stamp, self.keys.index(f.key)))
+        bisect.insort(self._expired, dataclasses.replace(frame, reason=reason),
+                      key=lambda f: (f.stamp, self.keys.index(f.key)))
         self._seen_expired.add((key, frame.stamp))
 
     def _waited_out(self, frame: _Frame, deadline: float) -> bool:

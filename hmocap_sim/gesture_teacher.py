@@ -6,9 +6,9 @@ furnished room of the gesture simulator (:mod:`~hmocap_sim.depth_scene`, people 
 asks:
 
 - ``do_gesture``: moves (a short blend) to a new spot of the zone (each round at another
-  distance and angle) and into the taught gesture with its reference point at the box centre; ``update_positive`` and ``testing``: holds it there with small pose variations
-  (two jittered solutions of the gesture blended back and forth, a new pair every
-  ``VARIATION_S``);
+  distance and angle) and into the taught gesture with its reference point at the box centre;
+  ``update_positive`` and ``testing``: holds it there with small pose variations (two jittered
+  solutions of the gesture blended back and forth, a new pair every ``VARIATION_S``);
 - ``rehearse``: holds the known gesture the status names (``rehearsed``) in the box, as above;
 - ``release``: blends back to standing;
 - ``do_negatives``: takes of near misses of the taught gesture (a third of them:

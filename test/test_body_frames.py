@@ -236,7 +236,8 @@ def test_motion_model_scales_with_the_periods_between_tracked_sets(tracker):
     gain = VELOCITY_GAIN
     np.testing.assert_allclose(predicted[skel.translation_dofs] - tracker.estimate[skel.translation_dofs],
                                gain * 3 * np.array([0.05, 0.0, 0.02]), atol=1e-12)
-    np.testing.assert_allclose(tracker.particles[:, skel.translation_dofs], predicted[skel.translation_dofs][None].repeat(5, 0))
+    np.testing.assert_allclose(tracker.particles[:, skel.translation_dofs],
+                               predicted[skel.translation_dofs][None].repeat(5, 0))
     # a long gap extrapolates MAX_ELAPSED_PERIODS at most
     tracker._note_stamp(T0 + 30 * PERIOD)
     tracker.particles = np.tile(tracker.estimate, (5, 1))

@@ -108,9 +108,11 @@ def test_visibility_mask():
 def test_look_at_orientation_room_up():
     camera = look_at("cam", (0.0, 2.5, -3.0), ROOM_CENTRE)
     np.testing.assert_allclose(camera.position, (0.0, 2.5, -3.0), atol=1e-12)
-    np.testing.assert_allclose(camera.optical_axis, (ROOM_CENTRE - camera.position) / np.linalg.norm(ROOM_CENTRE - camera.position))
+    np.testing.assert_allclose(camera.optical_axis,
+                               (ROOM_CENTRE - camera.position) / np.linalg.norm(ROOM_CENTRE - camera.position))
     # The target projects to the principal point; a point above it (+Y) is higher in the image (smaller v).
-    (target_px, above_px, right_px), _ = camera.project([ROOM_CENTRE, ROOM_CENTRE + (0, 0.5, 0), ROOM_CENTRE + (-0.5, 0, 0)])
+    (target_px, above_px, right_px), _ = camera.project(
+        [ROOM_CENTRE, ROOM_CENTRE + (0, 0.5, 0), ROOM_CENTRE + (-0.5, 0, 0)])
     np.testing.assert_allclose(target_px, (319.5, 239.5), atol=1e-9)
     assert above_px[1] < target_px[1] - 50
     # Looking along +Z with +Y up, the room's -X axis is on the image right (right-handed frame).
@@ -126,11 +128,13 @@ def test_pose_quaternion_round_trip():
         q = camera.pose_quaternion()
         assert q[3] >= 0 and np.isclose(np.linalg.norm(q), 1.0)
         np.testing.assert_allclose(quaternion_to_matrix(q), camera.R.T, atol=1e-12)
-        again = PinholeCamera.from_pose(camera.name, camera.width, camera.height, camera.K, camera.position, q, D=camera.D)
+        again = PinholeCamera.from_pose(camera.name, camera.width, camera.height, camera.K, camera.position, q,
+                                        D=camera.D)
         assert again.isclose(camera, atol=1e-12)
     # A rotation of 90 deg about +Y turns the optical axis (z) into room +X.
     s = np.sqrt(0.5)
-    camera = PinholeCamera.from_pose("cam", 640, 480, np.diag([500.0, 500.0, 1.0]) + [[0, 0, 320], [0, 0, 240], [0, 0, 0]],
+    camera = PinholeCamera.from_pose("cam", 640, 480,
+                                     np.diag([500.0, 500.0, 1.0]) + [[0, 0, 320], [0, 0, 240], [0, 0, 0]],
                                      (1.0, 2.0, 3.0), (0.0, s, 0.0, s))
     np.testing.assert_allclose(camera.optical_axis, (1.0, 0.0, 0.0), atol=1e-12)
     np.testing.assert_allclose(camera.position, (1.0, 2.0, 3.0), atol=1e-12)
@@ -156,7 +160,8 @@ def test_undistort_matches_cv2_and_inverts_distortion(D):
     np.testing.assert_allclose(xy, ref, atol=1e-10)
     # Exact inverse of the distortion: re-distorting gives the pixels back.
     redistorted = distort_normalized(xy, camera.D)
-    again = np.stack([camera.fx * redistorted[..., 0] + camera.cx, camera.fy * redistorted[..., 1] + camera.cy], axis=-1)
+    again = np.stack([camera.fx * redistorted[..., 0] + camera.cx, camera.fy * redistorted[..., 1] + camera.cy],
+                     axis=-1)
     np.testing.assert_allclose(again, pixels, atol=1e-9)
     np.testing.assert_allclose(undistort_normalized(distort_normalized(xy, D), D), xy, atol=1e-12)
     # undistort_pixels equals cv2.undistortPoints with P = K.
@@ -223,7 +228,8 @@ def test_camera_info_dict_round_trip():
     assert again.isclose(camera, atol=1e-12)
     # The name defaults to the frame id without its suffix; flattened K/R/P are accepted.
     flat = dict(info, K=info["K"].ravel(), R=info["R"].ravel(), P=info["P"].ravel())
-    assert PinholeCamera.from_camera_info(flat, position=camera.position, quaternion=camera.pose_quaternion()).isclose(camera, atol=1e-12)
+    assert PinholeCamera.from_camera_info(flat, position=camera.position,
+                                          quaternion=camera.pose_quaternion()).isclose(camera, atol=1e-12)
 
 
 def test_scaled_camera_matches_resized_image():

@@ -24,10 +24,14 @@ ROOT = Path(__file__).resolve().parents[1]
 # node name -> (module, config dataclass[, module, dataclass ...]): every dataclass the node declares
 NODE_CONFIGS = {
     "camera_rig_publisher": ("hmocap_ros.nodes.camera_rig_publisher", "CameraRigPublisherConfig"),
-    "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation", "ForegroundNodeConfig", "hmocap_ros.segmentation", "ForegroundParams"),
-    "gesture_detection": ("hmocap_ros.nodes.gesture_detection", "GestureNodeConfig", "hmocap_ros.gestures", "DetectorParams"),
-    "gesture_trainer": ("hmocap_ros.nodes.gesture_trainer", "TrainerNodeConfig", "hmocap_ros.gestures.trainer", "TrainerParams"),
-    "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.params", "TrackerParams"),
+    "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation", "ForegroundNodeConfig",
+                                "hmocap_ros.segmentation", "ForegroundParams"),
+    "gesture_detection": ("hmocap_ros.nodes.gesture_detection", "GestureNodeConfig", "hmocap_ros.gestures",
+                          "DetectorParams"),
+    "gesture_trainer": ("hmocap_ros.nodes.gesture_trainer", "TrainerNodeConfig", "hmocap_ros.gestures.trainer",
+                        "TrainerParams"),
+    "body_tracker": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.tracking.params",
+                     "TrackerParams"),
     "extremity_detection": ("hmocap_ros.nodes.extremity_detection", "ExtremityNodeConfig",
                             "hmocap_ros.detection.extremity_pipeline", "ExtremityDetectionParams"),
     # the example apps (examples/, installed as hmocap_examples; APP_NODES)

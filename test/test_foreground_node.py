@@ -1,4 +1,5 @@
-"""foreground_segmentation over DDS: masks for every frame with the input stamps; bad input survived; relearn service."""
+"""foreground_segmentation over DDS: masks for every frame with the input stamps; bad input survived; relearn
+service."""
 
 import sys
 

@@ -106,7 +106,8 @@ def test_shipped_forest_detects_gestures_on_the_demo_bag(monkeypatch):
     result = ge.evaluate_gestures(ge.read_gesture_bag(DEMO), forest)
     assert result["offset_scale"] == pytest.approx(0.5)
     assert result["mean_ap"] > 0.8, result["mean_ap"]
-    assert all(c["ap"] > 0.5 for c in result["per_class"].values()), {k: c["ap"] for k, c in result["per_class"].items()}
+    assert all(c["ap"] > 0.5 for c in result["per_class"].values()), \
+        {k: c["ap"] for k, c in result["per_class"].items()}
     monkeypatch.setattr("hmocap_ros.gestures.detection.forest_grid_votes", shuffled_votes())
     prior = ge.evaluate_gestures(ge.read_gesture_bag(DEMO), forest)
     assert result["mean_ap"] > prior["mean_ap"] + 0.5, (result["mean_ap"], prior["mean_ap"])
@@ -165,7 +166,8 @@ def test_eval_gestures_without_ground_truth_writes_the_detections(tmp_path, caps
     bag = tmp_path / "realsense.mcap"
     _unannotated_copy(bag, depth_topic)
     out = tmp_path / "detections.json"
-    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", out, "--depth-topic", depth_topic])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", out, "--depth-topic",
+                                                                     depth_topic])) == 0
     printed = capsys.readouterr()
     assert "no ground truth" in printed.out and "detections in" in printed.out and not printed.err
     result = json.loads(out.read_text())
@@ -204,7 +206,8 @@ def test_eval_gestures_warns_of_a_wrong_depth_unit(tmp_path, capsys):
     assert "depth_unit_m 0.000125 would put it at" in err and len(err.strip().splitlines()) == 1, err
     assert "depth_unit_m" in json.loads(out.read_text())["depth_unit_warning"]
     right = tmp_path / "right.json"
-    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", right, "--param", "depth_unit_m=0.000125"])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", right, "--param",
+                                                                     "depth_unit_m=0.000125"])) == 0
     assert not capsys.readouterr().err
     mm = tmp_path / "mm.json"
     assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", mm, "--no-truth"])) == 0
@@ -240,8 +243,10 @@ def test_eval_gestures_on_a_bag_without_depth_is_one_line(tmp_path, capsys):
     assert eval_gestures.main_from_args(command_args(eval_gestures, [bag, "--json", tmp_path / "r.json"])) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no /depth/image_raw" in err[0] and "--depth-topic" in err[0], err
-    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", tmp_path / "r.json", "--depth-topic", "/other"])) == 2
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", tmp_path / "r.json",
+                                                                     "--depth-topic", "/other"])) == 2
     assert "--no-truth" in capsys.readouterr().err
-    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", tmp_path / "r.json", "--param", "stride=x"])) == 2
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [DEMO, "--json", tmp_path / "r.json", "--param",
+                                                                     "stride=x"])) == 2
     assert "--param" in capsys.readouterr().err
     assert not (tmp_path / "r.json").exists()

@@ -193,7 +193,8 @@ def test_recording_keeps_the_learnt_frames_and_their_annotation(tmp_path):
 
     from hmocap_ros.geometry.pinhole_camera import PinholeCamera
 
-    camera = PinholeCamera.from_camera_info({"width": 64, "height": 48, "K": [[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]],
+    camera = PinholeCamera.from_camera_info({"width": 64, "height": 48,
+                                             "K": [[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]],
                                              "D": [0.0] * 5, "distortion_model": "plumb_bob", "frame_id": "depth"},
                                             name="depth")
     assert write_recording_bag(tmp_path / "session.mcap", rec, camera) == 35

@@ -38,7 +38,8 @@ def test_teach_a_gesture_then_gesture_detection_finds_it(tmp_path):
     with _trainer(env, tmp_path, "-p", "publish_feedback:=false") as trainer, \
          NodeProcess.module("gesture_detection", "hmocap_ros.nodes.gesture_detection",
                             ["--ros-args", "-p", f"model_file:={forest}", "-p", "watch_period_s:=0.2",
-                             "-p", "publish_probability:=false", "-p", "min_volume:=0.2"], env, tmp_path) as detection, \
+                             "-p", "publish_probability:=false", "-p", "min_volume:=0.2"],
+                            env, tmp_path) as detection, \
          NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(bag), "/gestures", "/gesture_trainer/state",
                                                       "/diagnostics", "--progress", "0.5"], env, tmp_path) as rec:
         assert trainer.wait_for_output("gesture trainer ready", 60), trainer.output()

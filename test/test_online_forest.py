@@ -224,7 +224,8 @@ def test_cli_online_train_resume_and_eval(tmp_path, tiny_bag, capsys, monkeypatc
     assert load_forest(two).n_nodes > forest.n_nodes
 
     out_json = tmp_path / "eval.json"
-    assert eval_gestures.main_from_args(command_args(eval_gestures, [tiny_bag, "--model", two, "--json", out_json])) == 0
+    assert eval_gestures.main_from_args(command_args(eval_gestures, [tiny_bag, "--model", two, "--json",
+                                                                     out_json])) == 0
     result = json.loads(out_json.read_text())
     assert set(result["per_class"]) == set(forest.class_names[1:])
     # after two passes the forest finds its training gestures (today 0.84) where one pass finds
@@ -249,6 +250,7 @@ def test_cli_online_bad_options_give_one_line_errors(tmp_path, tiny_bag, capsys,
     offline = save_forest(Forest([Tree.single_leaf([1, 1])], ("background", "g")), tmp_path / "offline.npz")
     argv = [a.replace("OFFLINE", str(offline)).replace("MISSING", str(tmp_path / "none.npz")) if isinstance(a, str)
             else a for a in argv]
-    assert train_gestures.main_from_args(command_args(train_gestures, [tiny_bag, "--out", tmp_path / "f.npz", *argv])) == 2
+    assert train_gestures.main_from_args(command_args(train_gestures, [tiny_bag, "--out", tmp_path / "f.npz",
+                                                                       *argv])) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err

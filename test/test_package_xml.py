@@ -96,7 +96,8 @@ def required_keys() -> tuple[dict[str, set[str]], dict[str, set[str]]]:
     for path in source_files():
         rel = str(path.relative_to(ROOT))
         for module in imported_modules(path):
-            if module in sys.stdlib_module_names or module in (PACKAGE, "hmocap_sim", "hmocap_examples", "__future__", *PIP_ONLY_MODULES):
+            if module in sys.stdlib_module_names or module in (PACKAGE, "hmocap_sim", "hmocap_examples", "__future__",
+                                                               *PIP_ONLY_MODULES):
                 continue
             key = rosdep_key(module)
             (needed.setdefault(key, set()) if key else unknown.setdefault(module, set())).add(rel)

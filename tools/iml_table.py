@@ -143,7 +143,8 @@ def table(rows: list, shipped: dict) -> list[str]:
         off = r.get("ap_offline")
         lines.append(
             f"| {r['gesture']} | {r['simulated_s'] / 60:g} min | {r['recorded_frames']} ({r['positive_frames']}) | "
-            f"{r['ap_iml']:.2f} | {'-' if off is None else f'{off:.2f}'} | {shipped.get(r['gesture'], float('nan')):.2f} | "
+            f"{r['ap_iml']:.2f} | {'-' if off is None else f'{off:.2f}'} | "
+            f"{shipped.get(r['gesture'], float('nan')):.2f} | "
             f"{mmss(r['simulated_s'])} ({r['trainer_cpu_s']:.0f} s) | "
             + ("-" if off is None else f"{mmss(r['simulated_s'])} + {mmss(r['offline_train_s'])} = "
                                        f"{mmss(r['simulated_s'] + r['offline_train_s'])}") + " |")

@@ -48,7 +48,8 @@ def _validated_arrays(camera: PinholeCamera, where: str) -> dict[str, np.ndarray
     n = DISTORTION_MODELS[camera.distortion_model]
     if D.size > n or not np.all(np.isfinite(D)):
         raise ValueError(
-            f"{where}: distortion_model {camera.distortion_model!r} takes at most {n} finite coefficients, got {D.tolist()}"
+            f"{where}: distortion_model {camera.distortion_model!r} takes at most {n} finite coefficients, "
+            f"got {D.tolist()}"
         )
     D = np.pad(D, (0, n - D.size))
     R = np.asarray(camera.R, dtype=np.float64)
@@ -62,7 +63,8 @@ def _validated_arrays(camera: PinholeCamera, where: str) -> dict[str, np.ndarray
     rect = np.eye(3) if camera.rectification is None else np.asarray(camera.rectification, dtype=np.float64)
     if rect.shape != (3, 3):
         raise ValueError(f"{where}: rectification must be 3x3, got shape {rect.shape}")
-    proj = np.hstack([K, np.zeros((3, 1))]) if camera.projection is None else np.asarray(camera.projection, dtype=np.float64)
+    proj = (np.hstack([K, np.zeros((3, 1))]) if camera.projection is None
+            else np.asarray(camera.projection, dtype=np.float64))
     if proj.shape != (3, 4):
         raise ValueError(f"{where}: projection must be 3x4, got shape {proj.shape}")
     return {"K": K, "D": D, "R": R, "t": t, "rectification": rect, "projection": proj}

@@ -206,8 +206,10 @@ def _camera_from_dict(entry: Any, index: int, source: str) -> PinholeCamera:
     where = f"{source}: camera {name!r}"
     unknown = sorted(set(entry) - _CAMERA_KEYS)
     if unknown:
-        raise RigError(f"{where}: unknown field(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(sorted(_CAMERA_KEYS))})")
-    for field in ("image_width", "image_height", "camera_matrix", "distortion_model", "distortion_coefficients", "pose"):
+        raise RigError(f"{where}: unknown field(s) {', '.join(map(repr, unknown))} "
+                       f"(allowed: {', '.join(sorted(_CAMERA_KEYS))})")
+    for field in ("image_width", "image_height", "camera_matrix", "distortion_model", "distortion_coefficients",
+                  "pose"):
         if field not in entry:
             raise RigError(f"{where}: missing field {field!r}")
     size = {}
@@ -218,11 +220,13 @@ def _camera_from_dict(entry: Any, index: int, source: str) -> PinholeCamera:
         size[field] = value
     model = entry["distortion_model"]
     if model not in DISTORTION_MODELS:
-        raise RigError(f"{where}: field 'distortion_model' must be one of {', '.join(DISTORTION_MODELS)}, got {model!r}")
+        raise RigError(f"{where}: field 'distortion_model' must be one of {', '.join(DISTORTION_MODELS)}, "
+                       f"got {model!r}")
     K = read_matrix_entry(entry["camera_matrix"], where, "camera_matrix", 3, 3)
     D = read_matrix_entry(entry["distortion_coefficients"], where, "distortion_coefficients", 1, None).reshape(-1)
     if D.size > DISTORTION_MODELS[model]:
-        raise RigError(f"{where}: field 'distortion_coefficients' has {D.size} values, {model} takes {DISTORTION_MODELS[model]}")
+        raise RigError(f"{where}: field 'distortion_coefficients' has {D.size} values, "
+                       f"{model} takes {DISTORTION_MODELS[model]}")
     rect = None
     if entry.get("rectification_matrix") is not None:
         rect = read_matrix_entry(entry["rectification_matrix"], where, "rectification_matrix", 3, 3)
@@ -257,7 +261,8 @@ def rig_from_dict(data: Any, source: str = "<rig>") -> Rig:
         raise RigError(f"{source}: a rig must be a mapping with frame_id and cameras, got {type(data).__name__}")
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
-        raise RigError(f"{source}: unknown top-level field(s) {', '.join(map(repr, unknown))} (allowed: frame_id, cameras)")
+        raise RigError(f"{source}: unknown top-level field(s) {', '.join(map(repr, unknown))} "
+                       "(allowed: frame_id, cameras)")
     for field in ("frame_id", "cameras"):
         if field not in data:
             raise RigError(f"{source}: missing top-level field {field!r}")
@@ -283,7 +288,8 @@ class RigDumper(yaml.SafeDumper):
     """The YAML dumper of rig files: :class:`FlowList` values in flow style."""
 
 
-RigDumper.add_representer(FlowList, lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True))
+RigDumper.add_representer(
+    FlowList, lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True))
 
 
 def matrix_entry(array: np.ndarray) -> dict:

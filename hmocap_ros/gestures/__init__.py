@@ -53,7 +53,8 @@ from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
 
 __all__ = [
     "DepthFormat", "Detection", "DetectorParams", "FeatureParams", "Forest", "ForestFileError", "ForestParams",
-    "GestureDetector", "OnlineForest", "OnlineParams", "OnlineTrainParams", "PatchParams", "PendingTests", "SampleSet", "TrainParams", "Tree", "TreeReport",
+    "GestureDetector", "OnlineForest", "OnlineParams", "OnlineTrainParams", "PatchParams", "PendingTests", "SampleSet",
+    "TrainParams", "Tree", "TreeReport",
     "collect_samples", "depth_to_metres", "evaluate_tests", "grow_tree", "load_forest", "mine_hard_negatives",
     "random_offsets", "read_header", "save_forest", "train_forest", "train_forest_on_frames",
     "train_forest_on_samples", "train_online_on_frames",

@@ -4,14 +4,14 @@ A bag path ending in ``.mcap`` gives a single MCAP file (readable by ``ros2 bag 
 Foxglove, ``mcap-ros2-support`` and :mod:`hmocap_ros.io.bag_reader`); any other path
 gives a rosbag2 directory (``metadata.yaml`` + ``<name>.mcap``, the YAML written on close).
 
-The MCAP file is written at its final path. Messages collect in a chunk that is compressed
-and appended when it reaches ``chunk_size`` bytes or is ``flush_period_s`` old, whichever comes
+The MCAP file is written at its final path. Messages collect in a chunk that is compressed and
+appended when it reaches ``chunk_size`` bytes or is ``flush_period_s`` old, whichever comes
 first (``flush_period_s=None``: by size only, so that the same messages always give the same
-bytes, whatever the wall clock did while they were written); every append leaves the file a valid MCAP without summary (see
-:mod:`~hmocap_ros.io.summaryless_mcap`), so a writer killed at any moment leaves a bag holding
-every message up to its last flush. :meth:`BagWriter.close` adds the summary (indexes and
-statistics). A full disk raises :class:`BagDiskFullError` and leaves the bag readable as
-flushed before.
+bytes, whatever the wall clock did while they were written); every append leaves the file a
+valid MCAP without summary (see :mod:`~hmocap_ros.io.summaryless_mcap`), so a writer killed at
+any moment leaves a bag holding every message up to its last flush. :meth:`BagWriter.close` adds
+the summary (indexes and statistics). A full disk raises :class:`BagDiskFullError` and leaves
+the bag readable as flushed before.
 
 Latched topics are stored with a transient-local offered QoS profile, so a replay
 re-publishes them as latched.

@@ -27,8 +27,9 @@ def rig_to_msg(rig: Rig, stamp_ns: int = 0, factory=None):
     """``hmocap_interfaces/msg/CameraRig`` of ``rig``, built with ``factory.make(typename, **fields)``.
 
     ``factory`` is a ``hmocap_ros.io.msg_factory`` factory (``RclpyFactory`` in a node; the
-    default is a ``RosbagsFactory`` on :func:`hmocap_ros.io.typestore.hmocap_typestore`). Each CameraInfo carries ``stamp_ns`` and the camera's
-    optical ``frame_id``; the header carries the rig's ``frame_id``.
+    default is a ``RosbagsFactory`` on :func:`hmocap_ros.io.typestore.hmocap_typestore`). Each
+    CameraInfo carries ``stamp_ns`` and the camera's optical ``frame_id``; the header carries
+    the rig's ``frame_id``.
     """
     from hmocap_ros.io.conversions import dict_to_camera_info
     from hmocap_ros.io.msg_factory import make_header
@@ -46,7 +47,8 @@ def rig_to_msg(rig: Rig, stamp_ns: int = 0, factory=None):
             position=factory.make("geometry_msgs/msg/Point", x=x, y=y, z=z),
             orientation=factory.make("geometry_msgs/msg/Quaternion", x=qx, y=qy, z=qz, w=qw),
         ))
-    return factory.make(CAMERA_RIG_TYPE, header=header, camera_names=list(rig.names), camera_info=infos, camera_poses=poses)
+    return factory.make(CAMERA_RIG_TYPE, header=header, camera_names=list(rig.names), camera_info=infos,
+                        camera_poses=poses)
 
 
 def rig_from_msg(msg) -> Rig:

@@ -164,8 +164,9 @@ def recording_file(path: Path) -> Path:
 def summaryless_view(path: str | Path, salvage: bool = False) -> SealedMcap | None:
     """For a bag whose MCAP file is a recording that did not close, the :class:`SealedMcap`
     view of that file: no summary, and either sealed by :data:`MCAP_TRAILER` or cut after at
-    least one complete chunk. None for a bag that is whole, or not MCAP, or damaged otherwise:
-    a closed file cut inside its summary, a file cut inside its first chunk. With ``salvage``, any file with a complete header gets a view (what repair reads)."""
+    least one complete chunk. None for a bag that is whole, or not MCAP, or damaged otherwise: a
+    closed file cut inside its summary, a file cut inside its first chunk. With ``salvage``, any
+    file with a complete header gets a view (what repair reads)."""
     path = Path(path)
     if path.is_dir() and (path / "metadata.yaml").exists():
         return None

@@ -166,7 +166,8 @@ class FrameTransform:
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise ValueError(f"frame transform {self.parent} -> {self.child}: translation must be 3 finite numbers")
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 1e-6:
-            raise ValueError(f"frame transform {self.parent} -> {self.child}: rotation must be a unit quaternion (x, y, z, w)")
+            raise ValueError(f"frame transform {self.parent} -> {self.child}: rotation must be a unit quaternion "
+                             "(x, y, z, w)")
         object.__setattr__(self, "translation", tuple(float(v) for v in t))
         object.__setattr__(self, "rotation", tuple(float(v) for v in q))
 

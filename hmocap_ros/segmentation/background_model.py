@@ -297,7 +297,8 @@ class BackgroundModel:
             frame, self.mean, self.variance, self._fg_count, self._mask, np.float32(self.gain),
             self._k2, self._min_var, self._max_var, p.shadow_suppression,
             np.float32(p.shadow_min_brightness), np.float32(p.shadow_max_brightness),
-            np.float32(p.highlight_max_brightness), np.float32(p.shadow_max_chroma ** 2), np.float32(p.shadow_chroma_sigma ** 2),
+            np.float32(p.highlight_max_brightness), np.float32(p.shadow_max_chroma ** 2),
+            np.float32(p.shadow_chroma_sigma ** 2),
             np.float32(p.learning_rate), p.absorb_frames, np.float32(p.absorb_rate),
             self.raw_mask, self.shadow_mask)
         assert self.raw_mask is not None  # allocated by the first frame

@@ -8,9 +8,9 @@ stands in for the foreground where the pixel is not learnt yet:
 
 1. **Person mask**: ``P`` = the network's probability above ``person_threshold``; ``G`` = ``P``
    grown by ``person_margin`` times the image's height (the network's outline is soft, and a
-   pixel next to a moving limb is not yet steady) keeps pixels from being learnt; the network runs on a camera every ``person_period`` frames while the
-   camera has pixels not learnt, and not at all once every pixel is (the last mask stands in
-   between two runs).
+   pixel next to a moving limb is not yet steady) keeps pixels from being learnt; the network
+   runs on a camera every ``person_period`` frames while the camera has pixels not learnt, and
+   not at all once every pixel is (the last mask stands in between two runs).
 2. **Learning** (:func:`learn_free_pixels`, per pixel not learnt yet): outside ``G`` the pixel's
    colour joins a running mean and variance (Welford); a colour farther than ``k_sigma`` of
    those from the mean (with the variance floored at ``(max_sigma / 2)^2``, so that sensor

@@ -185,7 +185,8 @@ def _frames(videos: list[VideoInfo], options: ImportOptions, warnings: list) -> 
                                f"{', '.join(v.path.name for v, n in zip(videos, left) if n is not None and n <= 0)}")
     if known and len(set(known)) > 1:
         shortest = [v.path.name for v, n in zip(videos, left) if n == count]
-        warnings.append(f"the videos have different lengths ({', '.join(f'{v.path.name} {n}' for v, n in zip(videos, left) if n is not None)} "
+        lengths = ", ".join(f"{v.path.name} {n}" for v, n in zip(videos, left) if n is not None)
+        warnings.append(f"the videos have different lengths ({lengths} "
                         f"frames from the start): imported to the shortest ({', '.join(shortest)})")
     if options.seconds is not None:
         wanted = max(1, int(round(options.seconds * fps)))

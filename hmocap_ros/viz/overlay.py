@@ -235,8 +235,9 @@ def depth_picture(depth_m: np.ndarray, gestures: Sequence[DepthGesture], truth: 
             depth = g.depth_m if g.depth_m > 0 else 1.5
             half = GESTURE_HALF_SIZE_M * fx / depth * scale
             u, v = (g.u + 0.5) * scale - 0.5, (g.v + 0.5) * scale - 0.5
-            cv2.rectangle(out, (int(round(u - half)), int(round(v - half))), (int(round(u + half)), int(round(v + half))),
-                          colour, thick, cv2.LINE_AA)
+            top_left = (int(round(u - half)), int(round(v - half)))
+            bottom_right = (int(round(u + half)), int(round(v + half)))
+            cv2.rectangle(out, top_left, bottom_right, colour, thick, cv2.LINE_AA)
             label = g.name if g.score is None else f"{g.name} {g.score:.2f}"
             y = v - half - 4 if g.score is not None else v + half + int(16 * text_scale / 0.4)
             _text(out, label, (u - half, max(12, y)), text_scale, colour)

@@ -248,7 +248,8 @@ def write_pictures(pictures: Iterator[Picture], out: Path, fps: float | None = N
                     if not writer.isOpened():
                         raise OverlayError(f"{out}: OpenCV cannot write this video here (no {out.suffix} "
                                            f"encoder); give a folder to write PNG frames")
-                writer.write(np.ascontiguousarray(bgr[:bgr.shape[0] - bgr.shape[0] % 2, :bgr.shape[1] - bgr.shape[1] % 2]))
+                writer.write(np.ascontiguousarray(bgr[:bgr.shape[0] - bgr.shape[0] % 2,
+                                                      :bgr.shape[1] - bgr.shape[1] % 2]))
             else:
                 out.mkdir(parents=True, exist_ok=True)
                 cv2.imwrite(str(out / f"frame_{count:05d}.png"), bgr)

@@ -1,12 +1,12 @@
 """The simulated user of ``hmocap sim teacher``: it follows gesture_trainer's instructions over DDS.
 
-The user of :class:`~hmocap_sim.gesture_teacher.GestureTeacher` (a person in a furnished
-room of the gesture simulator) in a closed loop with a running ``gesture_trainer`` node: it
-subscribes ``gesture_trainer/state`` (hmocap_interfaces/TrainerState) and publishes, frame by
-frame, the depth image of what the last state asks (the gesture held in the box, releasing,
-everyday motions, near misses of the taught gesture and unknown gestures as negatives) on ``depth/image_raw`` (16UC1 mm) with
-``depth/camera_info``, stamped ``1 / fps`` apart. A real user in front of a real depth
-camera replaces it one for one.
+The user of :class:`~hmocap_sim.gesture_teacher.GestureTeacher` (a person in a furnished room of
+the gesture simulator) in a closed loop with a running ``gesture_trainer`` node: it subscribes
+``gesture_trainer/state`` (hmocap_interfaces/TrainerState) and publishes, frame by frame, the
+depth image of what the last state asks (the gesture held in the box, releasing, everyday
+motions, near misses of the taught gesture and unknown gestures as negatives) on
+``depth/image_raw`` (16UC1 mm) with ``depth/camera_info``, stamped ``1 / fps`` apart. A real
+user in front of a real depth camera replaces it one for one.
 
 Closed loop: after each frame the teacher waits (up to ``--wait`` wall seconds) for the
 trainer's state of that frame before rendering the next, so a slow machine slows the session
