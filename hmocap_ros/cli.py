@@ -163,7 +163,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     own, ros_args = _split_ros_args(argv)
-    extra = []
+    extra: list[str] = []
     if own[:1] == ["bench"]:
         from hmocap_ros.commands.bench import split_arguments
 

@@ -79,11 +79,12 @@ def _read(bag: Path, spec, every: int, log):
 
     with BagReader(bag) as reader:
         topics = reader.topics()
-        image_topics = sorted(t for t, info in topics.items()
-                              if _IMAGE_TOPIC.match(t) and info.msgtype == "sensor_msgs/msg/Image")
+        camera_of = {t: m.group(1) for t, info in topics.items()
+                     if (m := _IMAGE_TOPIC.match(t)) and info.msgtype == "sensor_msgs/msg/Image"}
+        image_topics = sorted(camera_of)
         if not image_topics:
             raise ValueError(f"{bag}: no /<camera>/image_raw topics of sensor_msgs/Image")
-        session = CalibrationSession([_IMAGE_TOPIC.match(t).group(1) for t in image_topics], spec)
+        session = CalibrationSession([camera_of[t] for t in image_topics], spec)
         if "/camera_rig" in topics:
             for cam in rig_from_msg(reader.first("/camera_rig")):
                 session.intrinsics[cam.name] = (cam.K, cam.D, cam.width, cam.height, "/camera_rig")
@@ -215,7 +216,7 @@ def run_calibration(ns: argparse.Namespace, log=print) -> tuple[Path, Path, Path
     return calibrate_session(ns, session, bag, log)
 
 
-def calibrate_session(ns: argparse.Namespace, session, source: Path,
+def calibrate_session(ns: argparse.Namespace, session, source: Path | str,
                       log=print) -> tuple[Path, Path, Path]:
     """The rig from a gathered :class:`~hmocap_ros.calibration.session.CalibrationSession`
     (of a bag or of live topics, named ``source``): board checks, intrinsics, placement,

@@ -27,6 +27,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TypedDict
 
 __all__ = ["add_arguments", "detect_to_bag", "main_from_args", "output_topics"]
 
@@ -34,6 +35,16 @@ PROG = "hmocap detect gestures"
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
 #: seconds between two progress lines
 PROGRESS_PERIOD_S = 2.0
+
+
+class DetectCounts(TypedDict):
+    """What :func:`detect_to_bag` returns (see there)."""
+
+    frames: int
+    detections: int
+    skipped: dict[str, int]
+    topics: dict[str, int]
+    warning: str
 
 
 class DetectError(ValueError):
@@ -66,7 +77,7 @@ def _camera(info):
 
 
 def detect_to_bag(bag, out, forest, params=None, depth_topic: str | None = None,
-                  probability: bool = True, progress=None) -> dict:
+                  probability: bool = True, progress=None) -> DetectCounts:
     """Detect gestures on every frame of ``depth_topic`` of ``bag`` and write the node's
     messages to the new bag ``out`` (module docstring). Returns counts: ``frames``,
     ``detections``, ``skipped`` (reason -> frames), ``topics`` (topic -> messages written),
@@ -87,7 +98,7 @@ def detect_to_bag(bag, out, forest, params=None, depth_topic: str | None = None,
     gestures_topic, prob_topic = output_topics(depth_topic)
     detector = GestureDetector(forest, params)
     factory = RosbagsFactory()
-    counts = {"frames": 0, "detections": 0, "skipped": {}, "topics": {}, "warning": ""}
+    counts: DetectCounts = {"frames": 0, "detections": 0, "skipped": {}, "topics": {}, "warning": ""}
 
     def skip(reason: str) -> None:
         counts["skipped"][reason] = counts["skipped"].get(reason, 0) + 1

@@ -16,6 +16,7 @@ from pathlib import Path
 import yaml
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
+from mcap.writer import Writer as McapWriter
 
 from hmocap_ros.io.bag_writer import (
     SealedMcapFile,
@@ -49,7 +50,7 @@ def repair(path: str | Path) -> RepairResult | None:
     staging = view.path.with_name(f".{view.path.name}.repair")
     staging.unlink(missing_ok=True)
     stream = SealedMcapFile(staging)
-    writer = None
+    writer: McapWriter | None = None
     channels: dict[int, tuple[int, Channel, str]] = {}
     schemas: dict[int, tuple[int, str]] = {}
     counts: dict[int, int] = {}
@@ -61,6 +62,8 @@ def repair(path: str | Path) -> RepairResult | None:
             for record in records:
                 if isinstance(record, Header):
                     writer = open_mcap_writer(stream)
+                elif writer is None:  # an MCAP file opens with its Header: a record before it is damage
+                    raise ValueError(f"a {type(record).__name__} record before the MCAP header")
                 elif isinstance(record, Schema):
                     schemas[record.id] = (writer.register_schema(record.name, record.encoding, record.data),
                                           record.name)

@@ -34,6 +34,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
@@ -45,6 +46,17 @@ MIN_VIEWS = 2
 SILHOUETTES = ("auto", "masks", "fg", "gt")
 PROGRESS_PERIOD_S = 2.0
 EXTREMITIES_TOPIC = "/extremities"
+
+
+class TrackCounts(TypedDict):
+    """What :func:`track_to_bag` returns (see there)."""
+
+    frame_sets: int
+    with_pose: int
+    notes: list[str]
+    warnings: dict[str, int]
+    topics: dict[str, int]
+    silhouettes: NotRequired[str]  # set once the bag is open and the source chosen
 
 
 class TrackError(ValueError):
@@ -129,7 +141,7 @@ def _masks(source: _Source, rig, msgs: dict, stamp: int, models, rgb_of, warn) -
     """One mask per camera of a frame set (None: a dropped view)."""
     from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 
-    out = []
+    out: list[np.ndarray | None] = []
     for k, (cam, topic) in enumerate(zip(rig.cameras, source.topics)):
         if topic not in msgs:
             out.append(None)
@@ -171,7 +183,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                  learn_from: str | None = None, max_people: int = 1,
                  seed: int = 0, overrides: dict | None = None, body_id: str = "b0",
                  publish_tf: bool = True, rig_file: str | None = None, max_frames: int | None = None,
-                 progress=None) -> dict:
+                 progress=None) -> TrackCounts:
     """Track every frame set of ``bag`` and write body_tracker's messages to the new bag ``out``
     (module docstring). Returns ``frame_sets``, ``with_pose`` (frame sets with a body),
     ``silhouettes`` (the source used), ``notes``, ``warnings`` (text -> count) and ``topics``
@@ -200,7 +212,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     if learn_frames is not None and learn_frames < 1:
         raise TrackError(f"--learn-frames must be >= 1, got {learn_frames}")
     params = method_params(method or TrackerParams().method, overrides=overrides)
-    counts = {"frame_sets": 0, "with_pose": 0, "notes": [], "warnings": {}, "topics": {}}
+    counts: TrackCounts = {"frame_sets": 0, "with_pose": 0, "notes": [], "warnings": {}, "topics": {}}
     detection_params = ExtremityDetectionParams(detector=detector) if detector else ExtremityDetectionParams()
 
     def warn(text: str) -> None:
@@ -284,7 +296,10 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                 posed = [r for r in results if r.has_pose]
                 counts["frame_sets"] += 1
                 counts["with_pose"] += bool(posed)
-                previous = skeleton_labels(list(posed[0].joint_names), posed[0].joints) if posed else None
+                previous = None
+                if posed:
+                    assert posed[0].joints is not None  # has_pose
+                    previous = skeleton_labels(list(posed[0].joint_names), posed[0].joints)
                 if progress is not None and time.monotonic() - last_report >= PROGRESS_PERIOD_S:
                     last_report = time.monotonic()
                     progress(f"{counts['frame_sets']}/{total} frame sets, "

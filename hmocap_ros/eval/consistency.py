@@ -41,8 +41,12 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hmocap_ros.detection.keypoint_network import ViewLandmarks
 
 __all__ = ["ConsistencyError", "consistency_report", "evaluate_consistency", "silhouette_iou"]
 
@@ -192,14 +196,15 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
         if max_frames is not None:
             total = min(total, max_frames)
         chosen = set(np.linspace(0, max(total - 1, 0), PICTURE_FRAMES).round().astype(int).tolist())
-        reproj = {(label, name): [] for label in labels for name in rig.names}
-        gaps = {label: [] for label in labels}
-        ious = {name: [] for name in rig.names}
+        reproj: dict[tuple[str, str], list[float]] = {(label, name): [] for label in labels for name in rig.names}
+        gaps: dict[str, list[float]] = {label: [] for label in labels}
+        ious: dict[str, list[float]] = {name: [] for name in rig.names}
         n_frames = n_pose = 0
         rows = []
         for stamp, msgs in reader.frame_sets(present, 0, allow_partial=True, min_topics=1):
             images = [image_to_rgb(msgs[t]) if t in msgs else None for t in image_topics]
-            views, foregrounds = [], []
+            views: list[ViewLandmarks | None] = []
+            foregrounds: list[np.ndarray | None] = []
             for k, (name, image) in enumerate(zip(rig.names, images)):
                 if image is None or image.shape[:2] != (rig[k].height, rig[k].width):
                     views.append(None)
@@ -217,7 +222,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                 joints, vertices = found
                 points = np.array([joints[label] for label in labels])
                 projected = project_points(rig.cameras, points)
-                rendered = [None] * len(rig)
+                rendered: list[np.ndarray | None] = [None] * len(rig)
                 if vertices is not None:
                     mesh = project_points(rig.cameras, vertices)
                     for k, camera in enumerate(rig):
@@ -230,8 +235,9 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                         if weights[k, p] >= params.confident_visibility and projected.depth[k, j] > 0:
                             reproj[(label, name)].append(
                                 float(np.linalg.norm(projected.pixels[k, j] - pixels[k, p])))
-                    if rendered[k] is not None and foregrounds[k] is not None:
-                        iou = silhouette_iou(rendered[k], foregrounds[k])
+                    silhouette, foreground = rendered[k], foregrounds[k]
+                    if silhouette is not None and foreground is not None:
+                        iou = silhouette_iou(silhouette, foreground)
                         if iou is not None:
                             ious[name].append(iou)
                 triangulated = dict(zip(keypoints.labels, zip(keypoints.positions, keypoints.views_used)))

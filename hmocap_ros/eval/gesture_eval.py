@@ -49,6 +49,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -139,8 +140,9 @@ def read_gesture_bags(paths, frame_fn: Callable[[np.ndarray], np.ndarray] | None
     if not paths:
         raise GestureBagError("no bag given")
     wanted = [topics.DEPTH_IMAGE, topics.DEPTH_INFO, topics.GT_GESTURES]
-    depth = None
+    depth: np.ndarray | None = None
     n = 0
+    labels: list[tuple[int, float, float] | None]
     stamps, labels, visible, names, focal, sources = [], [], [], {}, None, []
     first_path = None
     try:
@@ -187,6 +189,7 @@ def read_gesture_bags(paths, frame_fn: Callable[[np.ndarray], np.ndarray] | None
         raise GestureBagError(str(err)) from err
     except FileNotFoundError as err:
         raise GestureBagError(f"{err.filename}: no such bag") from err
+    assert depth is not None and focal is not None  # each bag gave a frame (n_bag > 0), paths is not empty
     # A prefix of a C-contiguous array is C-contiguous: no copy.
     return GestureBag(depth[:n], np.asarray(stamps, np.int64), labels, np.asarray(visible, bool),
                       float(focal), _class_names(names), sources)
@@ -276,8 +279,8 @@ def score_run(data: GestureBag, forest: Forest, run: DetectorRun, node_params: D
               if thresholds is None else dict(thresholds))
     tolerance = TOLERANCE_PX_640 * data.width / REFERENCE_WIDTH
     n_gestures = forest.n_classes - 1
-    scores = [[] for _ in range(n_gestures)]
-    correct = [[] for _ in range(n_gestures)]
+    scores: list[list[float]] = [[] for _ in range(n_gestures)]
+    correct: list[list[bool]] = [[] for _ in range(n_gestures)]
     positives = np.zeros(n_gestures, int)
     found = np.zeros(n_gestures, int)
     at_node = []
@@ -300,7 +303,7 @@ def score_run(data: GestureBag, forest: Forest, run: DetectorRun, node_params: D
         at_node += [(i, d.class_id, not hit(d, label)) for d in reported]
         if label is not None and 1 <= label[0] <= n_gestures and any(hit(d, label) for d in reported):
             found[label[0] - 1] += 1
-    per_class = {}
+    per_class: dict[str, dict[str, Any]] = {}
     for k in range(n_gestures):
         ap, precision, recall, score_steps = average_precision(scores[k], correct[k], int(positives[k]))
         per_class[forest.class_names[k + 1]] = {
@@ -361,6 +364,8 @@ def detect_gestures(path, forest: Forest, params: DetectorParams | None = None,
     info_topic = info_topic or _info_topic(depth_topic)
     path = Path(path)
     detector = GestureDetector(forest, params)
+    frames: list[dict[str, Any]]
+    per_class: dict[str, dict[str, Any]]
     frames, per_class, size, focal, warning, notes = [], {}, None, None, "", []
     seconds = 0.0
     try:
@@ -414,11 +419,11 @@ def detect_gestures(path, forest: Forest, params: DetectorParams | None = None,
                               + (f" with a {info_topic} of the same stamp" if info_topic in available else ""))
     per_gesture = {}
     for name in forest.class_names[1:]:
-        c = per_class.get(name)
-        per_gesture[name] = ({"detections": c["detections"], "frames": c["detections"],
-                              "mean_score": round(c["score_sum"] / c["detections"], 4),
-                              "first_stamp_ns": c["first_stamp_ns"], "last_stamp_ns": c["last_stamp_ns"]}
-                             if c else {"detections": 0, "frames": 0})
+        seen = per_class.get(name)
+        per_gesture[name] = ({"detections": seen["detections"], "frames": seen["detections"],
+                              "mean_score": round(seen["score_sum"] / seen["detections"], 4),
+                              "first_stamp_ns": seen["first_stamp_ns"], "last_stamp_ns": seen["last_stamp_ns"]}
+                             if seen else {"detections": 0, "frames": 0})
     return {
         "mode": "detections",
         "bag": str(path),

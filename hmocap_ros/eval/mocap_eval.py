@@ -43,6 +43,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -204,6 +205,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     has_truth = frames.has_truth
     estimates = np.full((len(frames.stamps), len(est_idx), 3), np.nan)
     states, costs, tracks = [], [], []
+    stage: dict[str, float]
     times, stage, evals = [], {}, []
     for k, stamp in enumerate(frames.stamps):
         dets = frames.detections[k] if (frames.detections is not None and uses_detector) else None
@@ -220,7 +222,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
                 stage[key] = stage.get(key, 0.0) + sum(r.timings.get(key, 0.0) for r in results)
             if result.has_pose:
                 tracks.append(slot)
-        if result.has_pose:
+        if result.joints is not None:  # has_pose
             estimates[k] = result.joints[est_idx]
         if progress is not None:
             progress(k, len(frames.stamps), result)
@@ -262,7 +264,7 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
                          detector=(ExtremityDetectionParams(detector=detector)
                                    if any(get_method(m).uses_detector for m in methods)
                                    else None), rig=rig)
-    report = {
+    report: dict[str, Any] = {
         "bag": str(bag),
         "rig": "the bag's" if rig is None else "given",
         "silhouettes": frames.silhouettes,

@@ -13,8 +13,13 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hmocap_ros.body import BodyShape
+    from hmocap_ros.geometry.rig import Rig
 
 __all__ = ["BagFrames", "empty_room_frames", "load_frames"]
 
@@ -35,12 +40,12 @@ class BagFrames:
     per frame set.
     """
 
-    rig: object
+    rig: Rig
     stamps: np.ndarray
     masks: list
     truth: np.ndarray
     joint_names: tuple
-    body_shape: object | None
+    body_shape: BodyShape | None
     silhouettes: str
     fallback: str = ""
     segmentation_s: float = 0.0
@@ -50,7 +55,7 @@ class BagFrames:
 
     def mask_list(self, k: int) -> list:
         h, w = self.shape_hw
-        out = []
+        out: list[np.ndarray | None] = []
         for packed in self.masks[k]:
             if packed is None:
                 out.append(None)
@@ -63,7 +68,7 @@ class BagFrames:
         return np.isfinite(self.truth).all(axis=(1, 2))
 
 
-def _read_truth(reader, available, bag) -> tuple[dict, tuple, object]:
+def _read_truth(reader, available, bag) -> tuple[dict, tuple, BodyShape | None]:
     """The ground-truth skeletons by stamp, their joint names, and the subject's shape."""
     from hmocap_ros.body import BodyShape
     from hmocap_ros.io import topics
@@ -78,7 +83,7 @@ def _read_truth(reader, available, bag) -> tuple[dict, tuple, object]:
         joint_names = tuple(str(n) for n in msg.joint_names)
         truth_by_stamp[stamp_to_ns(msg.header.stamp)] = np.array(
             [[p.x, p.y, p.z] for p in msg.positions], dtype=np.float64)
-    body_shape = None
+    body_shape: BodyShape | None = None
     if topics.GT_BODY_SHAPE in available:
         shape_msg = reader.first(topics.GT_BODY_SHAPE)
         if shape_msg is not None:
@@ -101,7 +106,7 @@ def _mask_row(use, msgs, stamp, bg, rgb_of) -> list:
     """One mask per camera of a frame set (segmented, or the bag's silhouette), or None."""
     from hmocap_ros.io.conversions import image_to_numpy
 
-    row = []
+    row: list[np.ndarray | None] = []
     for k, topic in enumerate(use):
         msg = msgs.get(topic)
         if msg is None:
@@ -130,7 +135,7 @@ def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, 
     from hmocap_ros.io.conversions import image_to_rgb
 
     stamps, masks, truth = [], [], []
-    detections = [] if pipeline is not None else None
+    detections: list | None = [] if pipeline is not None else None
     shape_hw: tuple = ()
     seg_time = det_time = 0.0
     n_truth = 0

@@ -35,8 +35,8 @@ def _discover(node, executor, log) -> list:
     names: list = []
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.1)
-        names = sorted(_IMAGE_TOPIC.match(t).group(1) for t, types in node.get_topic_names_and_types()
-                       if _IMAGE_TOPIC.match(t) and "sensor_msgs/msg/Image" in types)
+        names = sorted(m.group(1) for t, types in node.get_topic_names_and_types()
+                       if (m := _IMAGE_TOPIC.match(t)) and "sensor_msgs/msg/Image" in types)
     if not names:
         raise ValueError(f"no /<camera>/image_raw topic of sensor_msgs/Image within {_DISCOVERY_S:g} s; "
                          f"name the cameras with --cameras")

@@ -34,6 +34,8 @@ from hmocap_ros.params import flat_fields, from_flat, param  # noqa: F401  (para
 
 #: Images and other high-rate sensor data: best effort, keep last 5.
 SENSOR_QOS = qos_profile_sensor_data
+#: a node class given to :func:`run_node`, and the node its ``on_shutdown`` receives
+NodeT = typing.TypeVar("NodeT", bound=Node)
 
 #: The reliabilities of an image subscription (node parameter ``image_reliability``).
 IMAGE_RELIABILITIES = {"best_effort": ReliabilityPolicy.BEST_EFFORT, "reliable": ReliabilityPolicy.RELIABLE}
@@ -196,12 +198,12 @@ class ShutdownFlag:
 
 
 def run_node(
-    node_factory: Callable[[], Node],
+    node_factory: Callable[[], NodeT],
     node_name: str,
     doc: str,
     config_cls=None,
     args: Sequence[str] | None = None,
-    on_shutdown: Callable[[Node], None] | None = None,
+    on_shutdown: Callable[[NodeT], None] | None = None,
 ) -> int:
     """Standard ``main`` of a node: --help, default config, spin until Ctrl-C/SIGTERM, clean shutdown.
 
@@ -256,7 +258,7 @@ def take_rig(node: Node, rig_file: str, set_rig: Callable) -> None:
         return
 
     def on_rig(msg) -> None:
-        rig = changed_rig(msg, node.rig, node.get_logger())
+        rig = changed_rig(msg, getattr(node, "rig", None), node.get_logger())  # the node's rig, None before the first
         if rig is not None:
             set_rig(rig)
 

@@ -23,6 +23,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
 from hmocap_ros.viz.foxglove_bridge import FoxgloveBridge
@@ -43,7 +44,7 @@ class FoxgloveView(Node):
         self.bridge = bridge
         self.requested = {t if t.startswith("/") else "/" + t for t in topics}
         self.types: dict[str, str] = {}
-        self.subs: dict[str, object] = {}
+        self.subs: dict[str, Subscription] = {}
         self.refused: set[str] = set()
         self._discover()
         self.create_timer(period_s, self._discover)

@@ -374,13 +374,15 @@ class GestureTrainer(Node):
         if previous is not None and previous.state != status.state:
             log.info(f"'{status.gesture}': {status.state}" + (f" (round {status.round}/{status.rounds})"
                                                               if status.round else ""))
-            if status.state == "done" and not trainer.taught:
-                log.error(status.instruction + " Nothing written.")
-            elif status.state == "done":
-                th = trainer.thresholds.get(status.gesture)
-                log.info(f"'{status.gesture}' is taught" + (f", threshold {th:.3f}" if th is not None else ""))
-                if self.config.save_when_taught:
-                    self._save()
+            if status.state == "done":
+                assert trainer is not None  # with no trainer the status is idle
+                if not trainer.taught:
+                    log.error(status.instruction + " Nothing written.")
+                else:
+                    th = trainer.thresholds.get(status.gesture)
+                    log.info(f"'{status.gesture}' is taught" + (f", threshold {th:.3f}" if th is not None else ""))
+                    if self.config.save_when_taught:
+                        self._save()
 
     def _publish_state(self, status: TrainerStatus) -> None:
         self.last_status = status

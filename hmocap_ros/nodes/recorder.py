@@ -28,6 +28,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 
 from hmocap_ros.io.bag_writer import BagWriteError, BagWriter, QosProfile
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
@@ -44,7 +45,7 @@ class Recorder(Node):
         self.writer = writer
         self.requested = [self._absolute(t) for t in topics]
         self.record_all = record_all
-        self._subs = {}
+        self._subs: dict[str, Subscription] = {}
         self._matched: set[str] = set()
         self._unknown_types: set[str] = set()
         self.write_error: BagWriteError | None = None

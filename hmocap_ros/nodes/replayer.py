@@ -184,6 +184,7 @@ def _publish(node: Replayer, reader: BagReader, rate: float, loop: bool, flag: S
         if last_ns is not None and clock_period is not None:
             node.publish_clock(last_ns)
         if behind and not quiet:
+            assert start_ns is not None and last_ns is not None  # behind holds a message's lateness
             late = np.asarray(behind)
             print(f"replay timing: bag_s={(last_ns - start_ns) * 1e-9 / rate:.3f} "
                   f"wall_s={behind[-1] - behind[0] + (last_ns - start_ns) * 1e-9 / rate:.3f} "
