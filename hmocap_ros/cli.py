@@ -73,8 +73,10 @@ COMMAND_GROUPS = {
         {
             "mocap": ("hmocap_sim.commands.mocap", "multi-view RGB bag of a retargeted BVH clip, with ground truth"),
             "gestures": ("hmocap_sim.commands.gestures", "depth bag of gestures among clutter, with ground truth"),
-            "calibration": ("hmocap_sim.commands.calibration", "multi-view bag of a ChArUco board carried through the room, with the true rig"),
-            "teacher": ("hmocap_sim.commands.teacher", "a simulated user who follows gesture_trainer's instructions over DDS"),
+            "calibration": ("hmocap_sim.commands.calibration",
+                            "multi-view bag of a ChArUco board carried through the room, with the true rig"),
+            "teacher": ("hmocap_sim.commands.teacher",
+                        "a simulated user who follows gesture_trainer's instructions over DDS"),
         },
     ),
     "eval": (
@@ -83,10 +85,14 @@ COMMAND_GROUPS = {
         "errors against the bag's ground truth as JSON and a plot; consistency checks a bag "
         "without ground truth against its own images.",
         {
-            "mocap": ("hmocap_ros.commands.eval_mocap", "3D joint error and speed of the body tracker on a multi-view bag"),
+            "mocap": ("hmocap_ros.commands.eval_mocap",
+                      "3D joint error and speed of the body tracker on a multi-view bag"),
             "gestures": ("hmocap_ros.commands.eval_gestures", "precision-recall and AP per gesture on a depth bag"),
-            "extremities": ("hmocap_ros.commands.eval_extremities", "precision, recall and 3D error of the extremity detection on a multi-view bag"),
-            "consistency": ("hmocap_ros.commands.eval_consistency", "the tracked body against the images of a bag without ground truth: reprojection, silhouettes, triangulation"),
+            "extremities": ("hmocap_ros.commands.eval_extremities",
+                            "precision, recall and 3D error of the extremity detection on a multi-view bag"),
+            "consistency": ("hmocap_ros.commands.eval_consistency",
+                            "the tracked body against the images of a bag without ground truth: reprojection, "
+                            "silhouettes, triangulation"),
         },
     ),
     "detect": (
@@ -112,14 +118,17 @@ COMMAND_GROUPS = {
         "Turn recordings made outside ROS (synchronised video files and another tool's camera "
         "calibration) into bags in the documented layout.",
         {
-            "videos": ("hmocap_ros.commands.import_videos", "synchronised videos and their calibration into a multi-view bag"),
+            "videos": ("hmocap_ros.commands.import_videos",
+                       "synchronised videos and their calibration into a multi-view bag"),
         },
     ),
     "rig": (
         "camera rig files",
         "Read and write camera calibrations in other tools' formats.",
         {
-            "convert": ("hmocap_ros.commands.rig_convert", "a calibration from one format into another (rig YAML, Pose2Sim/Anipose TOML, Qualisys QCA, OpenCV/EasyMocap, ROS camera_info)"),
+            "convert": ("hmocap_ros.commands.rig_convert",
+                        "a calibration from one format into another (rig YAML, Pose2Sim/Anipose TOML, Qualisys QCA, "
+                        "OpenCV/EasyMocap, ROS camera_info)"),
         },
     ),
     "train": (

@@ -270,8 +270,8 @@ def calibrate_session(ns: argparse.Namespace, session, source: Path | str,
 def run_live_calibration(ns: argparse.Namespace, ros_args: list | None = None,
                          log=print) -> tuple[Path, Path, Path]:
     """``--live``: the session from the cameras' topics, then the same calibration."""
-    from hmocap_ros.nodes.calibration_collector import collect_live
     from hmocap_ros.calibration.board import board_from_args
+    from hmocap_ros.nodes.calibration_collector import collect_live
 
     session = collect_live(ns, board_from_args(ns), ros_args or [], log)
     return calibrate_session(ns, session, "live topics", log)
@@ -279,8 +279,8 @@ def run_live_calibration(ns: argparse.Namespace, ros_args: list | None = None,
 
 def main_from_args(ns: argparse.Namespace, ros_args: list | None = None) -> int:
     from hmocap_ros.calibration.pipeline import CalibrationError
-    from hmocap_ros.io.bag_reader import BagReadError
     from hmocap_ros.geometry.rig import RigError
+    from hmocap_ros.io.bag_reader import BagReadError
 
     if bool(ns.bag) == bool(ns.live):
         print("hmocap calibrate: give a bag or --live (not both)", file=sys.stderr)

@@ -9,9 +9,15 @@ import json
 import sys
 from pathlib import Path
 
-from hmocap_ros.eval.gesture_eval import (DEFAULT_MODEL, SWEEP_MIN_SCORE, GestureBagError,
-                                          detect_gestures, evaluate_gestures, plot_pr,
-                                          read_gesture_bag)
+from hmocap_ros.eval.gesture_eval import (
+    DEFAULT_MODEL,
+    SWEEP_MIN_SCORE,
+    GestureBagError,
+    detect_gestures,
+    evaluate_gestures,
+    plot_pr,
+    read_gesture_bag,
+)
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.io import topics

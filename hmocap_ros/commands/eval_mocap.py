@@ -9,8 +9,14 @@ import json
 import sys
 from pathlib import Path
 
-from hmocap_ros.eval.mocap_eval import (evaluate, json_default, plot_errors, strict_json,
-                                        tracker_overrides, unevaluated_methods)
+from hmocap_ros.eval.mocap_eval import (
+    evaluate,
+    json_default,
+    plot_errors,
+    strict_json,
+    tracker_overrides,
+    unevaluated_methods,
+)
 from hmocap_ros.tracking.methods import method_names
 
 __all__ = ["add_arguments", "main_from_args"]

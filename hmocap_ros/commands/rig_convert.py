@@ -77,9 +77,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main_from_args(ns: argparse.Namespace) -> int:
-    from hmocap_ros.calibration.formats import (CalibrationFormatError, detect_format,
-                                                load_calibration_rig, read_calibration,
-                                                save_calibration_rig)
+    from hmocap_ros.calibration.formats import (
+        CalibrationFormatError,
+        detect_format,
+        load_calibration_rig,
+        read_calibration,
+        save_calibration_rig,
+    )
 
     output = Path(ns.output)
     target = ns.target_format or output_format(output)

@@ -35,8 +35,15 @@ from hmocap_ros.gestures.depth_features import depth_to_millimetres
 from hmocap_ros.gestures.forest import train_forest_on_frames
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest, save_forest
 from hmocap_ros.gestures.online_forest import OnlineForest, PassReport, train_online_on_frames
-from hmocap_ros.gestures.params import (NEGATIVE_MODES, REFERENCE_FOCAL_PX, FeatureParams, ForestParams, OnlineParams,
-                                        OnlineTrainParams, TrainParams)
+from hmocap_ros.gestures.params import (
+    NEGATIVE_MODES,
+    REFERENCE_FOCAL_PX,
+    FeatureParams,
+    ForestParams,
+    OnlineParams,
+    OnlineTrainParams,
+    TrainParams,
+)
 
 __all__ = ["REFERENCE_FOCAL_PX", "add_arguments", "main_from_args", "print_data_summary", "read_training_bags",
            "train_params_for_focal"]

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import NotRequired, TypedDict
 
 import numpy as np
@@ -189,16 +188,15 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     ``silhouettes`` (the source used), ``notes``, ``warnings`` (text -> count) and ``topics``
     (topic -> messages written). :class:`TrackError` for bad input."""
     from hmocap_ros.body import load_body_model
-    from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
-                                                         skeleton_labels)
+    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams, ExtremityPipeline, skeleton_labels
     from hmocap_ros.detection.keypoint_network import ModelFileError
     from hmocap_ros.eval.mocap_eval import method_params
+    from hmocap_ros.geometry.rig import RigError, load_rig
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.bag_writer import LATCHED, whole_bag
     from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.io.msg_factory import RosbagsFactory
-    from hmocap_ros.geometry.rig import RigError, load_rig
     from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.segmentation import ForegroundParams, background_models
     from hmocap_ros.tracking.params import TrackerParams
@@ -269,7 +267,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                                                  min_topics=min(MIN_VIEWS, len(read))):
                 decoded: dict = {}
 
-                def rgb_of(topic: str) -> np.ndarray:
+                def rgb_of(topic: str, decoded: dict = decoded, msgs: dict = msgs) -> np.ndarray:
                     if topic not in decoded:
                         decoded[topic] = image_to_rgb(msgs[topic])
                     return decoded[topic]

@@ -33,9 +33,10 @@ JSON (``--json``): ``frames``, ``frames_with_pose``, ``reprojection_median_px``,
 ``reprojection_p90_px``, ``silhouette_iou_mean``, ``triangulation_gap_mm`` (median), and
 ``per_joint``, ``per_view``, ``image_size``, ``keypoint_pairs``, ``triangulated_points``,
 ``tracked`` (the ``--tracked`` bag, null when tracked here) and ``tracking`` (the on-the-fly
-run's frame sets, frame sets with a body, foreground source and notes). ``--picture``: each view of a few frame sets with the foreground's outline
-(green), the rendered body's (magenta), the views' keypoints (yellow) and the tracked joints
-projected (red, with the skeleton's bones). Pixels are those of the bag's images.
+run's frame sets, frame sets with a body, foreground source and notes). ``--picture``: each view
+of a few frame sets with the foreground's outline (green), the rendered body's (magenta), the
+views' keypoints (yellow) and the tracked joints projected (red, with the skeleton's bones).
+Pixels are those of the bag's images.
 """
 from __future__ import annotations
 
@@ -129,7 +130,7 @@ def _tile(rgb, foreground, rendered, pixels, weights, labels, joint_pixels, bone
         if a in joint_pixels and b in joint_pixels:
             cv2.line(image, tuple(int(v) for v in joint_pixels[a]),
                      tuple(int(v) for v in joint_pixels[b]), (230, 40, 40), max(1, radius // 2))
-    for k, label in enumerate(labels):
+    for k in range(len(labels)):
         if weights[k] > 0:
             cv2.circle(image, tuple(int(v) for v in pixels[k]), radius, (250, 230, 40), -1)
     for pixel in joint_pixels.values():
@@ -166,15 +167,14 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                        progress=None) -> dict:
     """The checks of the module docstring for ``bag`` and a tracked body's ``motion``
     (:class:`~hmocap_ros.export.motion.BodyMotion`)."""
-    from hmocap_ros.geometry.projection import project_points
+    from hmocap_ros.detection.keypoint_triangulation import TRIANGULATED_POINTS, triangulate_views, view_keypoints
     from hmocap_ros.detection.params import KeypointParams
-    from hmocap_ros.detection.keypoint_triangulation import (TRIANGULATED_POINTS, triangulate_views,
-                                                             view_keypoints)
+    from hmocap_ros.geometry.projection import project_points
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.conversions import image_to_rgb
-    from hmocap_ros.render import render_silhouettes
     from hmocap_ros.io.rig_messages import rig_from_msg
+    from hmocap_ros.render import render_silhouettes
     from hmocap_ros.segmentation import ForegroundParams, background_models
     from hmocap_ros.segmentation.person_masks import PersonMasks
 

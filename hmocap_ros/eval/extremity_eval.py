@@ -144,6 +144,7 @@ def evaluate_extremities(bag, detector: str = "keypoints", silhouettes: str = "f
     out = sys.stderr if out is None else out
     frames = load_frames(bag, silhouettes, max_frames, out=out,
                          detector=ExtremityDetectionParams(detector=detector))
+    assert frames.detections is not None  # load_frames runs the detector it is given on every frame set
     scores = score_detections(frames.detections, frame_truths(frames, true_extremities(
         bag, frames.stamps)), radius)
     return {"bag": str(bag), "detector": detector, "radius_m": radius,

@@ -37,17 +37,17 @@ detections and mean score per gesture). The CameraInfo beside the depth topic gi
 length; without one the camera is taken for the forest's training camera at the image width.
 
 Also here: :func:`read_gesture_bag` / :func:`read_gesture_bags`, the one reader of annotated
-depth bags that training (``hmocap train gestures``) shares, and :func:`~hmocap_ros.gestures.depth_units.implausible_depth`,
-the depth-unit check of the node and of the detections.
+depth bags that training (``hmocap train gestures``) shares, and
+:func:`~hmocap_ros.gestures.depth_units.implausible_depth`, the depth-unit check of the node and
+of the detections.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import replace
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +63,8 @@ from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
 
 __all__ = ["DEFAULT_MODEL", "DetectorRun", "GestureBag", "GestureBagError", "SWEEP_MIN_SCORE",
-           "average_precision", "detect_gestures", "evaluate_gestures", "false_detections", "run_detector", "score_run", "read_gesture_bag",
+           "average_precision", "detect_gestures", "evaluate_gestures", "false_detections", "run_detector", "score_run",
+           "read_gesture_bag",
            "read_gesture_bags"]
 
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"

@@ -1,10 +1,11 @@
 """Reading a multi-view bag for the tracker's evaluation: masks, detections and truth.
 
 :func:`load_frames` reads any bag in the documented layout (:mod:`hmocap_ros.io.topics`),
-segments each frame set's images with the same foreground model as the live node (or reads
-the bag's exact silhouettes), optionally runs the extremity detection of detector-driven
-tracking on each frame set (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`,
-the node's code, without the last skeleton), and collects the ground truth. Masks are stored bit-packed, computed once for all methods.
+segments each frame set's images with the same foreground model as the live node (or reads the
+bag's exact silhouettes), optionally runs the extremity detection of detector-driven tracking on
+each frame set (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`, the node's
+code, without the last skeleton), and collects the ground truth. Masks are stored bit-packed,
+computed once for all methods.
 """
 from __future__ import annotations
 
@@ -145,7 +146,7 @@ def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, 
     for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True, min_topics=1):
         decoded: dict = {}  # each image decoded once, for its mask and its detections
 
-        def rgb_of(topic: str) -> np.ndarray:
+        def rgb_of(topic: str, decoded: dict = decoded, msgs: dict = msgs) -> np.ndarray:
             if topic not in decoded:
                 decoded[topic] = image_to_rgb(msgs[topic])
             return decoded[topic]

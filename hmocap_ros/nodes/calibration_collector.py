@@ -48,12 +48,12 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
     """Gather a :class:`~hmocap_ros.calibration.session.CalibrationSession` from the topics
     (module docstring)."""
     import rclpy
+    from hmocap_interfaces.msg import CameraRig
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import CameraInfo, Image
 
-    from hmocap_interfaces.msg import CameraRig
     from hmocap_ros.calibration.detection import MIN_CORNERS
     from hmocap_ros.calibration.live_collection import FrameSetCollector, enough_views
     from hmocap_ros.calibration.session import CalibrationSession

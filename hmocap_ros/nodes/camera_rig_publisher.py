@@ -36,13 +36,12 @@ from sensor_msgs.msg import CameraInfo, Image
 from tf2_msgs.msg import TFMessage
 
 from hmocap_ros.config_files import find_config_file
+from hmocap_ros.geometry.rig import Rig, RigError, load_rig
 from hmocap_ros.io.conversions import dict_to_camera_info
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.io.tf import DEFAULT_FIXED_FRAME, TF_STATIC_TOPIC, rig_transforms, tf_message
-from hmocap_ros.nodes.common import (LATCHED_QOS, declare_parameters, image_qos, image_reliability_param, param,
-                                     run_node)
-from hmocap_ros.geometry.rig import Rig, RigError, load_rig
 from hmocap_ros.io.rig_messages import rig_to_msg
+from hmocap_ros.io.tf import DEFAULT_FIXED_FRAME, TF_STATIC_TOPIC, rig_transforms, tf_message
+from hmocap_ros.nodes.common import LATCHED_QOS, declare_parameters, image_qos, image_reliability_param, param, run_node
 
 NODE_NAME = "camera_rig_publisher"
 

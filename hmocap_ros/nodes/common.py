@@ -1,11 +1,11 @@
 """What every hmocap_ros node shares: parameters from a frozen dataclass, config YAML, --help, start/stop.
 
 A node's tunables are one frozen dataclass whose fields carry a ``description`` in their
-metadata (:func:`hmocap_ros.params.param`; nested groups by :func:`hmocap_ros.params.group`). :func:`declare_parameters` declares each as a ROS parameter
-with that description and reads them back into the dataclass, which the algorithm takes.
-:func:`run_node` handles ``--help`` (printing the parameter table), loads
-``config/<node_name>.yaml`` as the default parameter file, spins, and shuts down cleanly
-on Ctrl-C or SIGTERM.
+metadata (:func:`hmocap_ros.params.param`; nested groups by :func:`hmocap_ros.params.group`).
+:func:`declare_parameters` declares each as a ROS parameter with that description and reads them
+back into the dataclass, which the algorithm takes. :func:`run_node` handles ``--help``
+(printing the parameter table), loads ``config/<node_name>.yaml`` as the default parameter file,
+spins, and shuts down cleanly on Ctrl-C or SIGTERM.
 """
 
 from __future__ import annotations
@@ -285,8 +285,8 @@ def changed_rig(msg, current, logger):
 def depth_camera_from_info(msg, current, logger):
     """The PinholeCamera of a ``depth/camera_info`` message, or ``current`` when it cannot be
     read (logged, throttled); a new camera, or one whose focal length changed, is logged."""
-    from hmocap_ros.io.conversions import ConversionError, camera_info_to_dict
     from hmocap_ros.geometry import PinholeCamera
+    from hmocap_ros.io.conversions import ConversionError, camera_info_to_dict
 
     try:
         camera = PinholeCamera.from_camera_info(camera_info_to_dict(msg))

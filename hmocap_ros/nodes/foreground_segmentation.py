@@ -44,8 +44,15 @@ from std_srvs.srv import Trigger
 
 from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to_rgb, numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import (RESULT_QOS, create_image_publisher, declare_parameters, image_qos,
-                                     image_reliability_param, param, run_node)
+from hmocap_ros.nodes.common import (
+    RESULT_QOS,
+    create_image_publisher,
+    declare_parameters,
+    image_qos,
+    image_reliability_param,
+    param,
+    run_node,
+)
 from hmocap_ros.segmentation import ForegroundParams, background_models, compile_kernels
 
 NODE_NAME = "foreground_segmentation"

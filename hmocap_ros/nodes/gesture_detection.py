@@ -48,14 +48,23 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from hmocap_ros.camera_model import PinholeCamera
+from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
 from hmocap_ros.gestures.depth_units import implausible_depth
 from hmocap_ros.gestures.detection import gesture_thresholds, node_detections
 from hmocap_ros.gestures.file_watch import FileWatch
 from hmocap_ros.gestures.gesture_messages import gesture_array, probability_image
-from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
-from hmocap_ros.nodes.common import (RESULT_QOS, create_image_publisher, declare_parameters, depth_camera_from_info,
-                                     depth_from_msg, image_qos, image_reliability_param, param, run_node)
+from hmocap_ros.nodes.common import (
+    RESULT_QOS,
+    create_image_publisher,
+    declare_parameters,
+    depth_camera_from_info,
+    depth_from_msg,
+    image_qos,
+    image_reliability_param,
+    param,
+    run_node,
+)
 
 NODE_NAME = "gesture_detection"
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
@@ -134,9 +143,10 @@ class GestureDetection(Node):
         trained = forest.training_focal_px
         self.get_logger().info(
             f"gesture forest {path.name}: {len(forest.trees)} trees, classes {', '.join(forest.class_names[1:])}, "
-            f"{forest.features.feature_type} tests" + (f" (kappa {forest.features.kappa_m:g} m)" if forest.features.clipped
-                                                       else "")
-            + (f", trained at fx {trained:g} px" if trained else ", training focal length unknown (offsets used as is)"))
+            f"{forest.features.feature_type} tests"
+            + (f" (kappa {forest.features.kappa_m:g} m)" if forest.features.clipped else "")
+            + (f", trained at fx {trained:g} px" if trained
+               else ", training focal length unknown (offsets used as is)"))
         return ""
 
     def _check_model_file(self) -> None:

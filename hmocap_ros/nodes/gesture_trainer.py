@@ -70,8 +70,17 @@ from hmocap_ros.gestures.trainer import INSTRUCTIONS, Trainer, TrainerParams, Tr
 from hmocap_ros.gestures.trainer_feedback import feedback_image
 from hmocap_ros.io.conversions import numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, ns_to_stamp, stamp_to_ns
-from hmocap_ros.nodes.common import (RESULT_QOS, create_image_publisher, declare_parameters, depth_camera_from_info,
-                                     depth_from_msg, image_qos, image_reliability_param, param, run_node)
+from hmocap_ros.nodes.common import (
+    RESULT_QOS,
+    create_image_publisher,
+    declare_parameters,
+    depth_camera_from_info,
+    depth_from_msg,
+    image_qos,
+    image_reliability_param,
+    param,
+    run_node,
+)
 from hmocap_ros.nodes.gesture_detection import DEPTH_ENCODINGS
 
 NODE_NAME = "gesture_trainer"
@@ -394,8 +403,9 @@ class GestureTrainer(Node):
         metres = depth_to_metres(depth, fmt, fmt.max_depth_m + 1.0)
         metres[metres > fmt.max_depth_m] = 0.0
         prob = None
-        if trainer is not None and trainer.detector is not None and trainer.gesture in trainer.detector.forest.class_names:
-            prob = trainer.detector.probability_image(trainer.detector.forest.class_names.index(trainer.gesture))
+        detector = trainer.detector if trainer is not None else None
+        if trainer is not None and detector is not None and trainer.gesture in detector.forest.class_names:
+            prob = detector.probability_image(detector.forest.class_names.index(trainer.gesture))
         image = feedback_image(metres, status, prob)
         self.feedback_pub.publish(numpy_to_image(image, "rgb8", status.stamp_ns, frame_id, self.factory))
 

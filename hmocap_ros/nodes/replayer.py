@@ -58,8 +58,8 @@ class Replayer(Node):
     def __init__(self, topics: dict, clock: bool = False):
         super().__init__("hmocap_replay")
         self.publishers_by_topic = {}
-        self.clock_pub = (self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
-                          if clock else None)
+        clock_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, clock_qos) if clock else None
         self.clock_ns: int | None = None
         for topic, info in topics.items():
             try:
