@@ -45,9 +45,9 @@ from hmocap_ros.gestures.forest import frames_to_metres, train_forest_on_samples
 from hmocap_ros.gestures.params import FeatureParams, PatchParams, TrainParams
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # test fixtures
-from fixtures.toy_depth import TOY_CLASSES, focal_scale, toy_sequence  # noqa: E402
+from fixtures.toy_depth import TOY_CLASSES, focal_scale, toy_sequence
 
-from hmocap_sim.gesture_dataset import generate  # noqa: E402
+from hmocap_sim.gesture_dataset import generate
 
 
 def train(samples, params: TrainParams, rng, label: str):

@@ -64,17 +64,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from iml_table import relabelled  # noqa: E402
+from iml_table import relabelled
 
-from hmocap_ros.commands import train_gestures  # noqa: E402
-from hmocap_ros.eval.gesture_eval import DEFAULT_MODEL, GestureBagError, read_gesture_bag, run_detector, score_run  # noqa: E402
-from hmocap_ros.gestures.forest_file import load_forest  # noqa: E402
-from hmocap_ros.gestures.trainer import SessionOnlineParams, Trainer, TrainerParams, blend_threshold  # noqa: E402
-from hmocap_ros.io import topics  # noqa: E402
-from hmocap_ros.io.bag_reader import BagReader, BagReadError  # noqa: E402
-from hmocap_sim import gesture_set as gs  # noqa: E402
-from hmocap_sim.gesture_dataset import generate  # noqa: E402
-from hmocap_sim.gesture_teacher import GestureTeacher, write_recording_bag  # noqa: E402
+from hmocap_ros.commands import train_gestures
+from hmocap_ros.eval.gesture_eval import DEFAULT_MODEL, GestureBagError, read_gesture_bag, run_detector, score_run
+from hmocap_ros.gestures.forest_file import load_forest
+from hmocap_ros.gestures.trainer import SessionOnlineParams, Trainer, TrainerParams, blend_threshold
+from hmocap_ros.io import topics
+from hmocap_ros.io.bag_reader import BagReader, BagReadError
+from hmocap_sim import gesture_set as gs
+from hmocap_sim.gesture_dataset import generate
+from hmocap_sim.gesture_teacher import GestureTeacher, write_recording_bag
 
 #: Thesis table 3.3 (mean of tee, silence, cross; same subject in training and test).
 THESIS = {"minutes": [3, 6, 9], "iml": [0.54, 0.78, 0.82], "offline": [0.34, 0.64, 0.87],

@@ -36,7 +36,7 @@ from hmocap_ros.gestures.params import OnlineParams, OnlineTrainParams, TrainPar
 from hmocap_ros.gestures.patches import collect_samples
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # test fixtures
-from fixtures.toy_depth import TOY_CLASSES, toy_sequence  # noqa: E402
+from fixtures.toy_depth import TOY_CLASSES, toy_sequence
 
 
 def balanced_batches(samples, batch: int, n_total: int, rng: np.random.Generator):

@@ -7,4 +7,4 @@ sim`` front ends, when called).
 
 # hmocap_ros first: its __init__ pins numpy's BLAS to one thread before numpy loads (the
 # numba kernels own the threads), so the simulator's renders repeat bit for bit.
-import hmocap_ros  # noqa: F401
+import hmocap_ros  # noqa: F401 (imported for its side effect, above)

@@ -13,7 +13,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import bench_iml  # noqa: E402
+import bench_iml  # noqa: E402 (benchmarks/ joins the path above)
 
 
 def _unlabelled_bag(path: Path) -> Path:

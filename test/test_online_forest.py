@@ -199,7 +199,10 @@ def test_frame_negatives_hard_and_random_take_the_same_count(toy_data):
     np.testing.assert_array_equal(hard[2], random[2])
     assert hard[0].size == random[0].size == hard[2].sum() > 0
     assert np.all(depth[hard[1], hard[0]] < 10.0)
-    spread = lambda xs, ys: np.hypot(xs - xs.mean(), ys - ys.mean()).mean()  # noqa: E731
+
+    def spread(xs, ys):
+        return np.hypot(xs - xs.mean(), ys - ys.mean()).mean()
+
     assert spread(*hard[:2]) < 0.5 * spread(*random[:2])
 
 

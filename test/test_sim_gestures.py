@@ -157,7 +157,10 @@ def _solve(model, name, k):
 @pytest.mark.parametrize("name", gs.ALL_GESTURES)
 def test_gesture_geometry(model, name, k):
     subj, spec, params, kin, camera = _solve(model, name, k)
-    P = lambda n: kin.point(model, n)[0]  # noqa: E731
+
+    def P(n):
+        return kin.point(model, n)[0]
+
     s = spec.side
     assert s in ("l", "r") and spec.class_id == gs.class_id(name)
     if name == "silence":
@@ -234,10 +237,16 @@ def _near_miss(model, kind, k=0):
 def test_near_misses_are_their_gesture_done_wrong(model, kind, k):
     """A near miss is background and differs from its gesture in what its table says."""
     spec, kin = _near_miss(model, kind, k)
-    P = lambda n: kin.point(model, n)[0]  # noqa: E731
+
+    def P(n):
+        return kin.point(model, n)[0]
+
     s, o = spec.side, gs.other(spec.side)
     assert spec.class_id == 0 and spec.kind == kind
-    gap = lambda a, b: float(np.linalg.norm(P(a) - P(b)))  # noqa: E731
+
+    def gap(a, b):
+        return float(np.linalg.norm(P(a) - P(b)))
+
     d, _, volar = (x[0] for x in gs.hand_axes(model, kin, s))
     checks = {
         "tee_apart": gap(f"{s}_hand_tip", f"{o}_palm") > 0.06,

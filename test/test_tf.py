@@ -99,7 +99,7 @@ def test_tf2_msgs_is_jazzys():
     """The environment's tf2_msgs (a ROS install's, or msg_defs_tf2 built by make setup) has the
     type hash of ROS 2 Jazzy's, so tf2, RViz and bags of other machines read our /tf_static."""
     import tf2_msgs
-    from tf2_msgs.msg import TFMessage  # noqa: F401
+    from tf2_msgs.msg import TFMessage  # noqa: F401 (the message module must import)
 
     share = [Path(p).parents[3] / "share" / "tf2_msgs" / "msg" / "TFMessage.json" for p in tf2_msgs.__path__]
     found = [p for p in share if p.is_file()]

@@ -1,4 +1,4 @@
-"""Robust DLT triangulation (camera_model.triangulate_robust) on the example rig: exact on
+"""Robust DLT triangulation (geometry.triangulation.triangulate_robust) on the example rig: exact on
 noise-free projections (with distortion), a wrong view is dropped by the reprojection test, too
 few views give NaN."""
 from pathlib import Path

@@ -44,13 +44,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal  # noqa: E402
-from hmocap_ros.eval.gesture_eval import SWEEP_MIN_SCORE, evaluate_gestures, plot_pr, read_gesture_bag  # noqa: E402
-from hmocap_ros.gestures.forest import train_forest_on_frames  # noqa: E402
-from hmocap_ros.gestures.forest_file import load_forest, save_forest  # noqa: E402
-from hmocap_ros.gestures.params import DetectorParams  # noqa: E402
-from hmocap_sim import gesture_dataset as gd  # noqa: E402
-from hmocap_sim.gesture_set import GESTURE_CLASSES  # noqa: E402
+from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal
+from hmocap_ros.eval.gesture_eval import SWEEP_MIN_SCORE, evaluate_gestures, plot_pr, read_gesture_bag
+from hmocap_ros.gestures.forest import train_forest_on_frames
+from hmocap_ros.gestures.forest_file import load_forest, save_forest
+from hmocap_ros.gestures.params import DetectorParams
+from hmocap_sim import gesture_dataset as gd
+from hmocap_sim.gesture_set import GESTURE_CLASSES
 
 #: name -> ``hmocap sim gestures`` arguments (all 640x480). Short holds in the training bags give
 #: more distinct poses per frame; the validation and test bags hold gestures 5-10 frames.

@@ -49,13 +49,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-import gesture_table as gt  # noqa: E402
+import gesture_table as gt
 
-from hmocap_ros.commands import train_gestures  # noqa: E402
-from hmocap_ros.eval.gesture_eval import evaluate_gestures, read_gesture_bag  # noqa: E402
-from hmocap_ros.gestures.forest_file import load_forest  # noqa: E402
-from hmocap_ros.gestures.trainer import SessionOnlineParams, Trainer, TrainerParams  # noqa: E402
-from hmocap_sim.gesture_teacher import GestureTeacher, write_recording_bag  # noqa: E402
+from hmocap_ros.commands import train_gestures
+from hmocap_ros.eval.gesture_eval import evaluate_gestures, read_gesture_bag
+from hmocap_ros.gestures.forest_file import load_forest
+from hmocap_ros.gestures.trainer import SessionOnlineParams, Trainer, TrainerParams
+from hmocap_sim.gesture_teacher import GestureTeacher, write_recording_bag
 
 OFFLINE_MODEL = ROOT / "hmocap_ros" / "data" / "gesture_forest.npz"
 ROUND = dict(do_gesture_s=3.0, update_positive_s=6.0, release_s=2.0, do_negatives_s=9.0)

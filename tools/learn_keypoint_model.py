@@ -33,17 +33,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.body import ENTITY_NAMES, load_body_model  # noqa: E402
-from hmocap_ros.body.anthropometry import apply_shape  # noqa: E402
-from hmocap_ros.body.kinematics import forward_kinematics  # noqa: E402
-from hmocap_ros.body.skeleton import pose_to_local_rotations  # noqa: E402
-from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams  # noqa: E402
-from hmocap_ros.eval.mocap_frames import load_frames  # noqa: E402
-from hmocap_ros.io import topics  # noqa: E402
-from hmocap_ros.io.bag_reader import BagReader  # noqa: E402
-from hmocap_ros.io.msg_factory import stamp_to_ns  # noqa: E402
-from hmocap_ros.tracking.keypoint_anthropometry import MEASURES, KeypointShape, model_log_measures  # noqa: E402
-from hmocap_ros.tracking.keypoint_fit import KEYPOINT_MODEL_FILE, KeypointFit  # noqa: E402
+from hmocap_ros.body import ENTITY_NAMES, load_body_model
+from hmocap_ros.body.anthropometry import apply_shape
+from hmocap_ros.body.kinematics import forward_kinematics
+from hmocap_ros.body.skeleton import pose_to_local_rotations
+from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
+from hmocap_ros.eval.mocap_frames import load_frames
+from hmocap_ros.io import topics
+from hmocap_ros.io.bag_reader import BagReader
+from hmocap_ros.io.msg_factory import stamp_to_ns
+from hmocap_ros.tracking.keypoint_anthropometry import MEASURES, KeypointShape, model_log_measures
+from hmocap_ros.tracking.keypoint_fit import KEYPOINT_MODEL_FILE, KeypointFit
 
 
 def true_poses(bag: Path, model) -> dict:

@@ -39,7 +39,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.eval.mocap_eval import (  # noqa: E402
+from hmocap_ros.eval.mocap_eval import (
     evaluate,
     json_default,
     plot_errors,
@@ -47,8 +47,8 @@ from hmocap_ros.eval.mocap_eval import (  # noqa: E402
     stored_params,
     tracker_overrides,
 )
-from hmocap_ros.tracking.methods import METHODS, method_names  # noqa: E402
-from hmocap_sim.mocap_dataset import MocapSimConfig, generate  # noqa: E402
+from hmocap_ros.tracking.methods import METHODS, method_names
+from hmocap_sim.mocap_dataset import MocapSimConfig, generate
 
 BVH = ROOT / "hmocap_ros" / "data" / "bvh"
 #: (label, clip, start s, seconds): the shipped clips; the walk and the run are used whole.

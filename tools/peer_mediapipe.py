@@ -43,10 +43,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from mocap_table import SEQUENCES, bag_seed, bag_stem  # noqa: E402
+from mocap_table import SEQUENCES, bag_seed, bag_stem
 
-from hmocap_ros.geometry import triangulate, triangulate_robust  # noqa: E402
-from hmocap_ros.tracking.methods import METHODS  # noqa: E402
+from hmocap_ros.geometry import triangulate, triangulate_robust
+from hmocap_ros.tracking.methods import METHODS
 
 #: our joint -> MediaPipe Pose landmark index
 LANDMARKS = {"l_shoulder": 11, "r_shoulder": 12, "l_elbow": 13, "r_elbow": 14,

@@ -19,13 +19,13 @@ import matplotlib
 matplotlib.use("Agg")
 import sys
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from hmocap_ros.lpf import annealed_filter, hierarchical_filter, lpf_run  # noqa: E402
+from hmocap_ros.lpf import annealed_filter, hierarchical_filter, lpf_run
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # test fixtures
-from fixtures.synthetic_chain import BLOCK_DIMS, make_chain_problem  # noqa: E402
+from fixtures.synthetic_chain import BLOCK_DIMS, make_chain_problem
 
 LAYERS_PER_BLOCK = 2
 N_LAYERS = len(BLOCK_DIMS) * LAYERS_PER_BLOCK + 1  # 15 weightings per run

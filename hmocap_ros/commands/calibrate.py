@@ -19,6 +19,7 @@ a camera that never sees the board is named and left out of the rig.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import re
 import sys
@@ -286,7 +287,7 @@ def main_from_args(ns: argparse.Namespace, ros_args: list | None = None) -> int:
         print("hmocap calibrate: give a bag or --live (not both)", file=sys.stderr)
         return 2
     try:
-        log = lambda line: print(line, flush=True)  # noqa: E731
+        log = functools.partial(print, flush=True)
         out, report, picture = (run_live_calibration(ns, ros_args, log) if ns.live
                                 else run_calibration(ns, log))
     except (BagReadError, CalibrationError, RigError, ValueError) as err:

@@ -9,6 +9,7 @@ import json
 import sys
 from pathlib import Path
 
+from hmocap_ros.detection.detectors import detector_names
 from hmocap_ros.eval.extremity_eval import evaluate_extremities
 
 __all__ = ["add_arguments", "main_from_args"]
@@ -16,7 +17,7 @@ __all__ = ["add_arguments", "main_from_args"]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="multi-view bag with ground truth (hmocap sim mocap)")
-    parser.add_argument("--detector", choices=("keypoints", "skin"), default="keypoints",
+    parser.add_argument("--detector", choices=detector_names(), default="keypoints",
                         help="extremity detector (default keypoints)")
     parser.add_argument("--silhouettes", choices=("fg", "gt"), default="fg",
                         help="fg: segment the images (default); gt: the bag's exact silhouettes")

@@ -9,6 +9,7 @@ import json
 import sys
 from pathlib import Path
 
+from hmocap_ros.detection.detectors import detector_names
 from hmocap_ros.eval.mocap_eval import (
     evaluate,
     json_default,
@@ -46,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-people", type=int, default=1,
                         help="people followed at once (one tracker each); the subject is scored "
                              "on the track nearest it (default 1)")
-    parser.add_argument("--detector", choices=("keypoints", "skin"), default=None,
+    parser.add_argument("--detector", choices=detector_names(), default=None,
                         help="extremity detector of kf-hpf and dd-hpf (default: extremity_detection's)")
     parser.add_argument("--rig", metavar="RIG.yaml", default=None,
                         help="track with this rig (e.g. from hmocap calibrate) instead of the "

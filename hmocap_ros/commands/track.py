@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+from hmocap_ros.detection.detectors import detector_names
 from hmocap_ros.eval.bag_tracking import SILHOUETTES, TrackError, track_to_bag
 
 __all__ = ["add_arguments", "main_from_args"]
@@ -28,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="bag to write (.mcap: one file; another name: a rosbag2 folder); must not exist")
     parser.add_argument("--method", choices=method_names(), default=None,
                         help="tracker method (default: body_tracker's)")
-    parser.add_argument("--detector", choices=("keypoints", "skin"), default=None,
+    parser.add_argument("--detector", choices=detector_names(), default=None,
                         help="extremity detector of a method that uses detections (default: "
                              "extremity_detection's)")
     parser.add_argument("--silhouettes", choices=SILHOUETTES, default="auto",

@@ -32,7 +32,7 @@ PROBABILITY_TOPIC = "gestures/probability"
 
 def gesture_point(camera, u: float, v: float, depth_m: float | None):
     """3D point (x, y, z) in the depth optical frame of pixel (u, v) at depth ``depth_m``, or
-    None (no camera, no valid depth); ``camera`` a :class:`~hmocap_ros.camera_model.PinholeCamera`."""
+    None (no camera, no valid depth); ``camera`` a :class:`~hmocap_ros.geometry.PinholeCamera`."""
     if camera is None or depth_m is None or not np.isfinite(depth_m) or depth_m <= 0:
         return None
     ray = camera.undistort_points(np.array([[u, v]], float))[0]

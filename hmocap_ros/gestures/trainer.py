@@ -288,7 +288,10 @@ def add_class(forest: OnlineForest, name: str) -> OnlineForest:
     """``forest`` with one more class ``name`` (last): every node's and open candidate test's
     statistics get a zero count for it (nothing learnt is lost; module docstring)."""
     f = forest.to_forest()
-    pad = lambda a: np.concatenate([a, np.zeros(a.shape[:-1] + (1,), a.dtype)], axis=-1)  # noqa: E731
+
+    def pad(a: np.ndarray) -> np.ndarray:
+        return np.concatenate([a, np.zeros(a.shape[:-1] + (1,), a.dtype)], axis=-1)
+
     trees = []
     for t in f.trees:
         tree = Tree(t.feature, t.threshold, t.left, t.right, pad(t.counts), t.depth)

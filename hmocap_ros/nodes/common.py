@@ -225,7 +225,7 @@ def run_node(
             return 2
         for name in unknown_parameter_overrides(node):
             node.get_logger().error(f"unknown parameter {name!r} ignored"
-                                    + _suggestion(name, node._parameters))  # noqa: SLF001
+                                    + _suggestion(name, node._parameters))  # rclpy keeps the declared ones there
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         while not flag.requested and rclpy.ok():

@@ -47,7 +47,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
-from hmocap_ros.camera_model import PinholeCamera
+from hmocap_ros.geometry import PinholeCamera
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
 from hmocap_ros.gestures.depth_units import implausible_depth
 from hmocap_ros.gestures.detection import gesture_thresholds, node_detections

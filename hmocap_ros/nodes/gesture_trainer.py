@@ -63,7 +63,7 @@ from rclpy.task import Future
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
-from hmocap_ros.camera_model import PinholeCamera
+from hmocap_ros.geometry import PinholeCamera
 from hmocap_ros.gestures.depth_features import depth_to_metres
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
 from hmocap_ros.gestures.trainer import INSTRUCTIONS, Trainer, TrainerParams, TrainerStatus
