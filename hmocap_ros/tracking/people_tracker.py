@@ -102,8 +102,8 @@ class PeopleTracker:
         (:meth:`BodyTracker.update`)."""
         results = []
         for k, tracker in enumerate(self.trackers):
-            others = [t.position for j, t in enumerate(self.trackers) if j != k]
-            others = np.array([p for p in others if p is not None]).reshape(-1, 3)
+            positions = [t.position for j, t in enumerate(self.trackers) if j != k]
+            others = np.array([p for p in positions if p is not None]).reshape(-1, 3)
             mine = detections if (k == 0 or detections is None
                                   or not carries_labels(detections)) else None
             results.append(tracker.update(masks, stamp_ns, mine,
