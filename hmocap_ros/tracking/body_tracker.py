@@ -68,6 +68,8 @@ from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.detection.visual_hull import room_bounds
 from hmocap_ros.frame_sets import FramePeriod
+from hmocap_ros.geometry.pinhole_camera import PinholeCamera
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
@@ -132,7 +134,7 @@ class BodyTracker:
     the anthropometry estimation).
     """
 
-    def __init__(self, model, rig: Sequence, params: TrackerParams | None = None,
+    def __init__(self, model, rig: Rig | Sequence[PinholeCamera], params: TrackerParams | None = None,
                  rng: np.random.Generator | None = None, shape: BodyShape | None = None):
         self.cameras = tuple(rig)
         if not self.cameras:
