@@ -103,7 +103,7 @@ class BodyTrackerNodeConfig:
 
 
 class BodyTrackerNode(Node):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, BodyTrackerNodeConfig)
         self.mask_qos = image_qos(self.config.image_reliability, self.config.queue_depth)

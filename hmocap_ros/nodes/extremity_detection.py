@@ -82,7 +82,7 @@ class ExtremityNodeConfig:
 
 
 class ExtremityDetectionNode(Node):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, ExtremityNodeConfig)
         self.image_qos = image_qos(self.config.image_reliability, self.config.queue_depth)

@@ -174,7 +174,7 @@ class SilhouetteFitness:
     min_count: int = 20
     times: StageTimes = field(default_factory=StageTimes)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not 0.0 < self.working_scale <= 1.0:
             raise ValueError(f"working_scale must lie in (0, 1], got {self.working_scale}")
         self.cameras = tuple(self.cameras)
