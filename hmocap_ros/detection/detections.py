@@ -77,18 +77,19 @@ def detections_from_msg(msg) -> Detections:
     arrays disagree in length."""
     positions = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
     normals = np.array([[n.x, n.y, n.z] for n in msg.normals], float).reshape(-1, 3)
-    if len(normals) != len(positions):
-        normals = None
     return Detections(str(msg.detector) or "skin", tuple(str(s) for s in msg.labels), positions,
-                      np.asarray(msg.scores, float), normals)
+                      np.asarray(msg.scores, float),
+                      normals if len(normals) == len(positions) else None)
 
 
 def fill_msg(msg, det: Detections, point_cls, vector_cls):
     """Fill an Extremities message ``msg`` from ``det`` (the header is the caller's)."""
+    normals = det.normals
+    assert normals is not None  # Detections fills absent normals with NaN
     msg.detector = det.detector
     msg.labels = list(det.labels)
     msg.positions = [point_cls(x=float(x), y=float(y), z=float(z)) for x, y, z in det.positions]
     msg.normals = [vector_cls(x=float(x), y=float(y), z=float(z))
-                   for x, y, z in np.nan_to_num(det.normals)]
+                   for x, y, z in np.nan_to_num(normals)]
     msg.scores = [float(s) for s in det.scores]
     return msg

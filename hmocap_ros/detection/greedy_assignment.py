@@ -26,8 +26,8 @@ def greedy_pairs(d: np.ndarray) -> list[tuple[int, int]]:
     return pairs
 
 
-def classify(candidates: np.ndarray, targets: np.ndarray, max_distance: Sequence[float]
-             ) -> np.ndarray:
+def classify(candidates: np.ndarray, targets: np.ndarray,
+             max_distance: Sequence[float] | np.ndarray) -> np.ndarray:
     """Eq. 2.19 by the thesis' greedy rule: (I, 3) assigned candidate per target (NaN: none).
 
     Repeatedly assigns the closest (target, candidate) pair whose distance is within the

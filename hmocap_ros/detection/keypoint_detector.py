@@ -137,8 +137,10 @@ class KeypointDetector:
         self.cameras = list(cameras)
         self.params = params or KeypointParams()
         threads = int(self.params.threads)
-        self._network = PoseLandmarkNetwork(model_path, threads)
-        self._detector = PoseDetector(detector_path, threads, self.params.min_detection_score)
+        # None once closed
+        self._network: PoseLandmarkNetwork | None = PoseLandmarkNetwork(model_path, threads)
+        self._detector: PoseDetector | None = PoseDetector(detector_path, threads,
+                                                           self.params.min_detection_score)
         self._reported: set[str] = set()
         self._tracks: list[Roi | None] = [None] * len(self.cameras)
         self.last_timings: dict[str, float] = {}
@@ -190,6 +192,7 @@ class KeypointDetector:
 
     def _infer(self, image, roi, source, fg_box) -> tuple[ViewLandmarks | None, str, float]:
         t0 = time.perf_counter()
+        assert self._network is not None and self._detector is not None, "detector closed"
         if roi is None:
             found = [d for d in self._detector.detect(image)
                      if fg_box is None or _meets(fg_box, d.box)]

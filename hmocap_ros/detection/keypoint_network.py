@@ -179,6 +179,7 @@ class PoseLandmarkNetwork:
             raise ValueError("this network was loaded without its segmentation output "
                              "(segmentation=True)")
         view = self.run(image_rgb, roi)
+        assert self._last_segmentation is not None  # run() keeps it for segmentation=True
         height, width = np.asarray(image_rgb).shape[:2]
         probability = _sigmoid(self._last_segmentation).astype(np.float32)
         mask = cv2.warpAffine(probability, self._last_matrix, (width, height),

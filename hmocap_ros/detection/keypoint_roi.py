@@ -94,7 +94,8 @@ def alignment_roi(centre, scale_point, scale: float = ROI_SCALE) -> Roi | None:
 
 def landmarks_roi(xy: np.ndarray, scale: float = ROI_SCALE) -> Roi | None:
     """The next crop from a view's landmarks ``(39, 2)`` (image pixels): points 33 and 34."""
-    return alignment_roi(*xy[list(ALIGNMENT_LANDMARKS)], scale)
+    centre, scale_point = xy[list(ALIGNMENT_LANDMARKS)]
+    return alignment_roi(centre, scale_point, scale)
 
 
 def skeleton_roi(pixels: dict[str, np.ndarray], pad: float,

@@ -103,7 +103,7 @@ class BodyTrackerNodeConfig:
 
 
 class BodyTrackerNode(Node):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, BodyTrackerNodeConfig)
         self.mask_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
@@ -215,7 +215,7 @@ class BodyTrackerNode(Node):
 
     def _on_mask(self, name: str):
         def on_mask(msg: Image) -> None:
-            if self.sync is None or name not in self.rig:
+            if self.sync is None or self.rig is None or name not in self.rig:
                 return
             self.last_input_ns = time.monotonic_ns()
             mask = self._mono8(msg, f"{name}/foreground")
@@ -232,6 +232,7 @@ class BodyTrackerNode(Node):
         return on_mask
 
     def _enqueue(self, synced_sets) -> None:
+        assert self.sync is not None  # its callers return until the rig came
         if self.sync.resets != self.sync_resets:
             self._start_over()
         now = time.monotonic_ns()
@@ -241,6 +242,7 @@ class BodyTrackerNode(Node):
     def _start_over(self) -> None:
         """The stamps went back (a bag replayed again, a camera clock reset): the synchroniser
         started the stream over; the waiting sets and the tracks (not the body shapes) go too."""
+        assert self.sync is not None and self.tracker is not None  # both come with the rig
         self.sync_resets = self.sync.resets
         self.get_logger().warning(
             f"the stamps went back by {self.sync.last_jump_ns / 1e9:.2f} s: frame sets and tracks "
@@ -270,6 +272,7 @@ class BodyTrackerNode(Node):
             self._process(picked)
 
     def _process(self, picked: PickedSet) -> None:
+        assert self.tracker is not None  # frame sets are taken once the rig came
         start = time.monotonic_ns()
         try:
             self.skipped_total += picked.skipped
@@ -281,6 +284,8 @@ class BodyTrackerNode(Node):
             self.busy_ns += self.idle_since_ns - start
 
     def _track(self, picked: PickedSet) -> None:
+        # frame sets are taken once the rig came, with the tracker and the messages' builder
+        assert self.rig is not None and self.tracker is not None and self.messages is not None
         stamp_ns, items = picked.stamp_ns, picked.items
         log = self.get_logger()
         masks = []
@@ -335,6 +340,7 @@ class BodyTrackerNode(Node):
             log.info(f"{who}a person appeared ({views} views): estimating the body shape "
                      f"({self.params.startup.frames} frames, start-up took {seconds:.1f} s)")
         elif result.state == "tracking":
+            assert self.tracker is not None  # results come from it
             mesh = self.tracker.trackers[k].model  # a shape's factors scale the tracker's mesh
             height = result.shape.height(mesh) if result.shape is not None else float("nan")
             log.info(f"{who}tracking ({self.params.method}); body height {height:.2f} m, "
@@ -373,6 +379,7 @@ class BodyTrackerNode(Node):
         self.skipped_unreported = 0
 
     def _status(self, body: str, result, seconds: float, timing: list) -> DiagnosticStatus:
+        assert self.rig is not None  # results come once the rig came
         values = [KeyValue(key="state", value=result.state),
                   KeyValue(key="seconds_per_frame", value=f"{seconds:.3f}"),
                   *timing,

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from typing import cast
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -81,7 +82,7 @@ class ExtremityNodeConfig:
 
 
 class ExtremityDetectionNode(Node):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__(NODE_NAME)
         self.config = declare_parameters(self, ExtremityNodeConfig)
         self.image_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
@@ -200,6 +201,7 @@ class ExtremityDetectionNode(Node):
                                           f"frame sets start over")
                 self.skeleton = None
                 self.queue = FrameSetQueue(self.config.latest_only)
+                assert self.pipeline is not None  # made with the synchroniser
                 self.pipeline.reset()
             self._enqueue(synced_sets)
 
@@ -255,6 +257,8 @@ class ExtremityDetectionNode(Node):
             self.busy_ns += self.idle_since_ns - start
 
     def _detect(self, stamp_ns: int, items: dict) -> None:
+        # frame sets are taken once the rig came, with the pipeline
+        assert self.rig is not None and self.pipeline is not None
         images, masks = [], []
         for name in self.rig.names:
             image, mask = items.get(name, (None, None))
@@ -316,7 +320,7 @@ class ExtremityDetectionNode(Node):
 def main(args=None) -> int:
     return run_node(ExtremityDetectionNode, NODE_NAME, __doc__,
                     (ExtremityNodeConfig, ExtremityDetectionParams), args,
-                    on_shutdown=lambda node: node.log_totals())
+                    on_shutdown=lambda node: cast(ExtremityDetectionNode, node).log_totals())
 
 
 if __name__ == "__main__":

@@ -123,6 +123,8 @@ class AnthropometryEstimator:
         self.rng = rng
         self.fixed_shape = fixed_shape
         self.estimate_shape = params.estimate_shape and fixed_shape is None
+        self.room_lo: np.ndarray | None
+        self.room_hi: np.ndarray | None
         self.room_lo, self.room_hi = (None, None) if room is None else root_room_limits(*room)
         self.n_pose = self.skel.n_dofs
         self.n_shape = len(SHAPE_PARAMS)

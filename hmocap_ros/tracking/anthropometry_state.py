@@ -46,7 +46,7 @@ def shape_from_state(state: np.ndarray) -> BodyShape:
     e = len(ENTITY_NAMES)
     bone = np.ones(batch + (e,))
     radial = np.ones(batch + (e,))
-    glob = np.ones(batch)
+    glob: float | np.ndarray = np.ones(batch)
     for k, (entity, kind) in enumerate(SHAPE_PARAMS):
         if kind == "":
             glob = s[..., k]

@@ -35,6 +35,7 @@ import numpy as np
 
 from hmocap_ros.body.anthropometry import BodyShape, ShapedRest, apply_shape
 from hmocap_ros.body.kinematics import forward_kinematics, skin_vertices, skinning_matrices
+from hmocap_ros.body.model import BodyModel
 from hmocap_ros.body.skeleton import pose_to_local_rotations
 from hmocap_ros.geometry.projection import project_batch
 from hmocap_ros.geometry.rig import camera_arrays
@@ -166,14 +167,14 @@ class SilhouetteFitness:
     times: accumulated :class:`StageTimes` (reset by the caller when it wants).
     """
 
-    model: object
+    model: BodyModel
     cameras: Sequence
     working_scale: float = 0.25
     front_only: bool = True
     min_count: int = 20
     times: StageTimes = field(default_factory=StageTimes)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not 0.0 < self.working_scale <= 1.0:
             raise ValueError(f"working_scale must lie in (0, 1], got {self.working_scale}")
         self.cameras = tuple(self.cameras)

@@ -137,15 +137,15 @@ def body_transforms(joint_names: Sequence[str], parents: Sequence[int], transfor
     that are not finite rigid motions.
     """
     transforms = np.asarray(transforms, dtype=np.float64)
-    parents = np.asarray(parents, dtype=np.intp)
+    parent_index = np.asarray(parents, dtype=np.intp)
     n = len(joint_names)
-    if transforms.shape != (n, 4, 4) or parents.shape != (n,):
+    if transforms.shape != (n, 4, 4) or parent_index.shape != (n,):
         raise ValueError(f"need (J, 4, 4) transforms and (J,) parents for {n} joints, got "
-                         f"{transforms.shape} and {parents.shape}")
+                         f"{transforms.shape} and {parent_index.shape}")
     world = transforms[:, :3, :3] @ REP155_AXES                  # (J, 3, 3) frame -> room
     position = transforms[:, :3, 3]
-    roots = parents < 0
-    up = np.where(roots, 0, parents)
+    roots = parent_index < 0
+    up = np.where(roots, 0, parent_index)
     # child pose in its parent's frame: R_p^T R_c, R_p^T (p_c - p_p); roots stay in the room
     local = np.where(roots[:, None, None], world,
                      np.einsum("jki,jkl->jil", world[up], world))
@@ -156,7 +156,7 @@ def body_transforms(joint_names: Sequence[str], parents: Sequence[int], transfor
              for name, root in zip(joint_names, roots)]
     out = []
     for j in np.argsort(~roots, kind="stable"):  # the root(s) first
-        parent = parent_frame if roots[j] else names[parents[j]]
+        parent = parent_frame if roots[j] else names[parent_index[j]]
         out.append(FrameTransform(parent, names[j], tuple(offset[j]), tuple(quaternions[j])))
     return out
 

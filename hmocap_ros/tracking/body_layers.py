@@ -225,8 +225,9 @@ class BodySchedule:
 
     @property
     def n_particles(self) -> int:
-        return int(self.filter.layers[0].n_particles if self.filter.layers
-                   else self.filter.final.n_particles)
+        first = self.filter.layers[0] if self.filter.layers else self.filter.final
+        assert first.n_particles is not None  # a body schedule sets every layer's count
+        return int(first.n_particles)
 
     @property
     def n_weightings(self) -> int:

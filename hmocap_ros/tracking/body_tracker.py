@@ -68,6 +68,8 @@ from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.detection.detections import MODEL_JOINT, Detections
 from hmocap_ros.detection.visual_hull import room_bounds
 from hmocap_ros.frame_sets import FramePeriod
+from hmocap_ros.geometry.pinhole_camera import PinholeCamera
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.lpf.layered_filter import LayeredFilter, lpf_run
 from hmocap_ros.tracking.body_fitness import Observation, SilhouetteFitness
 from hmocap_ros.tracking.body_frames import joint_spread, joint_transforms
@@ -83,7 +85,7 @@ from hmocap_ros.tracking.body_layers import (
 from hmocap_ros.tracking.detection_assignment import EFFECTOR_LABELS, Assigned
 from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape, size_corrections
 from hmocap_ros.tracking.keypoint_first import BLOCK_KEYPOINTS, KeypointFirst
-from hmocap_ros.tracking.keypoint_fit import load_keypoint_model
+from hmocap_ros.tracking.keypoint_fit import FitResult, load_keypoint_model
 from hmocap_ros.tracking.layer_weighting import fit_cost, layer_vertices, layer_weight_fn, warm_up
 from hmocap_ros.tracking.limb_proposals import PROPOSAL_FRACTION, LimbProposer
 from hmocap_ros.tracking.params import TRACKER_MESHES, TrackerParams
@@ -132,7 +134,7 @@ class BodyTracker:
     the anthropometry estimation).
     """
 
-    def __init__(self, model, rig: Sequence, params: TrackerParams | None = None,
+    def __init__(self, model, rig: Rig | Sequence[PinholeCamera], params: TrackerParams | None = None,
                  rng: np.random.Generator | None = None, shape: BodyShape | None = None):
         self.cameras = tuple(rig)
         if not self.cameras:
@@ -159,7 +161,7 @@ class BodyTracker:
         self.proposer = LimbProposer(model, ("l_arm", "r_arm"))
         self.start_proposer = LimbProposer(model, ("l_arm", "r_arm", "l_leg", "r_leg"))
         self.research = ResearchPolicy(p.research)
-        self.keypoint_first = None
+        self.keypoint_first: KeypointFirst | None = None
         if self.method.keypoint_first:
             lo, hi = root_room_limits(*self.room)
             kernel = pose_kernel(self.skel, lo, hi, JUMP_FRACTION, JUMP_SCALE, RESEED_FRACTION)
@@ -246,7 +248,7 @@ class BodyTracker:
 
     # ------------------------------------------------------------------ weighting
 
-    def weight_fn(self, obs: Observation, shape: BodyShape,
+    def weight_fn(self, obs: Observation, shape: BodyShape | None,
                   assigned: Assigned | None = None):
         """The schedule's weighting (:func:`~.layer_weighting.layer_weight_fn`): eq. 2.8, or
         eq. 2.15 in the layer's observation boxes; with detections, each layer adds its
@@ -298,6 +300,7 @@ class BodyTracker:
             fit = self._start_from_keypoints(detections, exclude)
             timings["fit"] = time.perf_counter() - t0
             if fit is not None:
+                assert detections is not None  # a fit is made of the frame set's keypoints
                 self._keypoints_awaited_since = None
                 return self._result(stamp_ns, obs, t_start, timings, self._fit_cost(obs),
                                     extremities=self._keypoint_assigned(fit, detections),
@@ -322,13 +325,15 @@ class BodyTracker:
 
     # ------------------------------------------------------------------ keypoint-first
 
-    def _start_from_keypoints(self, detections: Detections | None, exclude) -> object:
+    def _start_from_keypoints(self, detections: Detections | None,
+                              exclude: np.ndarray | None) -> FitResult | None:
         """A track started on the body fitted to the keypoints alone (:mod:`.keypoint_fit`),
         or None (no keypoints, no hips, fewer than ``keypoints.min_start_keypoints`` fitted,
         or a person another tracker follows)."""
         if detections is None or not len(detections):
             return None
         kf = self.keypoint_first
+        assert kf is not None  # called for a keypoint-first method only
         self._measure_shape(detections, ())
         fit = kf.fitter.fit(detections, self.fitness.rest(self.shape))
         if fit is None or len(fit.labels) < self.params.keypoints.min_start_keypoints:
@@ -357,6 +362,7 @@ class BodyTracker:
         """One keypoint-first frame (:mod:`.keypoint_first`): fit, check, the filter on what
         stays uncertain. Without keypoints, the silhouette filter."""
         kf = self.keypoint_first
+        assert kf is not None  # called for a keypoint-first method only
         if detections is None or not len(kf.fitter.targets(detections)[0]):
             self._fall_back("no keypoints in the frame set")
             return self._track(None, obs, stamp_ns, t_start, timings)
@@ -446,7 +452,7 @@ class BodyTracker:
                         reason)
         self.fallback_reason = reason
 
-    def _keypoint_assigned(self, fit, detections: Detections) -> Assigned:
+    def _keypoint_assigned(self, fit: FitResult, detections: Detections) -> Assigned:
         """The fitted keypoints as the tracker's per-joint detections (confidence, diagnostics)."""
         names = list(self.model.joint_names)
         joints = np.full((len(names), 3), np.nan)
@@ -463,7 +469,7 @@ class BodyTracker:
                 effectors[EFFECTOR_LABELS.index(label)] = pos
         return Assigned(detections.positions, effectors, joints, scores)
 
-    def _fit_spread(self, fit) -> np.ndarray:
+    def _fit_spread(self, fit: FitResult) -> np.ndarray:
         """Per joint, the RMS residual (m) of the fitted keypoints of its body block: how far
         the keypoints and the body disagree, in place of the particles' spread where no filter
         ran. A joint whose block has no keypoint (a leg out of view) is held at its prediction
@@ -493,6 +499,7 @@ class BodyTracker:
         """One start-up frame (sec. 2.3)."""
         t0 = time.perf_counter()
         startup = self._startup
+        assert startup is not None  # set by _start, which makes the state initialising
         if startup.estimator.frames_done > 0:
             startup.follow(obs, self.finder, self.skel.translation_dofs)
         diags = startup.estimator.step(self._shape_obs(masks, obs, stamp_ns))
@@ -514,7 +521,7 @@ class BodyTracker:
             reference = self._predict()
             periods = min(self._elapsed[1], MAX_ELAPSED_PERIODS)
             self._diffuse_elapsed(periods)
-            if PROPOSAL_FRACTION > 0.0 and self.estimate is not None:
+            if PROPOSAL_FRACTION > 0.0 and reference is not None:  # None iff no estimate
                 timings["proposals"] = self._propose(obs, reference)
             if self.driven is not None and detections is not None and reference is not None:
                 t1 = time.perf_counter()
@@ -522,6 +529,7 @@ class BodyTracker:
                                                  detections, reference, self.particles,
                                                  self.rng)
                 timings["detection"] = time.perf_counter() - t1
+            assert self.particles is not None  # a tracked body has particles
             res = lpf_run(self.particles, self._filter_for(periods),
                           self.weight_fn(obs, self.shape, extremities), self.rng)
             if self.driven is not None:
@@ -588,6 +596,7 @@ class BodyTracker:
         t1 = time.perf_counter()
         spent = self.fitness.times.weighting_seconds()
         rest = self.fitness.rest(self.shape)
+        assert self.particles is not None  # called while tracking
         # scored where the body is predicted to be (pelvis moved by its velocity), not where
         # the last frame left it: a runner's hips are 12 cm further on
         self.proposer.apply(self.particles, reference, rest, obs, self.fitness.faces,
@@ -597,6 +606,7 @@ class BodyTracker:
 
     def _search_if_due(self, obs: Observation, stamp_ns: int, timings: dict) -> None:
         """Ask the fresh-search policy (:mod:`.research`) and run the search it asks for."""
+        assert self.estimate is not None and self.particles is not None  # after a filter run
         pelvis = self.estimate[self.skel.translation_dofs][[0, 2]]
         yaw = float(self.estimate[self.skel.dof_index("root_yaw")])
         due = self.research.after_frame(pelvis, yaw)
@@ -648,6 +658,7 @@ class BodyTracker:
 
     def _finish_start(self) -> None:
         startup = self._startup
+        assert startup is not None  # called while initialising
         if self.shape is None:
             self.shape = startup.estimator.shape()
         (self.estimate, self.particles, self._previous_estimate,
@@ -667,6 +678,7 @@ class BodyTracker:
         if self._previous_estimate is None or gain <= 0.0:
             return predicted
         dofs = self.skel.translation_dofs
+        assert self.particles is not None  # a track with two estimates has particles
         step = self.estimate - self._previous_estimate
         before, now = self._elapsed
         now = min(now, MAX_ELAPSED_PERIODS)

@@ -132,7 +132,7 @@ class KeypointShape:
 
     def add(self, detections) -> None:
         """Measure one frame set's keypoints (a Detections)."""
-        named = {}
+        named: dict[str, tuple[np.ndarray, float]] = {}
         for label, pos, score in zip(detections.labels, detections.positions, detections.scores):
             if score >= self.min_score and np.all(np.isfinite(pos)):
                 if label not in named or score > named[label][1]:

@@ -44,6 +44,7 @@ schedule) for that frame; it says so once in the log and in its diagnostics.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -303,7 +304,7 @@ class KeypointFirst:
         labels = list(self.fitter.labels)
         scores = {lab: max(float(s) for l2, s in zip(detections.labels, detections.scores)
                            if l2 == lab) for lab in fit.labels}
-        out = []
+        out: list[Callable[..., np.ndarray] | None] = []
         for blocks in schedule.layer_blocks:
             wanted = ([k for b in blocks for k in LAYER_KEYPOINTS[b]] if blocks
                       else list(fit.labels))

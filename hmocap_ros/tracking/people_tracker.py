@@ -29,6 +29,8 @@ import numpy as np
 from hmocap_ros.body.anthropometry import BodyShape
 from hmocap_ros.detection.detections import Detections
 from hmocap_ros.detection.detectors import carries_labels
+from hmocap_ros.geometry.pinhole_camera import PinholeCamera
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.tracking.body_tracker import BodyTracker
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.result import TrackResult
@@ -59,7 +61,7 @@ class PeopleTracker:
     spawned from it. ids: the body id of each slot (default ``body_0``, ``body_1``, ...).
     """
 
-    def __init__(self, model, rig: Sequence, params: TrackerParams | None = None,
+    def __init__(self, model, rig: Rig | Sequence[PinholeCamera], params: TrackerParams | None = None,
                  rng: np.random.Generator | None = None, shape: BodyShape | None = None,
                  max_people: int = 1, ids: Sequence[str] | None = None):
         if max_people < 1:
@@ -102,8 +104,8 @@ class PeopleTracker:
         (:meth:`BodyTracker.update`)."""
         results = []
         for k, tracker in enumerate(self.trackers):
-            others = [t.position for j, t in enumerate(self.trackers) if j != k]
-            others = np.array([p for p in others if p is not None]).reshape(-1, 3)
+            positions = [t.position for j, t in enumerate(self.trackers) if j != k]
+            others = np.array([p for p in positions if p is not None]).reshape(-1, 3)
             mine = detections if (k == 0 or detections is None
                                   or not carries_labels(detections)) else None
             results.append(tracker.update(masks, stamp_ns, mine,

@@ -46,7 +46,11 @@ def make_schedule(method: str | TrackingMethod, skel: Skeleton, *,
     if n < 2:
         raise ValueError("need at least 2 particles")
     sigma0 = body_sigma0(skel, sigma_scale)
-    lo, hi = (None, None) if room_lo is None else root_room_limits(room_lo, room_hi)
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+    if room_lo is not None:
+        assert room_hi is not None  # the room box comes as both of its corners
+        lo, hi = root_room_limits(room_lo, room_hi)
     kernel = pose_kernel(skel, lo, hi, jump_fraction, jump_scale, reseed_fraction)
     return method.schedule(skel, n, n_layers, sigma0, kernel, survival_rate=survival_rate,
                            apf_alpha=apf_alpha, refine_nu=refine_nu, sweeps=sweeps)

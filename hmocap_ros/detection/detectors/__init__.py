@@ -18,7 +18,7 @@ __all__ = ["DETECTORS", "ExtremityDetector", "carries_labels", "detector_names",
            "get_detector"]
 
 #: detector name (the ``detector`` parameter) -> its class
-DETECTORS: dict[str, type] = {cls.name: cls for cls in (
+DETECTORS: dict[str, type[ExtremityDetector]] = {cls.name: cls for cls in (
     SkinDetector,
     KeypointsDetector,
 )}
@@ -29,7 +29,7 @@ def detector_names() -> tuple[str, ...]:
     return tuple(DETECTORS)
 
 
-def get_detector(name: str) -> type:
+def get_detector(name: str) -> type[ExtremityDetector]:
     """The registered detector class of that name; ValueError otherwise."""
     try:
         return DETECTORS[name]

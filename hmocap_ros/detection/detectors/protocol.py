@@ -30,6 +30,9 @@ class ExtremityDetector(Protocol):
     description: str
     labelled: bool
 
+    def __init__(self, cameras: Sequence, params, model_path=None) -> None:
+        """The detector of the rig ``cameras`` (see above)."""
+
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
                previous: dict | None) -> Detections:
         """The detections of one frame set: per camera an RGB image (H, W, 3) uint8 and a

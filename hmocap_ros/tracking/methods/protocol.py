@@ -26,16 +26,29 @@ class TrackingMethod(Protocol):
     subscribes to them, the evaluator runs the detector). keypoint_first: the filter is
     centred on the body fitted to the labelled keypoints and filters only what they leave
     uncertain (:mod:`hmocap_ros.tracking.keypoint_first`); the tracker starts from the
-    keypoints.
+    keypoints. The members are read-only (the registered methods are frozen dataclasses).
     """
 
-    name: str
-    label: str
-    summary: str
-    layers: int
-    particles: int
-    uses_detector: bool
-    keypoint_first: bool
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def label(self) -> str: ...
+
+    @property
+    def summary(self) -> str: ...
+
+    @property
+    def layers(self) -> int: ...
+
+    @property
+    def particles(self) -> int: ...
+
+    @property
+    def uses_detector(self) -> bool: ...
+
+    @property
+    def keypoint_first(self) -> bool: ...
 
     @property
     def evaluations(self) -> int:
