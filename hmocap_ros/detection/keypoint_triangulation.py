@@ -108,7 +108,8 @@ _ARMS = np.array([KEYPOINT_LABELS.index(f"{s}_{p}") for p in ("hand", "shoulder"
                   for s in ("left", "right")])
 _LEGS = np.array([KEYPOINT_LABELS.index(f"{s}_{p}") for p in ("foot", "hip", "knee", "ankle")
                   for s in ("left", "right")])
-_ARMS_AND_EARS = np.concatenate([_ARMS, [TRIANGULATED_POINTS.index("left_ear"), TRIANGULATED_POINTS.index("right_ear")]])
+_ARMS_AND_EARS = np.concatenate(
+    [_ARMS, [TRIANGULATED_POINTS.index("left_ear"), TRIANGULATED_POINTS.index("right_ear")]])
 _MATRIX = np.zeros((len(TRIANGULATED_POINTS), NUM_LANDMARKS))
 for _k, _label in enumerate(TRIANGULATED_POINTS):
     _MATRIX[_k, list(_COMPONENTS[_label])] = 1.0 / len(_COMPONENTS[_label])

@@ -43,19 +43,27 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from hmocap_ros.body.model import load_body_model
+from hmocap_ros.detection.detections import detections_from_msg
+from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.tf import TF_TOPIC
-from hmocap_ros.nodes.common import (LATCHED_QOS, RESULT_QOS, declare_parameters, image_qos,
-                                     image_reliability_param, param, run_node, take_rig)
-from hmocap_ros.geometry.rig import Rig
+from hmocap_ros.nodes.common import (
+    LATCHED_QOS,
+    RESULT_QOS,
+    declare_parameters,
+    image_qos,
+    image_reliability_param,
+    param,
+    run_node,
+    take_rig,
+)
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
-from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
+from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.people_tracker import DEFAULT_BODY_ID, PeopleTracker, body_ids
 from hmocap_ros.tracking.tracker_messages import TRACKED_TOPIC, TrackerMessages, per_body_topic
-from hmocap_ros.detection.detections import detections_from_msg
-from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 
 NODE_NAME = "body_tracker"
 #: the synchroniser's key (and topic) of the extremity detections

@@ -1,4 +1,5 @@
-"""extremity_detection: head, hands, feet and limb joints in 3D from the rig's images and foregrounds (thesis sec. 2.5.1).
+"""extremity_detection: head, hands, feet and limb joints in 3D from the rig's images and foregrounds
+(thesis sec. 2.5.1).
 
 Pairs each camera's image with its foreground mask by stamp, synchronises the cameras into frame
 sets and runs :class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline` on each:
@@ -35,7 +36,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-from typing import cast
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -46,16 +46,22 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image, PointCloud2
 
 from hmocap_ros.detection.detections import fill_msg
-from hmocap_ros.detection.extremity_pipeline import (ExtremityDetectionParams, ExtremityPipeline,
-                                                     skeleton_labels)
+from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams, ExtremityPipeline, skeleton_labels
 from hmocap_ros.detection.tflite_model import ModelFileError
 from hmocap_ros.frame_sets import TICK_S, FrameSetQueue
+from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.point_clouds import array_to_pointcloud2
-from hmocap_ros.nodes.common import (RESULT_QOS, declare_parameters, image_qos, image_reliability_param,
-                                     param, run_node, take_rig)
-from hmocap_ros.geometry.rig import Rig
+from hmocap_ros.nodes.common import (
+    RESULT_QOS,
+    declare_parameters,
+    image_qos,
+    image_reliability_param,
+    param,
+    run_node,
+    take_rig,
+)
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 
 NODE_NAME = "extremity_detection"
@@ -320,7 +326,7 @@ class ExtremityDetectionNode(Node):
 def main(args=None) -> int:
     return run_node(ExtremityDetectionNode, NODE_NAME, __doc__,
                     (ExtremityNodeConfig, ExtremityDetectionParams), args,
-                    on_shutdown=lambda node: cast(ExtremityDetectionNode, node).log_totals())
+                    on_shutdown=lambda node: node.log_totals())
 
 
 if __name__ == "__main__":
