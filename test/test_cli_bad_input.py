@@ -197,3 +197,9 @@ def replays(zoo) -> dict[str, tuple[list[str], tuple[int, str, str]]]:
 def test_replay_on_bad_input(replays, case):
     expected, (status, out, err) = replays[case]
     assert not _problems(status, out, err, expected, case.startswith("truncated_")), (case, status, out, err)
+
+
+def test_record_without_topics_is_a_one_line_error(tmp_path, capsys, caplog):
+    status, out, err = _run_in_process(["record", "-o", str(tmp_path / "x.mcap")], capsys, caplog)
+    assert status == 2 and not _problems(status, out, err, ["name the topics to record"]), (status, out, err)
+    assert not (tmp_path / "x.mcap").exists()

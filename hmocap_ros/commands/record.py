@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 __all__ = ["add_arguments", "main_from_args"]
 
@@ -20,7 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main_from_args(ns: argparse.Namespace, ros_args: list[str]) -> int:
     if not ns.topics and not ns.all:
-        raise SystemExit("hmocap record: name the topics to record, or pass --all")
+        print("hmocap record: name the topics to record, or pass --all", file=sys.stderr)
+        return 2
     from hmocap_ros.nodes.recorder import record
 
     record(ns.output, ns.topics, ns.all, ns.duration, ros_args, progress=ns.progress)
