@@ -64,7 +64,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from iml_table import relabelled
+from iml_table import relabelled, run_session
 
 from hmocap_ros.commands import train_gestures
 from hmocap_ros.eval.gesture_eval import DEFAULT_MODEL, GestureBagError, read_gesture_bag, run_detector, score_run
@@ -128,15 +128,7 @@ def trainer_params(ns) -> TrainerParams:
 
 def run_sessions(trainer: Trainer, teacher: GestureTeacher, g: str, k: int, extend: bool) -> tuple[float, int, int]:
     """One session of ``g`` in the closed loop; (trainer CPU seconds, frames recorded, positive frames)."""
-    trainer.recording.clear()
-    trainer.start(g, teacher.next_stamp, extend=extend)
-    status = trainer.status(teacher.next_stamp, teacher.camera.width, teacher.camera.height)
-    cpu = 0.0
-    while trainer.state != "done":
-        depth, stamp = teacher.next_frame(status)
-        t0 = time.process_time()
-        status = trainer.on_frame(depth, stamp)
-        cpu += time.process_time() - t0
+    cpu, status = run_session(trainer, teacher, g, extend)
     if not trainer.taught:
         raise RuntimeError(f"session {k} of '{g}' taught nothing: {status.instruction}")
     return cpu, len(trainer.recording), sum(bool(f.gesture) for f in trainer.recording)

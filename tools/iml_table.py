@@ -89,6 +89,21 @@ def train_offline(bags: list, out: Path, ns) -> float:
     return time.perf_counter() - t0
 
 
+def run_session(trainer: Trainer, teacher: GestureTeacher, g: str, extend: bool):
+    """One teaching session of ``g``, the simulated user in the closed loop with the trainer (a
+    fresh recording); (trainer CPU seconds, the last status)."""
+    trainer.recording.clear()
+    trainer.start(g, teacher.next_stamp, extend=extend)
+    status = trainer.status(teacher.next_stamp, teacher.camera.width, teacher.camera.height)
+    cpu = 0.0
+    while trainer.state != "done":
+        depth, stamp = teacher.next_frame(status)
+        t0 = time.process_time()
+        status = trainer.on_frame(depth, stamp)
+        cpu += time.process_time() - t0
+    return cpu, status
+
+
 def run_gesture(g: str, ns, data, work: Path) -> list:
     """The sessions of one gesture (module docstring); one dict per session, its counts and times
     summed over the sessions so far."""
@@ -100,15 +115,7 @@ def run_gesture(g: str, ns, data, work: Path) -> list:
     trainer = Trainer(None, p, np.random.default_rng(ns.seed), focal_px=teacher.focal_px, record=True)
     bags, rows = [], []
     for k in range(1, ns.minutes + 1):
-        trainer.recording.clear()
-        trainer.start(g, teacher.next_stamp, extend=k > 1)
-        status = trainer.status(teacher.next_stamp, teacher.camera.width, teacher.camera.height)
-        cpu = 0.0
-        while trainer.state != "done":
-            depth, stamp = teacher.next_frame(status)
-            t0 = time.process_time()
-            status = trainer.on_frame(depth, stamp)
-            cpu += time.process_time() - t0
+        cpu, _ = run_session(trainer, teacher, g, extend=k > 1)
         model = trainer.save(work / f"{g}_iml_{k}.forest.npz")
         bag = work / f"{g}_session_{k}.mcap"
         if bag.exists():
