@@ -31,30 +31,50 @@ class LightSwitchConfig:
     fixed_frame: str = param("world", "The +Z-up frame of the places (REP 103).")
 
 
+class Light:
+    """The light and what toggles it (module docstring), without rclpy: the node feeds it the
+    room's gestures."""
+
+    def __init__(self, config: LightSwitchConfig, places):
+        self.config = config
+        self.places = places  # name -> place (PlacesFile), read again by the node when it changes
+        self.first_of_hold = OncePerHold(int(config.cooldown_s * 1e9))
+        self.on = False
+
+    def on_gesture(self, gesture, room) -> str | None:
+        """Toggle the light when ``gesture`` is one of ``gestures`` with its point within
+        ``near_m`` of ``place`` and the first of a hold (by the stamps); the toggle's log line,
+        naming the body whose hand made the gesture (``room.body_of``), or None when the light
+        stays as it is."""
+        place = self.places.get(self.config.place)
+        if gesture.name not in self.config.gestures or gesture.point is None or place is None:
+            return None
+        if place.distance(gesture.point) > self.config.near_m or not self.first_of_hold(gesture.stamp_ns):
+            return None
+        self.on = not self.on
+        body = room.body_of(gesture)
+        return (f"light {'on' if self.on else 'off'}: {gesture.name} by {body.id if body else 'someone'} "
+                f"near {self.config.place}")
+
+
 class LightSwitch(Node):
     def __init__(self):
         super().__init__("light_switch")
         self.config = declare_parameters(self, LightSwitchConfig)
         self.room = Room(self, self.config.fixed_frame, on_gesture=self.on_gesture)
-        self.places = self.room.load_places(self.config.places_file, "places")
-        if self.places.get(self.config.place) is None and not self.places.errors:
-            self.get_logger().warning(f"no place '{self.config.place}' in {self.places.path}: the light stays as it is")
-        self.first_of_hold = OncePerHold(int(self.config.cooldown_s * 1e9))
-        self.light = Bool(data=False)
+        places = self.room.load_places(self.config.places_file, "places")
+        if places.get(self.config.place) is None and not places.errors:
+            self.get_logger().warning(f"no place '{self.config.place}' in {places.path}: the light stays as it is")
+        self.light = Light(self.config, places)
         self.pub = self.create_publisher(Bool, "light", LATCHED_QOS)
-        self.pub.publish(self.light)
+        self.pub.publish(Bool(data=self.light.on))
         self.get_logger().info(f"light off: {' or '.join(self.config.gestures)} near {self.config.place} toggles it")
 
     def on_gesture(self, gesture) -> None:
-        place = self.places.get(self.config.place)
-        if gesture.name not in self.config.gestures or gesture.point is None or place is None:
-            return
-        if place.distance(gesture.point) <= self.config.near_m and self.first_of_hold(gesture.stamp_ns):
-            self.light = Bool(data=not self.light.data)
-            self.pub.publish(self.light)
-            body = self.room.body_of(gesture)
-            self.get_logger().info(f"light {'on' if self.light.data else 'off'}: {gesture.name} by "
-                                   f"{body.id if body else 'someone'} near {self.config.place}")
+        line = self.light.on_gesture(gesture, self.room)
+        if line is not None:
+            self.pub.publish(Bool(data=self.light.on))
+            self.get_logger().info(line)
 
 
 def main(args=None) -> int:

@@ -4,6 +4,7 @@ frame, and ``hmocap rig convert``'s errors.
 The files under ``test/data/calibration/`` were written by the tools themselves (``SOURCES.md``
 there names each one's repository, commit and licence).
 """
+import dataclasses
 from pathlib import Path
 
 import cv2
@@ -18,7 +19,12 @@ from hmocap_ros.calibration.formats import (
     read_calibration,
     save_calibration_rig,
 )
-from hmocap_ros.calibration.formats.world_frame import guess_up, up_rotation
+from hmocap_ros.calibration.formats.world_frame import (
+    calibration_from_rig,
+    calibration_to_rig,
+    guess_up,
+    up_rotation,
+)
 from hmocap_ros.cli import main
 from hmocap_ros.geometry import look_at
 from hmocap_ros.geometry.rig import Rig, load_rig
@@ -91,6 +97,34 @@ def test_up_rotations_are_proper_and_take_the_axis_to_room_y():
         vector = np.zeros(3)
         vector["XYZ".index(axis[1])] = 1.0 if axis[0] == "+" else -1.0
         np.testing.assert_allclose(A @ vector, [0.0, 1.0, 0.0], atol=1e-15)
+
+
+def test_floor_offset_puts_the_floor_at_room_y_zero(tmp_path):
+    # the known rig's cameras in a Z-up millimetre world whose floor lies at Z = 750 mm
+    rig = _known_rig(rational=False)  # a .qca holds no rational distortion
+    floor_mm = 750.0
+    world = calibration_from_rig(rig, up="+Z", metres_per_unit=0.001)
+    raised = dataclasses.replace(world, cameras=tuple(
+        dataclasses.replace(c, t=c.t - c.R @ [0.0, 0.0, floor_mm]) for c in world.cameras))
+    back, _ = calibration_to_rig(raised, floor=floor_mm)
+    floor_point = np.array([1200.0, -800.0, floor_mm])  # a point on the floor, in the file's world
+    for foreign, camera in zip(raised.cameras, back):
+        in_camera = 0.001 * (foreign.R @ floor_point + foreign.t)  # metres
+        room = camera.R.T @ (in_camera - camera.t)
+        assert room[1] == pytest.approx(0.0, abs=1e-9)
+    for a, b in zip(rig, back):
+        np.testing.assert_allclose(b.position, a.position, atol=1e-9)
+        np.testing.assert_allclose(b.R, a.R, atol=1e-12)
+    # hmocap rig convert --floor: the cameras stand as high above the floor as in the known rig;
+    # without it the origin is on the floor, 0.75 m below it
+    FORMATS["qca"].write(raised, tmp_path / "raised.qca")
+    assert main(["rig", "convert", str(tmp_path / "raised.qca"), str(tmp_path / "floor.yaml"),
+                 "--floor", str(floor_mm)]) == 0
+    assert main(["rig", "convert", str(tmp_path / "raised.qca"), str(tmp_path / "origin.yaml")]) == 0
+    on_floor, on_origin = load_rig(tmp_path / "floor.yaml"), load_rig(tmp_path / "origin.yaml")
+    for a, b, c in zip(rig, on_floor, on_origin):
+        np.testing.assert_allclose(b.position, a.position, atol=1e-6)
+        np.testing.assert_allclose(c.position - a.position, [0.0, 0.75, 0.0], atol=1e-6)
 
 
 def _relative(cameras, i, j):

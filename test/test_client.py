@@ -178,6 +178,19 @@ def test_nearest_hand_names_the_body_and_side():
     assert joint_above(b, "r_wrist", "l_wrist") is None
 
 
+def test_nearest_hand_is_the_nearer_of_two_bodies_hands_within_reach():
+    # a right hand 0.1 m and a left hand 0.3 m from the gesture, both within reach (0.5 m), the
+    # bodies' other hands out of it
+    a = _body({"l_wrist": [0.0, 0.0, 0.6], "r_wrist": [1.1, 0.0, 1.2]}, "b0")
+    b = _body({"l_wrist": [1.0, 0.3, 1.2], "r_wrist": [1.8, 0.3, 1.2]}, "b1")
+    body, side, distance = nearest_hand([a, b], [1.0, 0.0, 1.2], 0.5)
+    assert (body.id, side) == ("b0", "right") and distance == pytest.approx(0.1)
+    # the gesture moved nearer the other body's hand: that body, in either order of the bodies
+    for bodies in ([a, b], [b, a]):
+        body, side, distance = nearest_hand(bodies, [1.0, 0.2, 1.2], 0.5)
+        assert (body.id, side) == ("b1", "left") and distance == pytest.approx(0.1)
+
+
 def _brute_force_angle(origin, direction, box: BoxPlace, n: int = 200) -> float:
     """The smallest angle to a dense grid on the box's surface (faces sampled n x n)."""
     s = np.linspace(0.0, 1.0, n)

@@ -99,6 +99,22 @@ def test_cli_checks_a_tracked_bag_and_writes_the_issue_keys(tmp_path, capsys, tr
     assert "a pose on 8 of 16 frame sets" in capsys.readouterr().out
 
 
+def test_triangulated_points_fall_as_min_views_rises(tmp_path):
+    # a point seen by 4 views is seen by 2: --min-views 4 keeps fewer points than 2, as some of
+    # the body's joints are hidden from one or two of the 4 cameras (about 60 and 96 here)
+    tracked = tmp_path / "tracked.mcap"
+    _tracked_bag(tracked)
+    counts = []
+    for min_views in (2, 4):
+        out = tmp_path / f"report{min_views}.json"
+        assert main(["eval", "consistency", str(DEMO_BAG), "--tracked", str(tracked), "--json", str(out),
+                     "--frames", str(FRAMES), "--min-views", str(min_views), "--quiet"]) == 0
+        report = json.loads(out.read_text())
+        assert report["min_views"] == min_views
+        counts.append(report["triangulated_points"])
+    assert counts[1] < counts[0], counts
+
+
 def test_cli_tracks_on_the_fly_without_tracked(tmp_path):
     out = tmp_path / "report.json"
     assert main(["eval", "consistency", str(DEMO_BAG), "--json", str(out), "--frames", "10",

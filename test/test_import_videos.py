@@ -21,8 +21,10 @@ from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.conversions import image_to_rgb
+from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.io.rig_messages import rig_from_msg
 from hmocap_ros.video_import.camera_fit import rotate_camera, upright_turns
+from hmocap_ros.video_import.importer import BASE_STAMP_NS
 
 FPS = 25.0
 FRAMES = 12
@@ -130,6 +132,22 @@ def test_scale_and_start_pick_the_frames_and_shrink_the_cameras(recording, capsy
     for i in range(5):
         point = triangulate(list(rig.cameras), pixels[i][:, None, :])[0]
         assert np.linalg.norm(point - _ball(4 + i)) < 0.04
+
+
+def test_stamps_are_the_frames_times_in_the_videos_from_their_start(recording, capsys):
+    # --start 4 frames in: frame set k is the videos' frame 4 + k, stamped at its time in them
+    folder, _ = recording
+    bag = folder / "late.mcap"
+    assert main(["import", "videos", str(folder / "cam1.avi"), "--calibration", str(folder / "calib.qca"),
+                 "--out", str(bag), "--start", str(4 / FPS), "--seconds", str(5 / FPS), "--quiet"]) == 0
+    capsys.readouterr()
+    expected = [BASE_STAMP_NS + round((4 + k) * 1e9 / FPS) for k in range(5)]
+    with BagReader(bag) as reader:
+        for topic in ("/cam1/image_raw", "/cam1/camera_info"):
+            items = list(reader.messages([topic]))
+            assert [item.log_time_ns for item in items] == expected, topic
+            assert [stamp_to_ns(item.msg.header) for item in items] == expected, topic
+        assert stamp_to_ns(reader.first(topics.CAMERA_RIG).header) == expected[0]
 
 
 def test_a_turned_camera_projects_where_the_turned_image_shows(recording):

@@ -208,6 +208,140 @@ def negatives_at_random(mp: pytest.MonkeyPatch) -> None:
     mp.setattr(trainer, "hard_negative_pixels", hard_negative_pixels)
 
 
+def keypoint_scores_ignored(mp: pytest.MonkeyPatch) -> None:
+    """kf-hpf's keypoint fit weighs every keypoint it keeps alike, whatever its score."""
+    from hmocap_ros.tracking.keypoint_fit import KeypointFit
+
+    real = KeypointFit.targets
+
+    def targets(self, detections, drop=()):
+        rows, positions, scores = real(self, detections, drop)
+        return rows, positions, np.ones_like(scores)
+
+    mp.setattr(KeypointFit, "targets", targets)
+
+
+def landmark_offsets_dropped(mp: pytest.MonkeyPatch) -> None:
+    """kf-hpf's fit puts the keypoints on the model's points themselves: the landmark
+    offsets of keypoint_model.json are never applied."""
+    from hmocap_ros.tracking.keypoint_fit import KeypointFit
+
+    real = KeypointFit.__init__
+
+    def __init__(self, model, min_score=0.3, room=None, offsets=None):
+        real(self, model, min_score, room, None)
+
+    mp.setattr(KeypointFit, "__init__", __init__)
+
+
+def size_corrections_not_applied(mp: pytest.MonkeyPatch) -> None:
+    """The keypoint anthropometry measures the keypoints' medians as they are, whatever the
+    size corrections say."""
+    from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape
+
+    real = KeypointShape.measures
+
+    def measures(self):
+        return real(self) * self.corrections
+
+    mp.setattr(KeypointShape, "measures", measures)
+
+
+def keypoint_term_uncapped(mp: pytest.MonkeyPatch) -> None:
+    """kf-hpf's keypoint term counts each keypoint's whole distance: no cap."""
+    from hmocap_ros.tracking import keypoint_first
+
+    mp.setattr(keypoint_first, "CAP", np.inf)
+
+
+def large_residuals_explained(mp: pytest.MonkeyPatch) -> None:
+    """kf-hpf counts a confident keypoint as explaining its block however far the fit left
+    it."""
+    from hmocap_ros.tracking import keypoint_first
+
+    mp.setattr(keypoint_first, "MAX_RESIDUAL", np.inf)
+
+
+def nearest_hand_picks_the_farthest(mp: pytest.MonkeyPatch) -> None:
+    """Which body made a gesture: the hand joint farthest from its point (within the distance)
+    instead of the nearest."""
+    import hmocap_ros.client as client
+    from hmocap_ros.client import geometry, room_state
+    from hmocap_ros.client.bodies import HAND_JOINTS
+
+    def nearest_hand(bodies, point, max_distance):
+        target = np.asarray(point, dtype=np.float64)
+        found = [(body, side, float(np.linalg.norm(p - target)))
+                 for body in bodies for side, (hand, _elbow) in HAND_JOINTS.items()
+                 if (p := body.joint(hand)) is not None]
+        found = [f for f in found if f[2] <= max_distance]
+        return max(found, key=lambda f: f[2]) if found else None
+
+    for module in (geometry, client, room_state):
+        mp.setattr(module, "nearest_hand", nearest_hand)
+
+
+def gesture_body_is_the_first_tracked(mp: pytest.MonkeyPatch) -> None:
+    """The body said to have made a gesture is the first one tracked, wherever its hands are."""
+    from hmocap_ros.client.room_state import RoomState
+
+    mp.setattr(RoomState, "body_of",
+               lambda self, gesture, max_distance=0.5: next(iter(self.bodies.values()), None))
+
+
+def light_cooldown_on_the_wall_clock(mp: pytest.MonkeyPatch) -> None:
+    """light_switch's cool-down counted on the wall clock (time.monotonic_ns) instead of the
+    gestures' stamps."""
+    import time
+
+    from hmocap_examples import light_switch
+
+    class WallClockHold(light_switch.OncePerHold):
+        def __call__(self, stamp_ns):
+            return super().__call__(time.monotonic_ns())
+
+    mp.setattr(light_switch, "OncePerHold", WallClockHold)
+
+
+def floor_offset_sign_flipped(mp: pytest.MonkeyPatch) -> None:
+    """A calibration's floor offset (``--floor``) applied with the wrong sign: the floor ends up
+    2 f above the room's y = 0 instead of on it."""
+    from hmocap_ros.calibration import formats
+    from hmocap_ros.calibration.formats import world_frame
+
+    real = world_frame.calibration_to_rig
+
+    def calibration_to_rig(calibration, *, floor=0.0, **kwargs):
+        return real(calibration, floor=-floor, **kwargs)
+
+    mp.setattr(world_frame, "calibration_to_rig", calibration_to_rig)
+    mp.setattr(formats, "calibration_to_rig", calibration_to_rig)
+
+
+def import_stamps_ignore_start(mp: pytest.MonkeyPatch) -> None:
+    """The imported bag's stamps count from the first frame set imported, not from the videos'
+    start: ``--start`` leaves them as without it."""
+    from hmocap_ros.video_import.importer import BASE_STAMP_NS, ImportPlan
+
+    mp.setattr(ImportPlan, "stamp_ns",
+               lambda self, frame_set: BASE_STAMP_NS + int(round(frame_set * 1e9 / self.fps)))
+
+
+def min_views_ignored(mp: pytest.MonkeyPatch) -> None:
+    """``hmocap eval consistency --min-views`` ignored: the triangulation check keeps the points of
+    3 views or more whatever it says (the report still names the value asked)."""
+    from hmocap_ros.eval import consistency
+
+    real = consistency.consistency_report
+
+    def consistency_report(bag, motion, *, min_views=3, **kwargs):
+        report = real(bag, motion, **kwargs)
+        report["min_views"] = int(min_views)
+        return report
+
+    mp.setattr(consistency, "consistency_report", consistency_report)
+
+
 @dataclass(frozen=True)
 class Mutant:
     apply: Callable[[pytest.MonkeyPatch], None]
@@ -258,6 +392,36 @@ MUTANTS = {
     "shadow_suppression_off": Mutant(shadow_suppression_off, (
         "test_segmentation.py::test_cast_shadow_is_not_foreground",
         "test_segmentation.py::test_foreground_beats_naive_differencing_with_shadows_and_light_changes")),
+    "keypoint_scores_ignored": Mutant(keypoint_scores_ignored, (
+        "test_keypoint_fit_properties.py::"
+        "test_a_wrong_keypoint_pulls_the_fit_by_the_square_root_of_its_score",)),
+    "landmark_offsets_dropped": Mutant(landmark_offsets_dropped, (
+        "test_keypoint_fit_properties.py::"
+        "test_landmark_offsets_fit_keypoints_made_apart_from_the_fit_to_the_right_joints",)),
+    "size_corrections_not_applied": Mutant(size_corrections_not_applied, (
+        "test_keypoint_fit_properties.py::"
+        "test_the_measures_are_the_keypoints_medians_divided_by_the_size_corrections",
+        "test_keypoint_fit_properties.py::"
+        "test_size_corrections_that_model_the_keypoints_bias_give_the_true_shape")),
+    "keypoint_term_uncapped": Mutant(keypoint_term_uncapped, (
+        "test_keypoint_fit_properties.py::"
+        "test_a_kept_wrong_keypoint_out_of_reach_moves_the_pose_no_more_than_a_missing_one",)),
+    "large_residuals_explained": Mutant(large_residuals_explained, (
+        "test_keypoint_fit_properties.py::"
+        "test_a_keypoint_the_fit_cannot_reach_makes_its_block_uncertain",)),
+    "nearest_hand_picks_the_farthest": Mutant(nearest_hand_picks_the_farthest, (
+        "test_client.py::test_nearest_hand_is_the_nearer_of_two_bodies_hands_within_reach",
+        "test_example_apps.py::test_light_switch_names_the_body_whose_hand_made_the_pause")),
+    "gesture_body_is_the_first_tracked": Mutant(gesture_body_is_the_first_tracked, (
+        "test_example_apps.py::test_light_switch_names_the_body_whose_hand_made_the_pause",)),
+    "light_cooldown_on_the_wall_clock": Mutant(light_cooldown_on_the_wall_clock, (
+        "test_example_apps.py::test_light_cooldown_counts_by_the_stamps_at_any_replay_rate",)),
+    "floor_offset_sign_flipped": Mutant(floor_offset_sign_flipped, (
+        "test_calibration_formats.py::test_floor_offset_puts_the_floor_at_room_y_zero",)),
+    "import_stamps_ignore_start": Mutant(import_stamps_ignore_start, (
+        "test_import_videos.py::test_stamps_are_the_frames_times_in_the_videos_from_their_start",)),
+    "min_views_ignored": Mutant(min_views_ignored, (
+        "test_consistency.py::test_triangulated_points_fall_as_min_views_rises",)),
 }
 
 _patch: pytest.MonkeyPatch | None = None

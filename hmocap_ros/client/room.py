@@ -21,7 +21,6 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hmocap_ros.client.bodies import Body, Gesture
-from hmocap_ros.client.geometry import nearest_hand
 from hmocap_ros.client.places import PlacesFile
 from hmocap_ros.client.room_state import RoomState
 from hmocap_ros.config_files import find_config_file
@@ -92,12 +91,8 @@ class Room:
 
     def body_of(self, gesture: Gesture, max_distance: float = 0.5) -> Body | None:
         """The body that made ``gesture``: the one whose hand joint is nearest to its 3D point,
-        within ``max_distance`` m; None when the gesture has no point or no hand is that near.
-        The bodies are at their newest poses, which may be older than the gesture."""
-        if gesture.point is None:
-            return None
-        found = nearest_hand(self.bodies.values(), gesture.point, max_distance)
-        return None if found is None else found[0]
+        within ``max_distance`` m, or None (:meth:`RoomState.body_of`)."""
+        return self.state.body_of(gesture, max_distance)
 
     def load_places(self, path: str, section: str) -> PlacesFile:
         """The places of ``section`` (``places`` or ``zones``) of the YAML file ``path`` (empty:

@@ -30,6 +30,7 @@ from typing import Any
 
 from hmocap_ros.client.bodies import BadMessage, Body, Gesture, gesture_fields, skeleton_points
 from hmocap_ros.client.frames import StaticFrames, rig_frame_transforms
+from hmocap_ros.client.geometry import nearest_hand
 from hmocap_ros.io.msg_factory import stamp_to_ns
 
 __all__ = ["RoomState", "TIME_JUMP_NS"]
@@ -190,3 +191,13 @@ class RoomState:
             out.append(Gesture(stamp_ns=stamp, source_frame=frame, point=point, **fields))
         self.gestures = tuple(out)
         return [("gesture", g) for g in out]
+
+    def body_of(self, gesture: Gesture, max_distance: float = 0.5) -> Body | None:
+        """The body that made ``gesture``: the one whose hand joint is nearest to its 3D point
+        (:func:`~hmocap_ros.client.geometry.nearest_hand`), within ``max_distance`` m; None when
+        the gesture has no point or no hand is that near. The bodies are at their newest poses,
+        which may be older than the gesture."""
+        if gesture.point is None:
+            return None
+        found = nearest_hand(self.bodies.values(), gesture.point, max_distance)
+        return None if found is None else found[0]

@@ -106,6 +106,11 @@ class ImportPlan:
     warnings: tuple[str, ...]
     cut: tuple[int, int] | None = None
 
+    def stamp_ns(self, frame_set: int) -> int:
+        """The stamp of frame set ``frame_set``: :data:`BASE_STAMP_NS` plus the time of its frame
+        in the first video (module docstring)."""
+        return BASE_STAMP_NS + int(round((self.first[0] + frame_set) * 1e9 / self.fps))
+
 
 @dataclass(frozen=True)
 class ImportResult:
@@ -307,7 +312,7 @@ def import_videos(video_paths, calibration, out, options: ImportOptions = Import
             with FrameSetReader([v.path for v in plan.videos], list(plan.first), plan.count,
                                 convert) as reader:
                 for images in reader:
-                    stamp = BASE_STAMP_NS + int(round((plan.first[0] + written) * 1e9 / plan.fps))
+                    stamp = plan.stamp_ns(written)
                     if written == 0:
                         _write_latched(writer, factory, rig, stamp)
                     for k, (camera, image) in enumerate(zip(rig, images)):
