@@ -168,7 +168,8 @@ def run_gesture_demo(out: Path, env: dict, rate: float = 1.0) -> bool:
     t0 = time.monotonic()
     procs = replay_through_nodes(
         GESTURE_BAG,
-        [("gesture_detection", "hmocap_ros.nodes.gesture_detection", [], "detecting gestures")],
+        [("gesture_detection", "hmocap_ros.nodes.gesture_detection", ["--ros-args", "-p", "latest_only:=false"],
+          "detecting gestures")],
         ["/gestures", "/gestures/probability", topics.DEPTH_IMAGE, topics.DEPTH_INFO], out_bag, env,
         out / "logs",
         replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], replay_rate=rate, settle=2.0)

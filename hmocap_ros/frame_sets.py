@@ -1,11 +1,11 @@
 """Frame sets waiting for a node slower than its cameras: newest first, with what was skipped.
 
-A live node (``body_tracker``, ``extremity_detection``) feeds the complete frame sets of its
-stamp synchroniser into a :class:`FrameSetQueue` and takes one whenever it is idle: the newest
-(``latest_only``, a live room: the latency stays bounded and the sets in between are counted
-as skipped) or the oldest (a bag replayed slowly, where every frame must be processed).
-:class:`FramePeriod` measures the stream's frame period from its stamps, so that frames DDS
-dropped count as skipped too. No rclpy here.
+A live node's :class:`~hmocap_ros.frame_intake.FrameSetIntake` puts the complete frame sets of
+its stamp synchroniser into a :class:`FrameSetQueue`, and its worker takes one whenever it is
+idle: the newest (``latest_only``, a live room: the latency stays bounded and the sets in
+between are counted as skipped) or the oldest (a bag replayed slowly, where every frame must be
+processed). :class:`FramePeriod` measures the stream's frame period from its stamps, so that
+frames DDS dropped count as skipped too. No rclpy here.
 """
 
 from __future__ import annotations
@@ -15,17 +15,7 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["DRAIN_NS", "MAX_HOLD_NS", "QUIET_NS", "TICK_S", "FramePeriod", "FrameSetQueue", "PickedSet"]
-
-#: When a node takes a waiting set (:meth:`FrameSetQueue.ready`): its timer runs every
-#: ``TICK_S``; a set is taken once no input has arrived for ``QUIET_NS`` and ``DRAIN_NS`` have
-#: passed since the node finished its last set (rclpy's executor serves a due timer before the
-#: subscriptions, so this lets the input that queued up while the node worked come in first),
-#: or once the oldest set has waited ``MAX_HOLD_NS`` whatever the input does.
-TICK_S = 0.004
-QUIET_NS = 5_000_000
-DRAIN_NS = 5_000_000
-MAX_HOLD_NS = 50_000_000
+__all__ = ["FramePeriod", "FrameSetQueue", "PickedSet"]
 
 
 class FramePeriod:
@@ -128,17 +118,6 @@ class FrameSetQueue:
         """A complete (or given up on) frame set, arrived at ``arrival_ns`` (monotonic)."""
         self._pending[int(stamp_ns)] = (items, int(arrival_ns))
         self.period.add(stamp_ns)
-
-    def oldest_arrival_ns(self) -> int | None:
-        return min((a for _, a in self._pending.values()), default=None)
-
-    def ready(self, now_ns: int, idle_since_ns: int, last_input_ns: int) -> bool:
-        """Whether the node should take a set now (module constants): ``idle_since_ns``, when
-        it finished its last set; ``last_input_ns``, when its last input arrived (monotonic)."""
-        oldest_ns = self.oldest_arrival_ns()
-        if oldest_ns is None or now_ns - idle_since_ns < DRAIN_NS:  # None: nothing pending
-            return False
-        return now_ns - last_input_ns >= QUIET_NS or now_ns - oldest_ns >= MAX_HOLD_NS
 
     def take(self, idle_since_ns: int, now_ns: int) -> PickedSet | None:
         """The next set to track (None when none waits). ``idle_since_ns``: when the tracker

@@ -247,14 +247,3 @@ def test_motion_model_scales_with_the_periods_between_tracked_sets(tracker):
     tracker.reset()
 
 
-def test_a_waiting_set_is_taken_once_the_input_is_quiet_or_it_waited_too_long():
-    from hmocap_ros.frame_sets import DRAIN_NS, MAX_HOLD_NS, QUIET_NS
-
-    q = FrameSetQueue(latest_only=True)
-    now = 10_000_000_000
-    assert not q.ready(now, 0, 0)  # nothing waits
-    q.put(T0, {"a": 1}, arrival_ns=now)
-    assert not q.ready(now + DRAIN_NS // 2, now, 0)          # just finished a set: let input drain
-    assert not q.ready(now + DRAIN_NS, 0, now + DRAIN_NS)     # input still arriving
-    assert q.ready(now + QUIET_NS, 0, now)                     # input quiet
-    assert q.ready(now + MAX_HOLD_NS, 0, now + MAX_HOLD_NS)    # waited long enough whatever the input

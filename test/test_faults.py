@@ -58,7 +58,8 @@ PIPELINE = {
                             "waiting for the rig", "/extremities"),
     "body_tracker": ("hmocap_ros.nodes.body_tracker", ["-p", "method:=kf-hpf", *FAST],
                      "waiting for the rig", "/humans/bodies/tracked"),
-    "gesture_detection": ("hmocap_ros.nodes.gesture_detection", ["-p", "publish_probability:=false"],
+    "gesture_detection": ("hmocap_ros.nodes.gesture_detection", ["-p", "publish_probability:=false",
+                                                                 "-p", "latest_only:=false"],
                           "detecting gestures", "/gestures"),
 }
 RECORDED = [PIPELINE[n][3] for n in PIPELINE] + [f"{BODY_0}/joint_states"]

@@ -62,7 +62,8 @@ def test_foreground_segmentation_segments_every_full_size_rgb8_frame(tmp_path):
 def test_gesture_detection_answers_every_full_size_depth_frame(tmp_path):
     # 640x480 16UC1 (600 KiB) at 30 Hz from a best-effort publisher (sensor-data QoS drivers)
     answered, sent, log = _stream(
-        tmp_path, "gesture_detection", ["-p", "publish_probability:=false"], "detecting gestures",
+        tmp_path, "gesture_detection", ["-p", "publish_probability:=false", "-p", "latest_only:=false"],
+        "detecting gestures",
         ["/depth/image_raw", "16UC1", 30, 15, "best_effort", "/gestures", "hmocap_interfaces/msg/GestureArray",
          "reliable"])
     assert answered == sent == 15, log

@@ -14,7 +14,8 @@ from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
 
-NODE = ("gesture_detection", "hmocap_ros.nodes.gesture_detection", ["--ros-args", "-p", "publish_probability:=false"],
+NODE = ("gesture_detection", "hmocap_ros.nodes.gesture_detection",
+        ["--ros-args", "-p", "publish_probability:=false", "-p", "latest_only:=false"],
         "detecting gestures")
 
 
@@ -102,7 +103,8 @@ def test_bad_input_is_logged_and_survived(tmp_path):
     rec = NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(tmp_path / "o.mcap"), "/gestures"],
                              env, tmp_path)
     node = NodeProcess.module("gd", "hmocap_ros.nodes.gesture_detection",
-                              ["--ros-args", "-p", f"model_file:={corrupt}", "-p", "publish_probability:=false"],
+                              ["--ros-args", "-p", f"model_file:={corrupt}", "-p", "publish_probability:=false",
+                               "-p", "latest_only:=false"],
                               env, tmp_path)
     assert node.wait_for_output("detecting gestures once a forest is loaded", 60), node.output()
     assert rec.wait_for_output("recording /gestures [", 30), rec.output()
@@ -161,7 +163,7 @@ time.sleep(1.0)
 def test_depth_in_the_wrong_unit_is_warned_of_once(tmp_path):
     env = loopback_dds_env()
     node = NodeProcess.module("gd", "hmocap_ros.nodes.gesture_detection",
-                              ["--ros-args", "-p", "publish_probability:=false"], env, tmp_path)
+                              ["--ros-args", "-p", "publish_probability:=false", "-p", "latest_only:=false"], env, tmp_path)
     try:
         assert node.wait_for_output("detecting gestures with", 60), node.output()
         pub = NodeProcess("pub", [sys.executable, "-c", UNIT_PUBLISHER], env, tmp_path)

@@ -65,7 +65,7 @@ def test_body_tracker_markers_and_per_body_shape(tmp_path):
 
 def test_gesture_probability_image_per_frame(tmp_path):
     node = ("gesture_detection", "hmocap_ros.nodes.gesture_detection",
-            ["--ros-args", "-p", "publish_probability:=true"], "detecting gestures")
+            ["--ros-args", "-p", "publish_probability:=true", "-p", "latest_only:=false"], "detecting gestures")
     out = tmp_path / "out.mcap"
     with BagReader(GESTURE_BAG) as reader:
         depth = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages([topics.DEPTH_IMAGE])}

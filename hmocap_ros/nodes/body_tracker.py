@@ -1,8 +1,10 @@
 """body_tracker: the 3D body pose of the people in the room from N cameras (thesis ch. 2).
 
-Synchronises the foreground masks of the rig cameras (and the extremity node's keypoints) by
-stamp and runs :class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on each frame set, one
-per person with ``max_people`` (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`).
+Synchronises the foreground masks of the rig cameras by stamp, pairs each set with the
+extremity node's keypoints of its stamp whenever they come, and runs
+:class:`~hmocap_ros.tracking.body_tracker.BodyTracker` on the newest set in a worker thread
+(:class:`~hmocap_ros.frame_intake.FrameSetIntake`), one per person with ``max_people``
+(:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`).
 The default method, ``kf-hpf``, fits the skinned body to the keypoints, checks them against
 the silhouettes and runs the layered filter (alg. 5, weights eq. 2.8 and 2.15) only on the
 blocks they leave uncertain; without keypoints it runs the silhouette filter. ``method``
@@ -35,7 +37,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
 from hmocap_interfaces.msg import Extremities, Skeleton
 from hri_msgs.msg import IdsList
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, JointState
@@ -44,7 +45,8 @@ from visualization_msgs.msg import MarkerArray
 
 from hmocap_ros.body.model import load_body_model
 from hmocap_ros.detection.detections import detections_from_msg
-from hmocap_ros.frame_sets import TICK_S, FrameSetQueue, PickedSet
+from hmocap_ros.frame_intake import FrameSetIntake
+from hmocap_ros.frame_sets import PickedSet
 from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
@@ -59,20 +61,18 @@ from hmocap_ros.nodes.common import (
     run_node,
     take_rig,
 )
-from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.people_tracker import DEFAULT_BODY_ID, PeopleTracker, body_ids
 from hmocap_ros.tracking.tracker_messages import TRACKED_TOPIC, TrackerMessages, per_body_topic
 
 NODE_NAME = "body_tracker"
-#: the synchroniser's key (and topic) of the extremity detections
+#: the frame sets' key (and topic) of the extremity detections
 DETECTIONS = "extremities"
-#: live kf-hpf skips a frame set without detections while the extremity topic has a publisher
-#: and detections came this recently, or none yet since the first frame set this recently (the
-#: extremity node starts later than the masks, and takes the newest set when it falls behind:
-#: its latency reaches seconds on a loaded machine, docs/tracking.md section 7); longer without
-#: any, the frame sets are tracked on the silhouettes
+#: a frame set waits for its detections (however late they come) while the extremity topic has
+#: a publisher and detections came this recently, or none yet since the first mask this recently
+#: (the extremity node starts later than the masks); longer without any, the frame sets are
+#: tracked on the silhouettes
 KEYPOINTS_ALIVE_NS = 5_000_000_000
 #: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, keep last 100)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -123,17 +123,13 @@ class BodyTrackerNode(Node):
             raise SystemExit(2)
         self.ids = body_ids(self.config.body_id, self.config.max_people)
         self.tracker: PeopleTracker | None = None
-        self.sync: StampSynchronizer | None = None
+        self.intake: FrameSetIntake | None = None
         self.rig: Rig | None = None
         self.frame_id = "room"
         self.last_state = ["searching"] * len(self.ids)
         self.frames = 0
-        self.busy_ns = 0  # time spent in _process: not waiting time for the synchroniser
-        self.queue = FrameSetQueue(self.config.latest_only)
-        self.last_input_ns = 0   # steady time of the last mask or detections received
-        self.last_detections_ns = -KEYPOINTS_ALIVE_NS  # ... of the last detections received
-        self.first_set_ns: int | None = None  # ... of the first frame set taken
-        self.idle_since_ns = 0   # steady time the last frame set was done
+        self.last_detections_ns = -KEYPOINTS_ALIVE_NS  # steady time of the last detections received
+        self.first_mask_ns: int | None = None  # ... of the first mask received
         self.skipped_total = 0
         self.skipped_unreported = 0  # skipped since the last diagnostics message
         self.factory = RclpyFactory()
@@ -155,11 +151,6 @@ class BodyTrackerNode(Node):
         if self.config.max_wait_ms <= 0:
             self.get_logger().fatal(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
             raise SystemExit(2)
-        # A steady clock: sets with a missing view go out on time whatever /clock does, and the
-        # tracker takes the waiting sets on its own pace.
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync, clock=steady)
-        self.create_timer(TICK_S, self._tick, clock=steady)
         take_rig(self, self.config.rig_file, self._set_rig)
 
     def _set_rig(self, rig: Rig) -> None:
@@ -171,15 +162,16 @@ class BodyTrackerNode(Node):
         self.messages = TrackerMessages(self.model, self.ids, rig.frame_id, self.factory,
                                         publish_tf=self.pub_tf is not None)
         self.use_detections = self.params.tracking_method.uses_detector
-        self.keypoint_first = self.params.tracking_method.keypoint_first
-        self.sync = StampSynchronizer(
-            list(rig.names) + ([DETECTIONS] if self.use_detections else []), slop_ns=int(self.config.slop_ms * 1e6),
-            queue_size=max(10, self.config.queue_depth), allow_partial=True,
+        if self.intake is not None:
+            self.intake.close()
+        # Masks by stamp; a set waits for its detections however late they come (the
+        # extremity node answers at its own rate), and the worker takes the newest answered set.
+        self.intake = FrameSetIntake(
+            rig.names, self._process, slop_ns=int(self.config.slop_ms * 1e6),
             min_keys=min(self.config.min_views_to_sync, len(rig)),
-            max_delay_ns=int(self.config.max_wait_ms * 1e6), max_wait_ns=int(self.config.max_wait_ms * 1e6),
-            max_jump_back_ns=TIME_JUMP_BACK_NS)
-        self.sync_resets = 0
-        self.queue = FrameSetQueue(self.config.latest_only)
+            max_wait_ns=int(self.config.max_wait_ms * 1e6), queue_size=max(10, self.config.queue_depth),
+            latest_only=self.config.latest_only, companion=DETECTIONS if self.use_detections else None,
+            on_start_over=self._start_over, on_error=self._work_failed, name=NODE_NAME)
         if first:
             # Subscribe before compiling: masks that arrive during the (cold-cache) warm-up
             # wait in the subscriptions' queues instead of being published to nobody.
@@ -210,86 +202,61 @@ class BodyTrackerNode(Node):
         return image
 
     def _on_extremities(self, msg: Extremities) -> None:
-        if self.sync is None:
+        if self.intake is None:
             return
         try:
             detections = detections_from_msg(msg)
         except ValueError as err:
             self.get_logger().error(f"extremities: {err}", throttle_duration_sec=5.0)
             return
-        self.last_input_ns = self.last_detections_ns = time.monotonic_ns()
-        self._enqueue(self.sync.add(DETECTIONS, stamp_to_ns(msg.header.stamp), detections,
-                                    now_ns=self._idle_clock_ns()))
+        self.last_detections_ns = time.monotonic_ns()
+        self.intake.add_companion(stamp_to_ns(msg.header.stamp), detections)
 
     def _on_mask(self, name: str):
         def on_mask(msg: Image) -> None:
-            if self.sync is None or self.rig is None or name not in self.rig:
+            if self.intake is None or self.rig is None or name not in self.rig:
                 return
-            self.last_input_ns = time.monotonic_ns()
             mask = self._mono8(msg, f"{name}/foreground")
             if mask is None:
                 return
-            stamp = stamp_to_ns(msg.header.stamp)
-            synced_sets = self.sync.add(name, stamp, mask, now_ns=self._idle_clock_ns())
-            if self.use_detections and self.count_publishers(DETECTIONS) == 0:
-                # nobody detects: the set must not wait for detections (None: none this frame)
-                synced_sets += self.sync.add(DETECTIONS, stamp, None,
-                                             now_ns=self._idle_clock_ns())
-            self._enqueue(synced_sets)
+            self.intake.companion_expected = self._detections_expected()
+            self.intake.add(name, stamp_to_ns(msg.header.stamp), mask)
 
         return on_mask
 
-    def _enqueue(self, synced_sets) -> None:
-        assert self.sync is not None  # its callers return until the rig came
-        if self.sync.resets != self.sync_resets:
-            self._start_over()
+    def _detections_expected(self) -> bool:
+        """Whether frame sets wait for their detections (:data:`KEYPOINTS_ALIVE_NS`)."""
+        if not self.use_detections or self.count_publishers(DETECTIONS) == 0:
+            return False
         now = time.monotonic_ns()
-        for synced in synced_sets:
-            self.queue.put(synced.stamp_ns, synced.items, now)
+        if self.first_mask_ns is None:
+            self.first_mask_ns = now
+        return now - max(self.last_detections_ns, self.first_mask_ns) < KEYPOINTS_ALIVE_NS
 
-    def _start_over(self) -> None:
-        """The stamps went back (a bag replayed again, a camera clock reset): the synchroniser
-        started the stream over; the waiting sets and the tracks (not the body shapes) go too."""
-        assert self.sync is not None and self.tracker is not None  # both come with the rig
-        self.sync_resets = self.sync.resets
+    def _start_over(self, jump_ns: int) -> None:
+        """The stamps went back (a bag replayed again, a camera clock reset): the intake
+        started the stream over; the tracks (not the body shapes) go too."""
+        assert self.tracker is not None  # comes with the rig
         self.get_logger().warning(
-            f"the stamps went back by {self.sync.last_jump_ns / 1e9:.2f} s: frame sets and tracks "
-            f"start over")
-        self.queue = FrameSetQueue(self.config.latest_only)
+            f"the stamps went back by {jump_ns / 1e9:.2f} s: frame sets and tracks start over")
         self.tracker.reset(forget_shape=False)
-        self.first_set_ns = None
+        self.first_mask_ns = None
 
-    def _idle_clock_ns(self) -> int:
-        """Steady time the node has not spent processing (the synchroniser's arrival clock)."""
-        return time.monotonic_ns() - self.busy_ns
-
-    def _poll_sync(self) -> None:
-        if self.sync is None:
-            return
-        self._enqueue(self.sync.poll(self._idle_clock_ns()))
-
-    def _tick(self) -> None:
-        """Track a waiting frame set once the queued input has come in (module docstring)."""
-        if self.sync is None or not len(self.queue):
-            return
-        now = time.monotonic_ns()
-        if not self.queue.ready(now, self.idle_since_ns, self.last_input_ns):
-            return
-        picked = self.queue.take(self.idle_since_ns, now)
-        if picked is not None:
-            self._process(picked)
+    def _work_failed(self, err: Exception) -> None:
+        self.get_logger().error(f"frame set not tracked: {err!r}", throttle_duration_sec=5.0)
 
     def _process(self, picked: PickedSet) -> None:
+        """Track one frame set (the intake's worker thread)."""
         assert self.tracker is not None  # frame sets are taken once the rig came
-        start = time.monotonic_ns()
-        try:
-            self.skipped_total += picked.skipped
-            self.skipped_unreported += picked.skipped
-            self.tracker.saw(picked.passed_over)  # their stamps still measure the frame period
-            self._track(picked)
-        finally:
-            self.idle_since_ns = time.monotonic_ns()
-            self.busy_ns += self.idle_since_ns - start
+        self.skipped_total += picked.skipped
+        self.skipped_unreported += picked.skipped
+        self.tracker.saw(picked.passed_over)  # their stamps still measure the frame period
+        self._track(picked)
+
+    def destroy_node(self) -> None:
+        if self.intake is not None:
+            self.intake.close()
+        super().destroy_node()
 
     def _track(self, picked: PickedSet) -> None:
         # frame sets are taken once the rig came, with the tracker and the messages' builder
@@ -305,18 +272,6 @@ class BodyTrackerNode(Node):
                 mask = None
             masks.append(mask)
         detections = items.get(DETECTIONS)
-        now = time.monotonic_ns()
-        if self.first_set_ns is None:
-            self.first_set_ns = now
-        if (detections is None and self.config.latest_only and self.keypoint_first
-                and now - max(self.last_detections_ns, self.first_set_ns) < KEYPOINTS_ALIVE_NS
-                and self.count_publishers(DETECTIONS) > 0):
-            # live, the extremity node took a newer set than this one or has not answered
-            # yet: track the sets it answers, at its rate, rather than this one on the
-            # silhouettes alone (a silhouette start-up takes seconds)
-            self.skipped_total += 1
-            self.skipped_unreported += 1
-            return
         t0 = time.perf_counter()
         try:
             budget = (self.config.budget_ms / 1000.0

@@ -41,14 +41,14 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Vector3
 from hmocap_interfaces.msg import Extremities, Skeleton
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Image, PointCloud2
 
 from hmocap_ros.detection.detections import fill_msg
 from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams, ExtremityPipeline, skeleton_labels
 from hmocap_ros.detection.tflite_model import ModelFileError
-from hmocap_ros.frame_sets import TICK_S, FrameSetQueue
+from hmocap_ros.frame_intake import FrameSetIntake
+from hmocap_ros.frame_sets import PickedSet
 from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
@@ -62,7 +62,6 @@ from hmocap_ros.nodes.common import (
     run_node,
     take_rig,
 )
-from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 
 NODE_NAME = "extremity_detection"
 POINT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("probability", "<f4")])
@@ -98,24 +97,18 @@ class ExtremityDetectionNode(Node):
         self.factory = RclpyFactory()
         self.rig: Rig | None = None
         self.pipeline: ExtremityPipeline | None = None
-        self.sync: StampSynchronizer | None = None
+        self.intake: FrameSetIntake | None = None
         self.images: dict = {}   # camera -> stamp -> rgb image waiting for its mask
         self.skeleton: tuple[int, dict] | None = None
         self.frame_id = "room"
         self.frames = 0
         self.seconds = 0.0
         self.cpu_seconds = 0.0
-        self.busy_ns = 0
-        self.queue = FrameSetQueue(self.config.latest_only)
         self.skipped = 0
-        self.idle_since_ns = self.last_input_ns = time.monotonic_ns()
         self.last_counts = (0, 0)
         self.pub = self.create_publisher(Extremities, "extremities", RESULT_QOS)
         self.pub_points = self.create_publisher(PointCloud2, "extremities/points", RESULT_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(self.config.max_wait_ms / 4000.0, self._poll_sync, clock=steady)
-        self.create_timer(TICK_S, self._tick, clock=steady)
         self.create_timer(1.0, self._publish_diagnostics)
         if self.config.use_skeleton:
             self.create_subscription(Skeleton, "skeleton", self._on_skeleton, RESULT_QOS)
@@ -134,23 +127,27 @@ class ExtremityDetectionNode(Node):
 
     def _set_rig(self, rig: Rig) -> None:
         first = self.rig is None
+        if self.intake is not None:
+            self.intake.close()  # its worker uses the pipeline
         self.rig = rig
         self.frame_id = rig.frame_id
-        if self.pipeline is not None:
-            self.pipeline.close()
-        self.pipeline = self._make_pipeline(rig)
         self.images = {name: {} for name in rig.names}
-        wait = int(self.config.max_wait_ms * 1e6)
-        self.sync = StampSynchronizer(
-            list(rig.names), slop_ns=int(self.config.slop_ms * 1e6),
-            queue_size=max(10, self.config.queue_depth), allow_partial=True,
-            min_keys=min(self.config.min_views_to_sync, len(rig)),
-            max_delay_ns=wait, max_wait_ns=wait, max_jump_back_ns=TIME_JUMP_BACK_NS)
         if first:
+            # Subscribe before loading the network: frames that arrive meanwhile wait in the
+            # subscriptions' queues instead of being published to nobody.
             qos = self.image_qos
             for name in rig.names:
                 self.create_subscription(Image, f"{name}/image_raw", self._on_image(name), qos)
                 self.create_subscription(Image, f"{name}/foreground", self._on_mask(name), qos)
+        if self.pipeline is not None:
+            self.pipeline.close()
+        self.pipeline = self._make_pipeline(rig)
+        self.intake = FrameSetIntake(
+            rig.names, self._process, slop_ns=int(self.config.slop_ms * 1e6),
+            min_keys=min(self.config.min_views_to_sync, len(rig)),
+            max_wait_ns=int(self.config.max_wait_ms * 1e6), queue_size=max(10, self.config.queue_depth),
+            latest_only=self.config.latest_only, on_start_over=self._start_over,
+            on_error=self._work_failed, name=NODE_NAME)
         self.get_logger().info(f"detecting with {self.params.detector} on {len(rig)} cameras "
                                f"({', '.join(rig.names)})")
 
@@ -183,7 +180,7 @@ class ExtremityDetectionNode(Node):
 
     def _on_mask(self, name: str):
         def on_mask(msg: Image) -> None:
-            if self.sync is None or name not in self.images:
+            if self.intake is None or name not in self.images:
                 return
             try:
                 mask = image_to_numpy(msg)
@@ -199,19 +196,19 @@ class ExtremityDetectionNode(Node):
             if image is None:
                 self.get_logger().debug(f"{name}: no image of stamp {stamp} for its mask")
                 return
-            self.last_input_ns = time.monotonic_ns()
-            resets = self.sync.resets
-            synced_sets = self.sync.add(name, stamp, (image, mask), now_ns=self._idle_ns())
-            if self.sync.resets != resets:
-                self.get_logger().warning(f"the stamps went back by {self.sync.last_jump_ns / 1e9:.2f} s: "
-                                          f"frame sets start over")
-                self.skeleton = None
-                self.queue = FrameSetQueue(self.config.latest_only)
-                assert self.pipeline is not None  # made with the synchroniser
-                self.pipeline.reset()
-            self._enqueue(synced_sets)
+            self.intake.add(name, stamp, (image, mask))
 
         return on_mask
+
+    def _start_over(self, jump_ns: int) -> None:
+        """The stamps went back: the crops and the last skeleton belong to the old stream."""
+        self.get_logger().warning(f"the stamps went back by {jump_ns / 1e9:.2f} s: frame sets start over")
+        self.skeleton = None
+        assert self.pipeline is not None  # made with the intake
+        self.pipeline.reset()
+
+    def _work_failed(self, err: Exception) -> None:
+        self.get_logger().error(f"frame set not detected: {err!r}", throttle_duration_sec=5.0)
 
     def _image_for(self, name: str, stamp_ns: int) -> np.ndarray | None:
         recent = self.images[name]
@@ -220,29 +217,6 @@ class ExtremityDetectionNode(Node):
             if abs(stamp - stamp_ns) <= slop:
                 return recent.pop(stamp)
         return None
-
-    def _idle_ns(self) -> int:
-        return time.monotonic_ns() - self.busy_ns
-
-    def _poll_sync(self) -> None:
-        if self.sync is None:
-            return
-        self._enqueue(self.sync.poll(self._idle_ns()))
-
-    def _enqueue(self, synced_sets) -> None:
-        now = time.monotonic_ns()
-        for synced in synced_sets:
-            self.queue.put(synced.stamp_ns, synced.items, now)
-
-    def _tick(self) -> None:
-        """Detect on a waiting frame set once the queued input has come in (module docstring)."""
-        now = time.monotonic_ns()
-        if self.sync is None or not self.queue.ready(now, self.idle_since_ns, self.last_input_ns):
-            return
-        picked = self.queue.take(self.idle_since_ns, now)
-        if picked is not None:
-            self.skipped += picked.skipped
-            self._process(picked.stamp_ns, picked.items)
 
     # ------------------------------------------------------------------ detection
 
@@ -254,13 +228,15 @@ class ExtremityDetectionNode(Node):
             return None
         return joints
 
-    def _process(self, stamp_ns: int, items: dict) -> None:
-        start = time.monotonic_ns()
-        try:
-            self._detect(stamp_ns, items)
-        finally:
-            self.idle_since_ns = time.monotonic_ns()
-            self.busy_ns += self.idle_since_ns - start
+    def _process(self, picked: PickedSet) -> None:
+        """Detect on one frame set (the intake's worker thread)."""
+        self.skipped += picked.skipped
+        self._detect(picked.stamp_ns, picked.items)
+
+    def destroy_node(self) -> None:
+        if self.intake is not None:
+            self.intake.close()
+        super().destroy_node()
 
     def _detect(self, stamp_ns: int, items: dict) -> None:
         # frame sets are taken once the rig came, with the pipeline

@@ -47,6 +47,8 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
+from hmocap_ros.frame_intake import FrameSetIntake
+from hmocap_ros.frame_sets import PickedSet
 from hmocap_ros.geometry import PinholeCamera
 from hmocap_ros.gestures import DetectorParams, ForestFileError, GestureDetector, load_forest
 from hmocap_ros.gestures.depth_units import implausible_depth
@@ -69,6 +71,8 @@ from hmocap_ros.nodes.common import (
 NODE_NAME = "gesture_detection"
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "data" / "gesture_forest.npz"
 DEPTH_ENCODINGS = ("16UC1", "mono16", "32FC1")
+#: the intake's key of the depth frames
+DEPTH = "depth"
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,9 @@ class GestureNodeConfig:
     publish_probability: bool = param(True, "Publish the debug density image on gestures/probability.")
     queue_depth: int = param(30, "Depth images queued while the node is busy: a stall or the burst of a replay "
                                  "catching up must fit; 30 holds one second at 30 fps.")
+    latest_only: bool = param(True, "Live: when depth frames come faster than the detector, detect on the "
+                                    "newest and skip (and count) the others, so the latency stays bounded. "
+                                    "false: every frame in stamp order (slow bag replays).")
     image_reliability: str = image_reliability_param()
     watch_period_s: float = param(1.0, "Seconds between checks of model_file on disk (0 = none): a forest file "
                                        "written again (gesture_trainer saving a taught gesture) is loaded "
@@ -109,6 +116,12 @@ class GestureDetection(Node):
                          if self.config.publish_probability else None)
         depth_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         # camera_info as the images: a driver publishes both with one QoS
+        # the detector runs in the intake's worker, on the newest frame (``latest_only``)
+        self.skipped = 0
+        self.intake = FrameSetIntake(
+            [DEPTH], self._process, slop_ns=0, min_keys=1, max_wait_ns=1_000_000_000,
+            queue_size=max(1, self.config.queue_depth), latest_only=self.config.latest_only,
+            on_start_over=self._start_over, on_error=self._work_failed, name=NODE_NAME)
         self.create_subscription(CameraInfo, "depth/camera_info", self._on_info, depth_qos)
         self.create_subscription(Image, "depth/image_raw", self._on_depth, depth_qos)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -173,16 +186,38 @@ class GestureDetection(Node):
 
     def _on_info(self, msg: CameraInfo) -> None:
         self.camera = depth_camera_from_info(msg, self.camera, self.get_logger())
-        if self.detector is not None and self.camera is not None:
-            self.detector.set_focal(self.camera.fx)
 
     def _on_depth(self, msg: Image) -> None:
-        log = self.get_logger()
         if self.detector is None:
-            log.error(f"{self.model_error}: depth frames are dropped", throttle_duration_sec=10.0)
+            self.get_logger().error(f"{self.model_error}: depth frames are dropped", throttle_duration_sec=10.0)
             return
-        depth = depth_from_msg(msg, DEPTH_ENCODINGS, log)
-        if depth is None:
+        depth = depth_from_msg(msg, DEPTH_ENCODINGS, self.get_logger())
+        if depth is not None:
+            self.intake.add(DEPTH, stamp_to_ns(msg.header.stamp), (msg, depth))
+
+    def _start_over(self, jump_ns: int) -> None:
+        """The stamps went back (a bag replayed again): the temporal smoothing starts anew."""
+        self.get_logger().warning(f"the stamps went back by {jump_ns / 1e9:.2f} s: the smoothing starts over")
+        if self.detector is not None:
+            self.detector.reset()
+
+    def _work_failed(self, err: Exception) -> None:
+        self.get_logger().error(f"depth frame not detected: {err!r}", throttle_duration_sec=5.0)
+
+    def _process(self, picked: PickedSet) -> None:
+        """Detect on one depth frame (the intake's worker thread)."""
+        self.skipped += picked.skipped
+        msg, depth = picked.items[DEPTH]
+        self._detect(msg, depth)
+
+    def destroy_node(self) -> None:
+        self.intake.close()
+        super().destroy_node()
+
+    def _detect(self, msg: Image, depth: np.ndarray) -> None:
+        log = self.get_logger()
+        detector = self.detector  # a forest loaded meanwhile takes the next frame
+        if detector is None:
             return
         if not self.unit_warned:
             reason = implausible_depth(depth, self.params.depth_format)
@@ -193,36 +228,37 @@ class GestureDetection(Node):
         if camera is None:
             log.warning("no depth/camera_info yet: assuming the forest's training camera at this image width; "
                         "gestures have no 3D position", throttle_duration_sec=10.0)
-            self.detector.set_focal(None)
+            detector.set_focal(None)
         elif (msg.width, msg.height) != (camera.width, camera.height):
             log.error(f"depth/image_raw is {msg.width}x{msg.height} but camera_info says "
                       f"{camera.width}x{camera.height}: assuming the training camera at this width, "
                       f"no 3D positions", throttle_duration_sec=5.0)
             camera = None
-            self.detector.set_focal(None)
+            detector.set_focal(None)
         else:
-            self.detector.set_focal(camera.fx)
+            detector.set_focal(camera.fx)
         stamp = stamp_to_ns(msg.header.stamp)
         t0 = time.perf_counter()
         try:
-            self.detector.update(depth, stamp)
-            detections = node_detections(self.detector.candidates,
-                                         replace(self.detector.active_params, min_score=self.params.min_score,
+            detector.update(depth, stamp)
+            detections = node_detections(detector.candidates,
+                                         replace(detector.active_params, min_score=self.params.min_score,
                                                  min_volume=self.params.min_volume), self.thresholds)
         except ValueError as err:
             log.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
             return
         self.seconds += time.perf_counter() - t0
         self.frames += 1
-        if self.detector.class_map is not None and not np.any(self.detector.class_map >= 0):
+        if detector.class_map is not None and not np.any(detector.class_map >= 0):
             log.warning("depth/image_raw has no valid depth (all zero, NaN or out of range)",
                         throttle_duration_sec=10.0)
         self.pub.publish(gesture_array(detections, stamp, msg.header.frame_id, camera, self.factory))
         if self.prob_pub is not None:
-            self.prob_pub.publish(probability_image(self.detector.probability_image(), stamp,
+            self.prob_pub.publish(probability_image(detector.probability_image(), stamp,
                                                     msg.header.frame_id, self.factory))
         if self.frames % 100 == 0:
-            log.info(f"{self.frames} frames, {1e3 * self.seconds / self.frames:.1f} ms per frame")
+            log.info(f"{self.frames} frames, {1e3 * self.seconds / self.frames:.1f} ms per frame, "
+                     f"{self.skipped} skipped")
 
 
 def main(args=None) -> int:
