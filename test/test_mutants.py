@@ -3,7 +3,8 @@ must make the accuracy tests that guard it fail.
 
 Each mutant is a monkeypatch of the real code. A mutant's check runs its catching tests in a
 pytest of their own with this module loaded as a plugin (``-p test_mutants``) and the mutant
-named in ``HMOCAP_MUTANT``; the plugin applies the patch before any test runs. The check
+named in ``HMOCAP_MUTANT``; the plugin applies the patch before any test runs, and
+``mutant_site/sitecustomize.py`` applies it in every Python process the tests start (the nodes). The check
 passes when every catching test fails. The table in ``docs/development.md`` lists the mutants
 and the tests that catch them.
 """
@@ -342,6 +343,93 @@ def min_views_ignored(mp: pytest.MonkeyPatch) -> None:
     mp.setattr(consistency, "consistency_report", consistency_report)
 
 
+def views_left_out_never_counted(mp: pytest.MonkeyPatch) -> None:
+    """The keypoint detector leaves disagreeing views out but never counts them: its
+    ``views_left_out`` (and the extremity node's diagnostics) stay empty."""
+    from hmocap_ros.detection.keypoint_detector import KeypointDetector
+
+    real = KeypointDetector.detect
+
+    def detect(self, *args, **kwargs):
+        counts = dict(self.views_left_out)
+        result = real(self, *args, **kwargs)
+        self.views_left_out.clear()
+        self.views_left_out.update(counts)
+        return result
+
+    mp.setattr(KeypointDetector, "detect", detect)
+
+
+def kf_hpf_publishes_its_prediction(mp: pytest.MonkeyPatch) -> None:
+    """kf-hpf publishes its prediction without fitting: a tracked frame set's keypoint fit
+    returns the predicted pose as it is, every keypoint explained (so no filter runs either);
+    a new track still starts from its keypoints."""
+    import dataclasses
+
+    from hmocap_ros.tracking.keypoint_fit import KeypointFit
+
+    real = KeypointFit.fit
+
+    def fit(self, detections, rest, prior=None, periods=1.0, drop=()):
+        result = real(self, detections, rest, prior, periods, drop)
+        if prior is None or result is None:
+            return result
+        return dataclasses.replace(result, params=np.array(prior, float),
+                                   residuals=np.zeros_like(result.residuals))
+
+    mp.setattr(KeypointFit, "fit", fit)
+
+
+def joint_states_from_the_previous_frame_set(mp: pytest.MonkeyPatch) -> None:
+    """Each body's joint_states carries the pose of its previous frame set (under the stamp of
+    the current one); the skeleton and the rest stay right."""
+    from hmocap_ros.tracking import tracker_messages
+
+    real = tracker_messages.TrackerMessages.pose
+    previous: dict = {}
+
+    def pose(self, k, stamp_ns, result, shape_model):
+        out = real(self, k, stamp_ns, result, shape_model)
+        before, previous[id(self), k] = previous.get((id(self), k)), result.params
+        if before is not None:
+            out[0] = (out[0][0], tracker_messages.make_joint_state(
+                self.model.skeleton.dof_names, before, stamp_ns, self.frame_id,
+                factory=self.factory))
+        return out
+
+    mp.setattr(tracker_messages.TrackerMessages, "pose", pose)
+
+
+def keypoint_shape_not_estimated(mp: pytest.MonkeyPatch) -> None:
+    """kf-hpf's shape from the keypoints is the model's proportions, whatever they measure."""
+    from hmocap_ros.body import BodyShape
+    from hmocap_ros.tracking.keypoint_anthropometry import KeypointShape
+
+    mp.setattr(KeypointShape, "shape", lambda self: BodyShape.neutral())
+
+
+def crop_never_refreshed(mp: pytest.MonkeyPatch) -> None:
+    """Each view keeps the crop of its first landmarks: the track is never refreshed from the
+    later frame sets' landmarks (nor dropped when they lose the person)."""
+    from hmocap_ros.detection.keypoint_detector import KeypointDetector
+
+    real = KeypointDetector._follow
+
+    def _follow(self, v, camera, view):
+        if self._tracks[v] is None:
+            real(self, v, camera, view)
+
+    mp.setattr(KeypointDetector, "_follow", _follow)
+
+
+def pose_detector_never_run(mp: pytest.MonkeyPatch) -> None:
+    """The pose detector finds nobody in any image: a view without a previous crop takes
+    the foreground's box, or nothing without a mask."""
+    from hmocap_ros.detection.pose_detector import PoseDetector
+
+    mp.setattr(PoseDetector, "detect", lambda self, image: [])
+
+
 @dataclass(frozen=True)
 class Mutant:
     apply: Callable[[pytest.MonkeyPatch], None]
@@ -422,18 +510,37 @@ MUTANTS = {
         "test_import_videos.py::test_stamps_are_the_frames_times_in_the_videos_from_their_start",)),
     "min_views_ignored": Mutant(min_views_ignored, (
         "test_consistency.py::test_triangulated_points_fall_as_min_views_rises",)),
+    "views_left_out_never_counted": Mutant(views_left_out_never_counted, (
+        "test_extremity_detection.py::"
+        "test_a_knocked_camera_is_left_out_counted_and_reported_in_the_diagnostics",)),
+    "kf_hpf_publishes_its_prediction": Mutant(kf_hpf_publishes_its_prediction, (
+        "test_mocap_eval.py::test_eval_reports_json_and_plot_on_the_demo_bag",)),
+    "joint_states_from_the_previous_frame_set": Mutant(joint_states_from_the_previous_frame_set, (
+        "test_body_tracker_node.py::test_joint_states_with_input_stamps_and_bounded_error",)),
+    "keypoint_shape_not_estimated": Mutant(keypoint_shape_not_estimated, (
+        "test_body_tracker_node.py::test_joint_states_with_input_stamps_and_bounded_error",)),
+    "crop_never_refreshed": Mutant(crop_never_refreshed, (
+        "test_keypoint_network.py::test_each_views_crop_follows_a_walking_person",)),
+    "pose_detector_never_run": Mutant(pose_detector_never_run, (
+        "test_extremity_detection.py::test_views_without_a_crop_find_the_person_with_the_pose_detector",)),
 }
 
 _patch: pytest.MonkeyPatch | None = None
 
 
-def pytest_configure(config) -> None:
-    """Plugin hook (``-p test_mutants``): apply the mutant named in ``HMOCAP_MUTANT``."""
+def apply_named_mutant() -> None:
+    """Apply the mutant named in ``HMOCAP_MUTANT``, once per process (the pytest process and,
+    through ``mutant_site/sitecustomize.py``, every Python process it starts)."""
     global _patch
     name = os.environ.get(ENV)
-    if name:
+    if name and _patch is None:
         _patch = pytest.MonkeyPatch()
         MUTANTS[name].apply(_patch)
+
+
+def pytest_configure(config) -> None:
+    """Plugin hook (``-p test_mutants``): apply the mutant named in ``HMOCAP_MUTANT``."""
+    apply_named_mutant()
 
 
 def pytest_unconfigure(config) -> None:
@@ -444,7 +551,8 @@ def pytest_unconfigure(config) -> None:
 def run_under_mutant(name: str) -> tuple[set, str]:
     """Run the mutant's catching tests with the mutant applied: (failed node ids, output)."""
     env = {**os.environ, ENV: name,
-           "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+           "PYTHONPATH": os.pathsep.join([str(HERE / "mutant_site"), str(HERE),
+                                          os.environ.get("PYTHONPATH", "")])}
     ids = [str(HERE / node) for node in MUTANTS[name].catching]
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                            "-p", "test_mutants", "-m", "", "-rfEX", *ids],
