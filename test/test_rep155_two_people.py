@@ -22,6 +22,7 @@ from hmocap_ros.io.msg_factory import RosbagsFactory, stamp_to_ns
 from hmocap_ros.io.rig_messages import rig_to_msg
 from hmocap_ros.io.tf import from_transform_stamped
 from hmocap_ros.processes import loopback_dds_env, replay_through_nodes
+from hmocap_ros.tracking.body_frames import body_frame, joint_frame
 
 FRAMES = 5
 SMALL = ["-p", "method:=hpf", "-p", "filter.particles:=120", "-p", "filter.layers:=0",
@@ -91,7 +92,7 @@ def test_two_people_get_rep155_topics_and_frames_each(tmp_path, model, rig):
             pose[t.child_frame_id] = pose[t.header.frame_id] @ from_transform_stamped(t).matrix
         for body in IDS:
             sk = skeletons[stamp][body]
-            names = [f"body_{body}"] + [f"{n}_{body}" for n in sk.joint_names[1:]]
+            names = [body_frame(body)] + [joint_frame(n, body) for n in sk.joint_names[1:]]
             assert set(names) <= set(frames)
             np.testing.assert_allclose([pose[n][:3, 3] for n in names],
                                        [[p.x, p.y, p.z] for p in sk.positions], atol=1e-6)
