@@ -56,7 +56,8 @@ class KeypointParams:
         0.5, "The sides of views are renamed only when the consensus gained exceeds this share "
              "of the renamed views' weight (>= 0).")
     threads: int = param(
-        2, "LiteRT threads of the landmark network and the pose detector (>= 1).")
+        1, "LiteRT threads of the landmark network and the pose detector (>= 1): one, as the "
+           "room's other stages run beside it; more only on a machine with cores to spare.")
 
     def __post_init__(self) -> None:
         checks = {

@@ -32,6 +32,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from hmocap_interfaces.msg import BodyShape as BodyShapeMsg
@@ -102,6 +103,8 @@ class BodyTrackerNodeConfig:
     publish_tf: bool = param(True, "Publish each tracked body's frames on /tf: room -> body_<id> (the "
                                    "pelvis) and <joint>_<id> along the skeleton (REP-155 names).")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
+    threads: int = param(1, "Threads of the tracker's numba kernels (>= 1): one, as the room's other "
+                            "stages run beside it; more only on a machine with cores to spare.")
     body_id: str = param(DEFAULT_BODY_ID, "REP-155 body id of the first tracked body (topics humans/bodies/"
                                           "<id>/..., frames body_<id> and <joint>_<id>; it must start with "
                                           "a letter); further bodies are numbered on (b1, b2, ...).")
@@ -118,6 +121,10 @@ class BodyTrackerNode(Node):
         self.params = declare_parameters(self, TrackerParams)
         self.model = load_body_model("tracking")
         self.rng = np.random.default_rng(self.config.seed)
+        if self.config.threads < 1:
+            self.get_logger().fatal(f"threads must be >= 1, got {self.config.threads}")
+            raise SystemExit(2)
+        numba.set_num_threads(min(self.config.threads, numba.config.NUMBA_NUM_THREADS))
         if self.config.max_people < 1:
             self.get_logger().fatal(f"max_people must be >= 1, got {self.config.max_people}")
             raise SystemExit(2)

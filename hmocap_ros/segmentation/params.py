@@ -27,8 +27,9 @@ class ForegroundParams:
                       "segmentation leaves it free, the network's mask standing in where a pixel "
                       "is not learnt yet (a person may be in view from the first frame).")
     learn_frames: int = param(
-        50, "Frames (>= 1) that learn the background mean and variance: the first ones "
-            "(empty_room), or per pixel the steady frames free of the person (person_masks).")
+        25, "Frames (>= 1) that learn the background mean and variance: the first ones "
+            "(empty_room: one second of an empty room at 25 fps), or per pixel the steady frames "
+            "free of the person (person_masks).")
     k_sigma: float = param(
         3.5, "Foreground threshold: a pixel is foreground when its Mahalanobis distance to the "
              "background Gaussian (diagonal, 3 channels) exceeds k_sigma (standard deviations, > 0).")
