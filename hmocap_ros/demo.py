@@ -99,7 +99,7 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
         [("camera_rig_publisher", "hmocap_ros.nodes.camera_rig_publisher",
           ["--ros-args", "-p", f"rig_file:={DEMO_RIG}"], "serving rig"),
          ("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
-          ["--ros-args", "-p", f"cameras:=[{','.join(cameras)}]", "-p", "learn_frames:=8",
+          ["--ros-args", "-p", f"cameras:=[{','.join(cameras)}]", "-p", "learn_frames:=8", "-p", "latest_only:=false",
            "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
          ("extremity_detection", "hmocap_ros.nodes.extremity_detection",
           ["--ros-args", "-p", "queue_depth:=100", "-p", "latest_only:=false"], "waiting for the rig"),

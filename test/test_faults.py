@@ -52,6 +52,7 @@ START_S = 120.0
 PIPELINE = {
     "foreground_segmentation": ("hmocap_ros.nodes.foreground_segmentation",
                                 ["-p", f"cameras:=[{','.join(CAMERAS)}]", "-p", "learn_frames:=8",
+                                                   "-p", "latest_only:=false",
                                  "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"],
                                 "segmenting", "/cam_1/foreground"),
     "extremity_detection": ("hmocap_ros.nodes.extremity_detection", ["-p", "queue_depth:=25"],

@@ -15,7 +15,7 @@ from hmocap_ros.segmentation import mask_scores
 
 CAMERAS = ["cam_1", "cam_2", "cam_3", "cam_4"]
 NODE = ("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
-        ["--ros-args", "-p", "learn_frames:=8", "-p", "min_blob_area:=10"], "segmenting")
+        ["--ros-args", "-p", "learn_frames:=8", "-p", "latest_only:=false", "-p", "min_blob_area:=10"], "segmenting")
 
 BAD_INPUT_PUBLISHER = r"""
 import time, numpy as np, rclpy
@@ -103,7 +103,8 @@ def test_bad_input_is_logged_and_survived(tmp_path):
     with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(tmp_path / "o.mcap"), "--progress", "0.1",
                                                       "/cam_1/foreground"], env, tmp_path) as rec, \
          NodeProcess.module("fg", "hmocap_ros.nodes.foreground_segmentation",
-                            ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=5", "-p", "min_blob_area:=4",
+                            ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=5",
+                                                            "-p", "latest_only:=false", "-p", "min_blob_area:=4",
                              "-p", "relearn_after_size_errors:=0"], env, tmp_path) as node:
         assert node.wait_for_output("segmenting", 60), node.output()
         assert rec.wait_for_output("receiving /cam_1/foreground from", 60), rec.output()

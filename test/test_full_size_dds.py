@@ -54,7 +54,8 @@ def _stream(tmp_path, node, node_args, ready, stream, stall=None):
 def test_foreground_segmentation_segments_every_full_size_rgb8_frame(tmp_path):
     # 640x480 rgb8 (900 KiB) at 25 Hz from a reliable publisher (most drivers' default)
     answered, sent, log = _stream(
-        tmp_path, "foreground_segmentation", ["-p", "cameras:=[cam_1]", "-p", "learn_frames:=5"], "segmenting",
+        tmp_path, "foreground_segmentation", ["-p", "cameras:=[cam_1]", "-p", "learn_frames:=5",
+                                                               "-p", "latest_only:=false"], "segmenting",
         ["/cam_1/image_raw", "rgb8", 25, 15, "reliable", "/cam_1/foreground", "sensor_msgs/msg/Image", "best_effort"])
     assert answered == sent == 15, log
 

@@ -72,7 +72,8 @@ def _result(output: str) -> dict:
 def test_a_default_reliable_subscriber_receives_masks_and_probability_images(tmp_path):
     env = loopback_dds_env()
     nodes = [NodeProcess.module("fg", "hmocap_ros.nodes.foreground_segmentation",
-                                ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=3"], env, tmp_path),
+                                ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=3",
+                                                                "-p", "latest_only:=false"], env, tmp_path),
              NodeProcess.module("gestures", "hmocap_ros.nodes.gesture_detection", [], env, tmp_path)]
     try:
         assert nodes[0].wait_for_output("segmenting", 120), nodes[0].output()
@@ -96,7 +97,8 @@ def test_qos_overrides_set_an_image_output_best_effort(tmp_path):
     no default (reliable) subscriber; the publisher says so."""
     env = loopback_dds_env()
     node = NodeProcess.module("fg", "hmocap_ros.nodes.foreground_segmentation",
-                              ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=3", "-p",
+                              ["--ros-args", "-p", "cameras:=[cam_1]", "-p", "learn_frames:=3",
+                                                              "-p", "latest_only:=false", "-p",
                                "qos_overrides./cam_1/foreground.publisher.reliability:=best_effort"],
                               env, tmp_path)
     probe = r"""

@@ -144,7 +144,7 @@ def test_full_size_frames_cross_hosts_and_every_answer_comes_back(room, tmp_path
     try:
         segmenter = start("foreground_segmentation", "segmenter",
                           [python, "-m", "hmocap_ros.nodes.foreground_segmentation", "--ros-args",
-                           "-p", "cameras:=[cam_1]", "-p", "learn_frames:=5"])
+                           "-p", "cameras:=[cam_1]", "-p", "learn_frames:=5", "-p", "latest_only:=false"])
         rig_node = start("camera_rig_publisher", "tracker",
                          [python, "-m", "hmocap_ros.nodes.camera_rig_publisher", "--ros-args",
                           "-p", f"rig_file:={rig}", "-p", "cameras:=[cam_1]"])

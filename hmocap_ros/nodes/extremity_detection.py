@@ -65,6 +65,8 @@ from hmocap_ros.nodes.common import (
 
 NODE_NAME = "extremity_detection"
 POINT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("probability", "<f4")])
+#: images kept per camera for their masks, which come a segmentation later: one second at 25 fps
+IMAGES_KEPT = 25
 
 
 @dataclass(frozen=True)
@@ -173,7 +175,7 @@ class ExtremityDetectionNode(Node):
                 return
             recent = self.images[name]
             recent[stamp_to_ns(msg.header.stamp)] = rgb
-            while len(recent) > max(10, 2 * self.config.queue_depth):
+            while len(recent) > max(IMAGES_KEPT, 2 * self.config.queue_depth):
                 recent.pop(next(iter(recent)))
 
         return on_image

@@ -7,11 +7,16 @@ from the first frames, then adapts slowly where there is no foreground; with
 ``learn_from:=person_masks`` a :class:`~hmocap_ros.segmentation.PersonMaskedBackground` learns
 each pixel where the landmark network's person masks leave it free (no empty room needed).
 
+The cameras' frames are grouped into frame sets by stamp and segmented in a worker thread
+(:class:`~hmocap_ros.frame_intake.FrameSetIntake`): with ``latest_only`` (live) the newest set
+when the node falls behind, so every camera's mask of a stamp comes together and soon, as the
+extremity node and the tracker take them; with ``latest_only:=false`` every frame in stamp
+order (bag replays that must answer every frame).
+
 Subscriptions:
   ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8), per camera: ``image_reliability``
-  (best effort: any camera driver matches) with a queue of ``queue_depth`` frames, so that a
-  stall (CPU starvation, a publisher catching up) loses no frame as long as the node keeps up
-  on average (:func:`~hmocap_ros.nodes.common.image_qos`).
+  (best effort: any camera driver matches) with a queue of ``queue_depth`` frames
+  (:func:`~hmocap_ros.nodes.common.image_qos`).
 Publications:
   ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id;
   reliable, keep last ``queue_depth``: :func:`~hmocap_ros.nodes.common.image_output_qos`).
@@ -42,6 +47,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
+from hmocap_ros.frame_intake import FrameSetIntake
+from hmocap_ros.frame_sets import PickedSet
 from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to_rgb, numpy_to_image
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.nodes.common import (
@@ -64,6 +71,12 @@ class ForegroundNodeConfig:
                                "Camera names: the node subscribes <camera>/image_raw, publishes <camera>/foreground.")
     queue_depth: int = param(25, "Frames queued per camera while the node is busy (what overflows is dropped); "
                                  "25 holds one second at 25 fps.")
+    latest_only: bool = param(True, "Live: when frames come faster than the node segments them, segment the "
+                                    "newest frame set and skip the others, so the masks stay recent. false: "
+                                    "every frame in stamp order (bag replays that must answer every frame).")
+    slop_ms: float = param(5.0, "Largest stamp difference (ms) between the frames of one frame set.")
+    max_wait_ms: float = param(100.0, "How long (ms, > 0) a frame set waits for a missing camera before the "
+                                      "cameras it has are segmented.")
     image_reliability: str = image_reliability_param()
     diagnostics_period: float = param(1.0, "Seconds between diagnostics messages (0 = none).")
     relearn_after_size_errors: int = param(25, "Relearn a camera's background after this many consecutive "
@@ -83,11 +96,13 @@ class _CameraState:
         self.seconds = 0.0
         self.size_errors = 0
         self.encoding: str | None = None  # of the frames the background is learnt from
+        self.relearn_requested = False  # by the service, done by the worker
 
     def relearn(self) -> None:
         self.model.relearn()
         self.encoding = None
         self.size_errors = 0
+        self.relearn_requested = False
 
 
 class ForegroundSegmentation(Node):
@@ -104,6 +119,15 @@ class ForegroundSegmentation(Node):
         images_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         for name in self.cameras:
             self.mask_pubs[name] = create_image_publisher(self, f"{name}/foreground", self.config.queue_depth)
+        if self.config.max_wait_ms <= 0:
+            raise ValueError(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
+        self.skipped = 0
+        self.intake = FrameSetIntake(
+            list(self.cameras), self._segment, slop_ns=int(self.config.slop_ms * 1e6), min_keys=1,
+            max_wait_ns=int(self.config.max_wait_ms * 1e6), queue_size=max(10, self.config.queue_depth),
+            latest_only=self.config.latest_only, on_start_over=self._start_over, on_error=self._work_failed,
+            name=NODE_NAME)
+        for name in self.cameras:
             self.create_subscription(Image, f"{name}/image_raw", self._callback(name), images_qos)
         self.create_service(Trigger, "~/relearn", self._relearn)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
@@ -132,32 +156,53 @@ class ForegroundSegmentation(Node):
                 limit = self.config.relearn_after_size_errors
                 if limit and state.size_errors >= limit:
                     log.warning(f"{name}: image size changed to {rgb.shape[1]}x{rgb.shape[0]}; relearning")
-                    state.relearn()
+                    state.relearn_requested = True  # in the worker, before this frame
                 else:
                     log.error(f"{name}/image_raw is {rgb.shape[1]}x{rgb.shape[0]}, the background was learnt at "
                               f"{state.model.shape[1]}x{state.model.shape[0]}: frame refused",
                               throttle_duration_sec=5.0)
                     return
             state.size_errors = 0
-            stamp = stamp_to_ns(msg.header.stamp)
-            t0 = time.perf_counter()
-            try:
-                mask = state.model.apply(rgb, stamp)
-            except ValueError as err:  # e.g. a stamp older than the last (a bag restarted)
-                log.error(f"{name}: {err}; relearning", throttle_duration_sec=5.0)
-                state.relearn()
-                return
-            if state.encoding is None:
-                state.encoding = msg.encoding
-            state.seconds += time.perf_counter() - t0
-            state.frames += 1
-            self.mask_pubs[name].publish(numpy_to_image(mask, "mono8", stamp, msg.header.frame_id, self.factory))
+            self.intake.add(name, stamp_to_ns(msg.header.stamp), (rgb, msg.encoding, msg.header.frame_id))
 
         return on_image
 
-    def _relearn(self, _request, response):
+    def _segment(self, picked: PickedSet) -> None:
+        """Segment one frame set's cameras and publish their masks (the intake's worker)."""
+        self.skipped += picked.skipped
+        for name, (rgb, encoding, frame_id) in picked.items.items():
+            state = self.cameras[name]
+            if state.relearn_requested:
+                state.relearn()
+            t0 = time.perf_counter()
+            try:
+                mask = state.model.apply(rgb, picked.stamp_ns)
+            except ValueError as err:  # e.g. a size other than the one learnt
+                self.get_logger().error(f"{name}: {err}; relearning", throttle_duration_sec=5.0)
+                state.relearn()
+                continue
+            if state.encoding is None:
+                state.encoding = encoding
+            state.seconds += time.perf_counter() - t0
+            state.frames += 1
+            self.mask_pubs[name].publish(numpy_to_image(mask, "mono8", picked.stamp_ns, frame_id, self.factory))
+
+    def _start_over(self, jump_ns: int) -> None:
+        """The stamps went back (a bag replayed again): each camera's model forgets its last stamp."""
+        self.get_logger().warning(f"the stamps went back by {jump_ns / 1e9:.2f} s: relearning the background")
         for state in self.cameras.values():
             state.relearn()
+
+    def _work_failed(self, err: Exception) -> None:
+        self.get_logger().error(f"frame set not segmented: {err!r}", throttle_duration_sec=5.0)
+
+    def destroy_node(self) -> None:
+        self.intake.close()
+        super().destroy_node()
+
+    def _relearn(self, _request, response):
+        for state in self.cameras.values():
+            state.relearn_requested = True  # in the worker, before its next frame
         response.success = True
         response.message = f"relearning the background of {len(self.cameras)} cameras"
         self.get_logger().info(response.message)
