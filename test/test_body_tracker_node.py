@@ -3,10 +3,11 @@
 the REP-155 outputs (``humans/bodies/tracked``, the per-body topics, the body frames on
 ``/tf``, per-joint confidences) of one body; a tracker slower than the cameras keeps its
 latency bounded by skipping frame sets, and answers every one with ``latest_only:=false``;
-bad input is logged and survived.
+bad input is logged and survived. The camera absent and the slow tracker are marked slow
+(``make test-slow``): their mechanisms have quick tests of their own.
 
 The replay runs ``kf-hpf`` (the default), which takes the keypoints of the extremity node
-(synchronised with the masks by stamp) and runs ``hpf-apo``'s silhouette filter on a frame set
+(paired with the masks by stamp) and runs ``hpf-apo``'s silhouette filter on a frame set
 without any, so it covers both paths; and it runs with
 ``max_people:=2``, so the per-body topics are covered for two slots too (the bag has one
 person: the second slot keeps searching). Replays that count on every frame being answered
@@ -21,6 +22,7 @@ import json
 import sys
 
 import numpy as np
+import pytest
 
 from hmocap_ros.body import BodyShape, apply_shape
 from hmocap_ros.demo import DEMO_BAG, DEMO_RIG
@@ -87,6 +89,7 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path, model):
     out = tmp_path / "body.mcap"
     nodes = [("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
               ["--ros-args", "-p", f"cameras:=[{','.join(CAMERAS)}]", "-p", "learn_frames:=8",
+                                               "-p", "latest_only:=false",
                "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
              ("extremity_detection", "hmocap_ros.nodes.extremity_detection",
               ["--ros-args", "-p", f"detector:={DETECTOR}", "-p", "queue_depth:=100",
@@ -167,6 +170,7 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path, model):
     assert {s.message for d in diags for s in d.msg.status if s.name.endswith("b1")} == {"searching"}
 
 
+@pytest.mark.slow  # the partial sets: test_frame_intake.py; dropped views: test_body_tracking.py
 def test_every_frame_answered_with_a_camera_absent(tmp_path):
     # The ground-truth silhouettes of three of the four cameras straight into the tracker: the
     # sets of the missing camera go out after max_wait_ms, also the last ones of the stream.
@@ -346,6 +350,7 @@ def _latency_run(tmp_path, name: str, args: list, rate: float, expect: dict | No
             "skipped_since": since, "wait_ms": wait, "frames": frames}
 
 
+@pytest.mark.slow  # the newest-first intake: test_frame_intake.py
 def test_a_tracker_slower_than_the_cameras_skips_sets_and_keeps_its_latency_bounded(tmp_path):
     # The 4 cameras at a quarter of their 25 fps (frames 160 ms apart, the replay long enough
     # that a loaded machine's late discovery costs only empty-room sets): the tracker's start-up

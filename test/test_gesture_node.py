@@ -11,6 +11,7 @@ import numpy as np
 from hmocap_ros.demo import GESTURE_BAG
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
+from hmocap_ros.io.conversions import image_to_numpy
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.processes import NodeProcess, loopback_dds_env, replay_through_nodes
 
@@ -19,17 +20,23 @@ NODE = ("gesture_detection", "hmocap_ros.nodes.gesture_detection",
         "detecting gestures")
 
 
-def test_gestures_for_every_frame_with_input_stamps(tmp_path):
+def test_gestures_and_a_probability_image_for_every_frame_with_input_stamps(tmp_path):
     out = tmp_path / "gestures.mcap"
-    procs = replay_through_nodes(GESTURE_BAG, [NODE], ["/gestures"], out, loopback_dds_env(), tmp_path / "logs",
-                                 replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], settle=2.0)
-    log = procs["gesture_detection"].output()
-    assert "Traceback" not in log and "error" not in log.lower(), log
+    node = (NODE[0], NODE[1], ["--ros-args", "-p", "publish_probability:=true", "-p", "latest_only:=false"],
+            NODE[3])
     with BagReader(GESTURE_BAG) as reader:
         truth = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages([topics.GT_GESTURES])}
+        depth = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages([topics.DEPTH_IMAGE])}
         width = reader.first(topics.DEPTH_INFO).width
+    procs = replay_through_nodes(GESTURE_BAG, [node], ["/gestures", "/gestures/probability"], out,
+                                 loopback_dds_env(), tmp_path / "logs",
+                                 replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO],
+                                 expect={"/gestures/probability": len(depth)}, settle=2.0)
+    log = procs["gesture_detection"].output()
+    assert "Traceback" not in log and "error" not in log.lower(), log
     with BagReader(out) as reader:
         got = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/gestures"])}
+        prob = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/gestures/probability"])}
     assert set(got) == set(truth)  # one answer per depth frame, with the frame's stamp
     radius = 10.0 * width / 640.0
     found = false = labelled = 0
@@ -46,6 +53,20 @@ def test_gestures_for_every_frame_with_input_stamps(tmp_path):
     assert labelled > 20
     assert found >= 0.6 * labelled, (found, labelled)
     assert false <= 0.1 * len(truth), false
+    # the debug density: one image per depth frame, with its stamp, high where a gesture is found
+    assert set(prob) == set(depth) == set(got)
+    peaks = []
+    for stamp, msg in prob.items():
+        assert msg.encoding == "mono8" and msg.header.frame_id == depth[stamp].header.frame_id
+        image = image_to_numpy(msg)
+        assert 0 < msg.width <= depth[stamp].width and 0 < msg.height <= depth[stamp].height
+        peaks.append(int(image.max()))
+        for g in got[stamp].gestures:  # a detection lies on a high density
+            u = int(g.u * msg.width / depth[stamp].width)
+            v = int(g.v * msg.height / depth[stamp].height)
+            patch = image[max(v - 2, 0):v + 3, max(u - 2, 0):u + 3]
+            assert patch.max() > 0, (stamp, g.name)
+    assert max(peaks) > 100  # the held gestures show as densities near 1, not an empty image
 
 
 BAD_INPUT_PUBLISHER = r"""
@@ -163,7 +184,8 @@ time.sleep(1.0)
 def test_depth_in_the_wrong_unit_is_warned_of_once(tmp_path):
     env = loopback_dds_env()
     node = NodeProcess.module("gd", "hmocap_ros.nodes.gesture_detection",
-                              ["--ros-args", "-p", "publish_probability:=false", "-p", "latest_only:=false"], env, tmp_path)
+                              ["--ros-args", "-p", "publish_probability:=false",
+                               "-p", "latest_only:=false"], env, tmp_path)
     try:
         assert node.wait_for_output("detecting gestures with", 60), node.output()
         pub = NodeProcess("pub", [sys.executable, "-c", UNIT_PUBLISHER], env, tmp_path)
