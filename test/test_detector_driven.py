@@ -259,6 +259,7 @@ def _dd_tracker(model, rig):
         np.random.default_rng(0))
 
 
+@pytest.mark.slow  # dd-hpf's quick cover: test_extension_points.py (a registered detector)
 def test_dd_hpf_tracks_with_skin_detections_and_runs_without(model, rig, rest):
     params = arms_out(model)
     masks, maps = scene(model, rig, params)
