@@ -14,6 +14,7 @@ CONSOLE_SCRIPTS = [
     "gesture_trainer = hmocap_ros.nodes.gesture_trainer:main",
     "extremity_detection = hmocap_ros.nodes.extremity_detection:main",
     "body_tracker = hmocap_ros.nodes.body_tracker:main",
+    "room_pipeline = hmocap_ros.nodes.room_pipeline:main",
     # the example apps on hmocap_ros.client (examples/, installed as the package hmocap_examples)
     "light_switch = hmocap_examples.light_switch:main",
     "presence = hmocap_examples.presence:main",

@@ -3,10 +3,11 @@
 
 A multi-view bag (4 cameras, 640x480, 25 fps) is replayed in real time (``--rate 1``) into
 ``foreground_segmentation`` -> ``extremity_detection`` -> ``body_tracker``, each its own process
-over DDS on loopback with its shipped defaults (the tracker takes the newest frame set when
-it falls behind, ``latest_only``), while a depth bag (640x480, 30 fps) is replayed into
-``gesture_detection`` alongside. A monitor in this process subscribes to the last camera's
-images, the depth images and every output, and notes when each arrives. Reported:
+over DDS on loopback with its shipped defaults (each takes the newest frame set when it falls
+behind, ``latest_only``), or with ``--composed`` into ``room_pipeline``, the three stages in one
+process, while a depth bag (640x480, 30 fps) is replayed into ``gesture_detection`` alongside.
+A monitor in this process subscribes to the last camera's images, the depth images and every
+output, and notes when each arrives. Reported:
 
 - frame sets in, poses out, poses per second of the stream while a person is in view (and from
   the first pose on, once the start-up is over), frame sets skipped (the tracker's
@@ -26,12 +27,16 @@ images, the depth images and every output, and notes when each arrives. Reported
 - the mean joint error (mm) of the published poses against the bag's ground truth, and with
   ``--offline`` the same tracker run offline on every frame set (``hmocap eval mocap``) beside
   it, on all frames and on the frames published live;
-- gestures: depth frames in, frames answered per second, latency.
+- gestures: depth frames in, frames answered per second, latency;
+- ``poses_per_s_bound``: the same room pipeline's frame sets per second offline on the same bag
+  (:func:`~hmocap_ros.eval.bag_tracking.track_to_bag`, the nodes' defaults, its first
+  ``BOUND_FRAME_SETS`` frame sets), measured in the same run before the nodes start, and
+  ``poses_per_s_of_bound``, the live poses per second over it.
 
 Without arguments it renders its bags once into ``out/bench/`` (held-out data: the CMU wave
 clip 13_26 from 4 s, simulator seed 401; gestures seed 402), which takes a few minutes.
 
-    .venv/bin/python benchmarks/bench_pipeline.py [BAG] [--depth-bag BAG | --no-gestures]
+    .venv/bin/python benchmarks/bench_pipeline.py [BAG] [--depth-bag BAG | --no-gestures] [--composed]
         [--rate 1] [--json OUT] [--offline [--offline-report JSON]] [--param NODE:KEY=VALUE ...]
     .venv/bin/hmocap bench pipeline [BAG] [--json OUT]
 
@@ -73,6 +78,8 @@ CLIP = ROOT / "hmocap_ros" / "data" / "bvh" / "13_26.bvh"
 BAG_SECONDS = 20.0
 DEPTH_FPS = 30.0
 THESIS_SECONDS_PER_FRAME = "14-25 s"
+#: frame sets the offline bound is measured on (the bag's first ones)
+BOUND_FRAME_SETS = 150
 
 
 def ensure_bags(ns) -> None:
@@ -159,7 +166,7 @@ class Monitor:
 
     def _on_diagnostics(self, msg) -> None:
         for status in msg.status:
-            if status.name.startswith("body_tracker"):
+            if status.name.startswith(("body_tracker", "room_pipeline")):
                 values = {kv.key: kv.value for kv in status.values}
                 if "skipped_frame_sets" in values:
                     self.skipped = max(self.skipped, int(values["skipped_frame_sets"]))
@@ -182,7 +189,7 @@ class Monitor:
         rclpy.try_shutdown()
 
 
-NODES = ("foreground_segmentation", "extremity_detection", "body_tracker", "gesture_detection")
+NODES = ("foreground_segmentation", "extremity_detection", "body_tracker", "room_pipeline", "gesture_detection")
 
 
 def node_params(items: list[str], node: str) -> dict[str, str]:
@@ -203,6 +210,8 @@ def start_nodes(cameras: list[str], ns, env: dict, log_dir: Path) -> dict[str, N
         "extremity_detection": ("hmocap_ros.nodes.extremity_detection", [], "waiting for the rig"),
         "body_tracker": ("hmocap_ros.nodes.body_tracker", [], "waiting for the rig"),
     }
+    if ns.composed:
+        nodes = {"room_pipeline": ("hmocap_ros.nodes.room_pipeline", [], "waiting for the rig")}
     if ns.depth_bag is not None:
         nodes["gesture_detection"] = ("hmocap_ros.nodes.gesture_detection", [], "detecting gestures")
     procs = {}
@@ -226,10 +235,12 @@ def run(ns) -> dict:
     last_image = topics.camera_image(cameras[-1])
     watch = {last_image: "sensor_msgs/msg/Image", "/skeleton": "hmocap_interfaces/msg/Skeleton",
              "/extremities": "hmocap_interfaces/msg/Extremities"}
-    watch.update({topics.camera_foreground(c): "sensor_msgs/msg/Image" for c in cameras})
+    if not ns.composed:
+        watch.update({topics.camera_foreground(c): "sensor_msgs/msg/Image" for c in cameras})
     if ns.depth_bag is not None:
         watch.update({topics.DEPTH_IMAGE: "sensor_msgs/msg/Image", "/gestures": "hmocap_interfaces/msg/GestureArray"})
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE") if k in env})
+    bound = offline_bound(bag, ns)
     monitor = Monitor(watch, keep={"/skeleton"})
     procs: dict[str, NodeProcess] = {}
     try:
@@ -264,7 +275,32 @@ def run(ns) -> dict:
         for p in procs.values():
             p.stop()
         monitor.close()
-    return report(ns, bag, cameras, monitor, cpu_s, wall, replay)
+    out = report(ns, bag, cameras, monitor, cpu_s, wall, replay)
+    out["poses_per_s_bound"] = bound
+    out["poses_per_s_of_bound"] = out["poses_per_s"] / bound if bound > 0 else float("nan")
+    return out
+
+
+def offline_bound(bag: Path, ns) -> float:
+    """Frame sets per second of the room pipeline offline on the bag's first
+    :data:`BOUND_FRAME_SETS` frame sets, with the nodes' defaults and ``--param``'s settings of
+    the tracker (``body_tracker`` or ``room_pipeline``)."""
+    import tempfile
+
+    from hmocap_ros.eval.bag_tracking import track_to_bag
+    from hmocap_ros.eval.mocap_eval import tracker_overrides
+    from hmocap_ros.params import flat_fields
+    from hmocap_ros.tracking.params import TrackerParams
+
+    node = "room_pipeline" if ns.composed else "body_tracker"
+    names = {name for name, *_ in flat_fields(TrackerParams)}
+    tracker = [f"{k}={v}" for k, v in node_params(ns.param, node).items() if k in names]
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        counts = track_to_bag(bag, Path(tmp) / "bound.mcap", silhouettes="fg",
+                              overrides=tracker_overrides(tracker), max_frames=BOUND_FRAME_SETS)
+        seconds = time.perf_counter() - t0
+    return counts["frame_sets"] / seconds
 
 
 def offline_report(bag: Path, ns) -> dict:
@@ -315,8 +351,9 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu_s: dict, wal
     errors = pose_errors(estimates, truth)
     person_in = [s for s in inputs if s in truth]
     poses = arrivals["/skeleton"]
-    answered = {"foreground_segmentation": len(arrivals[topics.camera_foreground(cameras[-1])]),
-                "extremity_detection": len(arrivals["/extremities"]), "body_tracker": len(poses)}
+    answered = ({"room_pipeline": len(poses)} if ns.composed else
+                {"foreground_segmentation": len(arrivals[topics.camera_foreground(cameras[-1])]),
+                 "extremity_detection": len(arrivals["/extremities"]), "body_tracker": len(poses)})
     if ns.depth_bag is not None:
         answered["gesture_detection"] = len(arrivals["/gestures"])
     per_set = core_ms_per_set(cpu_s, answered, len(inputs))
@@ -337,8 +374,10 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu_s: dict, wal
                                       else float("nan")),
         "extremities": {"out": len(arrivals["/extremities"]),
                         **latency_summary(latency_ms(inputs, arrivals["/extremities"]))},
-        "foreground": {c: len(arrivals[topics.camera_foreground(c)]) for c in cameras},
-        "foreground_latency": latency_summary(latency_ms(inputs, arrivals[topics.camera_foreground(cameras[-1])])),
+        "composed": bool(ns.composed),
+        "foreground": {c: len(arrivals.get(topics.camera_foreground(c), {})) for c in cameras},
+        "foreground_latency": latency_summary(latency_ms(inputs, arrivals.get(topics.camera_foreground(cameras[-1]),
+                                                                               {}))),
         "cpu_cores": {n: c / wall for n, c in cpu_s.items()},
         "core_ms_per_set": {n: v["core_ms_per_set"] for n, v in per_set.items()},
         "core_ms_per_input_set": {n: v["core_ms_per_input_set"] for n, v in per_set.items()},
@@ -376,7 +415,8 @@ def print_report(r: dict) -> None:
     print(f"  pose latency p50 {r['latency_p50_ms']:.0f} ms, p95 {r['latency_p95_ms']:.0f} ms, max "
           f"{r['latency_max_ms']:.0f} ms; tracker {r['tracker_seconds_per_frame']:.2f} s per frame set "
           f"(the thesis: {THESIS_SECONDS_PER_FRAME})")
-    print(f"  mean joint error of the published poses {r['mean_error_mm']:.1f} mm")
+    print(f"  mean joint error of the published poses {r['mean_error_mm']:.1f} mm; offline the same pipeline "
+          f"tracks {r['poses_per_s_bound']:.2f} frame sets/s: live is {r['poses_per_s_of_bound']:.2f} of it")
     if "offline" in r:
         o = r["offline"]
         print(f"  offline, every frame set: {o['mean_error_mm']:.1f} mm ({o['mean_error_mm_on_published_stamps']:.1f} "
@@ -402,6 +442,9 @@ def main(argv=None) -> int:
     p.add_argument("bag", nargs="?", default=None, help="multi-view bag (default: rendered once into out/bench/)")
     p.add_argument("--depth-bag", default=None, help="depth bag for gesture_detection alongside (default: rendered)")
     p.add_argument("--no-gestures", action="store_true", help="no gesture_detection alongside")
+    p.add_argument("--composed", action="store_true",
+                   help="the room_pipeline node (segmentation, keypoints and tracking in one process) in place "
+                        "of foreground_segmentation, extremity_detection and body_tracker")
     p.add_argument("--rate", type=float, default=1.0, help="replay rate (default 1: real time)")
     p.add_argument("--param", action="append", default=[], metavar="NODE:KEY=VALUE",
                    help="a node's parameter (repeatable), e.g. body_tracker:filter.particles=100")

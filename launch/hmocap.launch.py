@@ -1,13 +1,14 @@
 """The hmocap_ros pipeline from a rig file, in a ROS 2 Jazzy install.
 
     ros2 launch hmocap_ros hmocap.launch.py rig_file:=/path/to/rig.yaml [namespace:=room_1]
-        [gestures:=false] [depth_namespace:=/camera/camera/depth depth_image:=image_rect_raw]
+        [composed:=true] [gestures:=false] [depth_namespace:=/camera/camera/depth depth_image:=image_rect_raw]
         [use_sim_time:=true] [dds_profile:=local|room|/path/to/profile.xml|none]
 
 Starts camera_rig_publisher (the rig as a latched message and on /tf_static),
 foreground_segmentation (one background model per rig camera: the camera names are read from
-the rig file), extremity_detection, body_tracker and gesture_detection, each with its
-config/<node>.yaml (keyed ``/**``, so the files apply in any namespace). The colour cameras
+the rig file), extremity_detection, body_tracker (or, with ``composed:=true``, room_pipeline:
+the three in one process, for a room whose cameras feed one PC) and gesture_detection, each
+with its config/<node>.yaml (keyed ``/**``, so the files apply in any namespace). The colour cameras
 publish ``<camera>/image_raw`` for the rig's camera names, inside ``namespace``; the depth
 camera of the gestures ``<depth_namespace>/<depth_image>`` and
 ``<depth_namespace>/camera_info``. ``use_sim_time:=true`` for a bag replayed with
@@ -36,6 +37,8 @@ ARGUMENTS = {
     "rig_file": ("", "Rig calibration YAML (intrinsics and camera poses in the room); empty = the "
                      "package's config/rig_example.yaml"),
     "namespace": ("", "Namespace of every node and of its relative topics (one room of several)"),
+    "composed": ("false", "Segmentation, keypoints and tracking in one process (room_pipeline) instead of "
+                          "three nodes: one PC for the room's cameras"),
     "gestures": ("true", "Start gesture_detection on the depth camera (false: leave it out)"),
     "depth_namespace": ("depth", "Namespace of the depth camera's topics (relative = inside namespace)"),
     "depth_image": ("image_raw", "Depth image topic in depth_namespace (image_rect_raw for realsense2_camera)"),
@@ -71,10 +74,10 @@ def _pipeline(context):
     if profile not in ("", "none") and not os.path.isfile(profile):
         raise RuntimeError(f"hmocap.launch.py: dds_profile {profile} is not a file")
     dds = {} if profile in ("", "none") else {variable: profile for variable in DDS_PROFILE_VARIABLES}
-    return [
-        Node(package="hmocap_ros", executable="camera_rig_publisher", name="camera_rig_publisher",
-             namespace=namespace, output="screen", additional_env=dds,
-             parameters=[os.path.join(config, "camera_rig_publisher.yaml"), {"rig_file": rig_file}, sim_time]),
+    rig = Node(package="hmocap_ros", executable="camera_rig_publisher", name="camera_rig_publisher",
+               namespace=namespace, output="screen", additional_env=dds,
+               parameters=[os.path.join(config, "camera_rig_publisher.yaml"), {"rig_file": rig_file}, sim_time])
+    stages = [
         Node(package="hmocap_ros", executable="foreground_segmentation", name="foreground_segmentation",
              namespace=namespace, output="screen", additional_env=dds,
              parameters=[os.path.join(config, "foreground_segmentation.yaml"),
@@ -86,13 +89,21 @@ def _pipeline(context):
         Node(package="hmocap_ros", executable="body_tracker", name="body_tracker",
              namespace=namespace, output="screen", additional_env=dds,
              parameters=[os.path.join(config, "body_tracker.yaml"), sim_time]),
-        Node(package="hmocap_ros", executable="gesture_detection", name="gesture_detection",
-             namespace=namespace, output="screen", additional_env=dds,
-             condition=IfCondition(LaunchConfiguration("gestures")),
-             parameters=[os.path.join(config, "gesture_detection.yaml"), sim_time],
-             remappings=[("depth/image_raw", f"{depth}/{depth_image}"),
-                         ("depth/camera_info", f"{depth}/camera_info")]),
     ]
+    composed = [
+        # The rig comes from camera_rig_publisher on the latched camera_rig topic.
+        Node(package="hmocap_ros", executable="room_pipeline", name="room_pipeline",
+             namespace=namespace, output="screen", additional_env=dds,
+             parameters=[os.path.join(config, "room_pipeline.yaml"), sim_time]),
+    ]
+    gestures = Node(package="hmocap_ros", executable="gesture_detection", name="gesture_detection",
+                    namespace=namespace, output="screen", additional_env=dds,
+                    condition=IfCondition(LaunchConfiguration("gestures")),
+                    parameters=[os.path.join(config, "gesture_detection.yaml"), sim_time],
+                    remappings=[("depth/image_raw", f"{depth}/{depth_image}"),
+                                ("depth/camera_info", f"{depth}/camera_info")])
+    one_process = LaunchConfiguration("composed").perform(context).lower() in ("true", "1")
+    return [rig, *(composed if one_process else stages), gestures]
 
 
 def generate_launch_description():

@@ -34,6 +34,9 @@ NODE_CONFIGS = {
                      "TrackerParams"),
     "extremity_detection": ("hmocap_ros.nodes.extremity_detection", "ExtremityNodeConfig",
                             "hmocap_ros.detection.extremity_pipeline", "ExtremityDetectionParams"),
+    "room_pipeline": ("hmocap_ros.nodes.body_tracker", "BodyTrackerNodeConfig", "hmocap_ros.nodes.room_pipeline",
+                      "RoomStagesConfig", "hmocap_ros.segmentation", "ForegroundParams", "hmocap_ros.tracking.params",
+                      "TrackerParams"),
     # the example apps (examples/, installed as hmocap_examples; APP_NODES)
     "light_switch": ("hmocap_examples.light_switch", "LightSwitchConfig"),
     "presence": ("hmocap_examples.presence", "PresenceConfig"),
@@ -155,14 +158,16 @@ def test_launch_file_starts_every_node_with_its_config():
 #: The pipeline hmocap.launch.py starts, in order.
 PIPELINE = ["camera_rig_publisher", "foreground_segmentation", "extremity_detection", "body_tracker",
             "gesture_detection"]
+#: ... with ``composed:=true``: the three body stages in one process
+COMPOSED = ["camera_rig_publisher", "room_pipeline", "gesture_detection"]
 
 
 def test_launch_file_starts_the_pipeline_in_order():
     tree = ast.parse((ROOT / "launch" / "hmocap.launch.py").read_text())
-    executables = [ast.literal_eval(k.value) for call in ast.walk(tree)
+    calls = sorted((call.lineno, ast.literal_eval(k.value)) for call in ast.walk(tree)
                    if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "Node"
-                   for k in call.keywords if k.arg == "executable"]
-    assert executables == PIPELINE
+                   for k in call.keywords if k.arg == "executable")
+    assert [executable for _, executable in calls] == PIPELINE[:-1] + ["room_pipeline", PIPELINE[-1]]
 
 
 class _Stub:
@@ -241,6 +246,12 @@ def test_launch_file_runs_the_pipeline_from_a_rig_file(monkeypatch, tmp_path):
     assert {"cameras": list(example.names)} in by_name["foreground_segmentation"]["parameters"]
     assert dict(by_name["gesture_detection"]["remappings"])["depth/image_raw"] == "depth/image_raw"
     assert by_name["body_tracker"]["namespace"] == ""
+    # composed:=true: the body stages in one process, with its own config
+    _, nodes = _run_launch_file(monkeypatch, ROOT / "launch" / "hmocap.launch.py", composed="true")
+    by_name = {n.kwargs["executable"]: n.kwargs for n in nodes}
+    assert list(by_name) == COMPOSED
+    assert [p for p in by_name["room_pipeline"]["parameters"] if isinstance(p, str)] == [
+        str(ROOT / "config" / "room_pipeline.yaml")]
 
 
 def test_launch_file_names_a_bad_rig_file_in_one_line(monkeypatch, tmp_path):

@@ -136,31 +136,43 @@ def _learn_frames(reader, source: _Source, requested: int | None,
     return source
 
 
-def _masks(source: _Source, rig, msgs: dict, stamp: int, models, rgb_of, warn) -> list:
-    """One mask per camera of a frame set (None: a dropped view)."""
+def _given_masks(source: _Source, rig, msgs: dict, warn) -> list:
+    """The bag's mask of each camera of a frame set (None: a dropped view)."""
     from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 
     out: list[np.ndarray | None] = []
-    for k, (cam, topic) in enumerate(zip(rig.cameras, source.topics)):
+    for cam, topic in zip(rig.cameras, source.topics):
         if topic not in msgs:
             out.append(None)
             continue
         try:
-            if source.kind == "fg":
-                mask = models[k].apply(rgb_of(topic), stamp)
-            else:
-                mask = image_to_numpy(msgs[topic])
-                if mask.ndim != 2:
-                    raise ConversionError(f"must be mono8, got {msgs[topic].encoding}")
+            mask = image_to_numpy(msgs[topic])
+            if mask.ndim != 2:
+                raise ConversionError(f"must be mono8, got {msgs[topic].encoding}")
         except ValueError as err:  # ConversionError is one
             warn(f"{topic}: {err} (view dropped)")
             out.append(None)
             continue
         if mask.shape != (cam.height, cam.width):
-            warn(f"{topic} is {mask.shape[1]}x{mask.shape[0]}, the rig says {cam.width}x{cam.height}: "
-                 f"view dropped")
+            warn(f"{topic}: {mask.shape[1]}x{mask.shape[0]}, the rig says {cam.width}x{cam.height} (view dropped)")
             mask = None
         out.append(mask)
+    return out
+
+
+def _images(topics_: list, msgs: dict, warn, what: str) -> list:
+    """Each camera's RGB image of a frame set (None: missing or not decodable, warned of)."""
+    from hmocap_ros.io.conversions import image_to_rgb
+
+    out: list[np.ndarray | None] = []
+    for topic in topics_:
+        image = None
+        if topic in msgs:
+            try:
+                image = image_to_rgb(msgs[topic])
+            except ValueError as err:
+                warn(f"{topic}: {err} ({what})")
+        out.append(image)
     return out
 
 
@@ -188,19 +200,19 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     ``silhouettes`` (the source used), ``notes``, ``warnings`` (text -> count) and ``topics``
     (topic -> messages written). :class:`TrackError` for bad input."""
     from hmocap_ros.body import load_body_model
-    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams, ExtremityPipeline, skeleton_labels
+    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
     from hmocap_ros.detection.keypoint_network import ModelFileError
     from hmocap_ros.eval.mocap_eval import method_params
     from hmocap_ros.geometry.rig import RigError, load_rig
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.bag_writer import LATCHED, whole_bag
-    from hmocap_ros.io.conversions import image_to_rgb
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.rig_messages import rig_from_msg
-    from hmocap_ros.segmentation import ForegroundParams, background_models
+    from hmocap_ros.room_pipeline import RoomPipeline
+    from hmocap_ros.segmentation import ForegroundParams
     from hmocap_ros.tracking.params import TrackerParams
-    from hmocap_ros.tracking.people_tracker import PeopleTracker, body_ids
+    from hmocap_ros.tracking.people_tracker import body_ids
     from hmocap_ros.tracking.tracker_messages import TrackerMessages, latched_topics
 
     if silhouettes not in SILHOUETTES:
@@ -235,69 +247,54 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
             counts["notes"].append(source.note)
         counts["silhouettes"] = source.kind
         image_topics = [topics.camera_image(n) for n in rig.names]
-        pipeline = None
+        detection = None
         if params.tracking_method.uses_detector:
             if any(t in available for t in image_topics):
-                try:
-                    pipeline = ExtremityPipeline(rig.cameras, detection_params)
-                except ModelFileError as err:
-                    raise TrackError(str(err)) from err
+                detection = detection_params
             else:
                 counts["notes"].append(f"no images in the bag: {params.method} runs without detections")
-        models = None
-        if source.kind == "fg":
-            fg = ForegroundParams(learn_frames=source.learn_frames, learn_from=source.learn_from)
-            models = background_models(fg, rig.names)
-        read = [t for t in source.topics if t in available]
-        if pipeline is not None:
-            read += [t for t in image_topics if t in available and t not in read]
-        total = max(available[t].count for t in read)
+        fg = (ForegroundParams(learn_frames=source.learn_frames, learn_from=source.learn_from)
+              if source.kind == "fg" else None)
         ids = body_ids(body_id, max_people)
         model = load_body_model("tracking")
-        people = PeopleTracker(model, rig, params, np.random.default_rng(seed), max_people=max_people, ids=ids)
+        try:
+            room = RoomPipeline(rig, params, model, np.random.default_rng(seed), foreground=fg,
+                                detection=detection, max_people=max_people, ids=ids)
+        except ModelFileError as err:
+            raise TrackError(str(err)) from err
+        read = [t for t in source.topics if t in available]
+        if room.detector is not None:
+            read += [t for t in image_topics if t in available and t not in read]
+        total = max(available[t].count for t in read)
         factory = RosbagsFactory()
         builder = TrackerMessages(model, ids, rig.frame_id, factory, publish_tf=publish_tf)
         latched = {"/" + t for t in latched_topics(ids)}
-        previous = None
         last_report = time.monotonic()
         with whole_bag(out) as writer:
             for topic in sorted(latched):
                 writer.add_topic(topic, "hmocap_interfaces/msg/BodyShape", LATCHED)
             for stamp, msgs in reader.frame_sets(read, int(SLOP_MS * 1e6), allow_partial=True,
                                                  min_topics=min(MIN_VIEWS, len(read))):
-                decoded: dict = {}
-
-                def rgb_of(topic: str, decoded: dict = decoded, msgs: dict = msgs) -> np.ndarray:
-                    if topic not in decoded:
-                        decoded[topic] = image_to_rgb(msgs[topic])
-                    return decoded[topic]
-
-                masks = _masks(source, rig, msgs, stamp, models, rgb_of, warn)
-                detections = None
-                if pipeline is not None:
-                    images = []
-                    for topic in image_topics:
-                        try:
-                            images.append(rgb_of(topic) if topic in msgs else None)
-                        except ValueError as err:
-                            warn(f"{topic}: {err} (no detections from this view)")
-                            images.append(None)
-                    detections = pipeline.detect(images, masks, previous)
-                    writer.write(EXTREMITIES_TOPIC, _extremities_msg(detections, stamp, rig.frame_id, factory),
-                                 stamp)
-                results = people.update(masks, int(stamp), detections)
-                built = builder.frame_set(int(stamp), results, [t.model for t in people.trackers])
+                images = None
+                if source.kind == "fg" or room.detector is not None:
+                    images = _images(image_topics, msgs, warn, "view dropped" if source.kind == "fg"
+                                     else "no detections from this view")
+                given = _given_masks(source, rig, msgs, warn) if source.kind != "fg" else None
+                step = room.step(int(stamp), images, given)
+                if given is None:
+                    for k, reason in room.dropped:
+                        warn(f"{image_topics[k]}: {reason} (view dropped)")
+                if step.detections is not None:
+                    writer.write(EXTREMITIES_TOPIC, _extremities_msg(step.detections, stamp, rig.frame_id,
+                                                                     factory), stamp)
+                results = step.results
+                built = builder.frame_set(int(stamp), results, [t.model for t in room.people.trackers])
                 for error in built.errors:
                     warn(error)
                 for topic, msg in built.messages:
                     writer.write(topic if topic.startswith("/") else "/" + topic, msg, stamp)
-                posed = [r for r in results if r.has_pose]
                 counts["frame_sets"] += 1
-                counts["with_pose"] += bool(posed)
-                previous = None
-                if posed:
-                    assert posed[0].joints is not None  # has_pose
-                    previous = skeleton_labels(list(posed[0].joint_names), posed[0].joints)
+                counts["with_pose"] += any(r.has_pose for r in results)
                 if progress is not None and time.monotonic() - last_report >= PROGRESS_PERIOD_S:
                     last_report = time.monotonic()
                     progress(f"{counts['frame_sets']}/{total} frame sets, "

@@ -82,13 +82,13 @@ TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 @dataclass(frozen=True)
 class BodyTrackerNodeConfig:
     rig_file: str = param("", "Rig calibration YAML; empty = take the rig from the latched camera_rig topic.")
-    slop_ms: float = param(5.0, "Largest stamp difference (ms) between the masks of one frame set.")
+    slop_ms: float = param(5.0, "Largest stamp difference (ms) between the cameras' frames of one frame set.")
     min_views_to_sync: int = param(2, "Frame sets with at least this many cameras are processed when a "
                                       "camera drops out (after max_wait_ms); 1 to the number of cameras.")
     max_wait_ms: float = param(200.0, "How long (ms, > 0) a frame set waits for a missing camera after its "
-                                      "newest mask arrived (idle time of the node) or until a mask this "
-                                      "much newer arrives; then it is processed with the views it has.")
-    queue_depth: int = param(5, "Masks queued per camera while the tracker is busy (best effort: older "
+                                      "newest frame arrived or until a frame this much newer arrives; "
+                                      "then it is processed with the views it has.")
+    queue_depth: int = param(5, "Frames queued per camera while the tracker is busy (best effort: older "
                                 "ones are dropped, so a live tracker works on recent frames; raise it "
                                 "when replaying a bag slowly and every frame must be tracked).")
     image_reliability: str = image_reliability_param()
@@ -114,8 +114,15 @@ class BodyTrackerNodeConfig:
 
 
 class BodyTrackerNode(Node):
+    """The tracker over the masks and keypoints of the other nodes; :class:`~hmocap_ros.nodes.
+    room_pipeline.RoomPipelineNode` runs every stage itself on the images (``_set_rig``,
+    ``_update``)."""
+
+    #: the node's name, and its diagnostics' prefix
+    node_name = NODE_NAME
+
     def __init__(self) -> None:
-        super().__init__(NODE_NAME)
+        super().__init__(self.node_name)
         self.config = declare_parameters(self, BodyTrackerNodeConfig)
         self.mask_qos = image_qos(self.config.image_reliability, self.config.queue_depth)
         self.params = declare_parameters(self, TrackerParams)
@@ -158,7 +165,11 @@ class BodyTrackerNode(Node):
         if self.config.max_wait_ms <= 0:
             self.get_logger().fatal(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
             raise SystemExit(2)
+        self._declare_stages()
         take_rig(self, self.config.rig_file, self._set_rig)
+
+    def _declare_stages(self) -> None:
+        """Declare the parameters of the stages this node runs beside the tracker (none)."""
 
     def _set_rig(self, rig: Rig) -> None:
         first = self.rig is None
@@ -166,8 +177,7 @@ class BodyTrackerNode(Node):
         self.frame_id = rig.frame_id
         self.tracker = PeopleTracker(self.model, rig, self.params, self.rng,
                                      max_people=len(self.ids), ids=self.ids)
-        self.messages = TrackerMessages(self.model, self.ids, rig.frame_id, self.factory,
-                                        publish_tf=self.pub_tf is not None)
+        self._new_messages(rig)
         self.use_detections = self.params.tracking_method.uses_detector
         if self.intake is not None:
             self.intake.close()
@@ -178,7 +188,7 @@ class BodyTrackerNode(Node):
             min_keys=min(self.config.min_views_to_sync, len(rig)),
             max_wait_ns=int(self.config.max_wait_ms * 1e6), queue_size=max(10, self.config.queue_depth),
             latest_only=self.config.latest_only, companion=DETECTIONS if self.use_detections else None,
-            on_start_over=self._start_over, on_error=self._work_failed, name=NODE_NAME)
+            on_start_over=self._start_over, on_error=self._work_failed, name=self.node_name)
         if first:
             # Subscribe before compiling: masks that arrive during the (cold-cache) warm-up
             # wait in the subscriptions' queues instead of being published to nobody.
@@ -195,6 +205,11 @@ class BodyTrackerNode(Node):
             self.get_logger().info(f"kernels ready ({seconds:.1f} s)")
         self.get_logger().info(f"tracking with {len(rig)} cameras ({', '.join(rig.names)}), method "
                                f"{self.params.method}")
+
+    def _new_messages(self, rig: Rig) -> None:
+        """The outputs' builder, in the rig's frame."""
+        self.messages = TrackerMessages(self.model, self.ids, rig.frame_id, self.factory,
+                                        publish_tf=self.pub_tf is not None)
 
     def _mono8(self, msg: Image, topic: str) -> np.ndarray | None:
         try:
@@ -270,20 +285,11 @@ class BodyTrackerNode(Node):
         assert self.rig is not None and self.tracker is not None and self.messages is not None
         stamp_ns, items = picked.stamp_ns, picked.items
         log = self.get_logger()
-        masks = []
-        for cam in self.rig.cameras:
-            mask = items.get(cam.name)
-            if mask is not None and mask.shape != (cam.height, cam.width):
-                log.error(f"{cam.name}/foreground is {mask.shape[1]}x{mask.shape[0]}, the rig says "
-                          f"{cam.width}x{cam.height}: view dropped", throttle_duration_sec=5.0)
-                mask = None
-            masks.append(mask)
-        detections = items.get(DETECTIONS)
         t0 = time.perf_counter()
         try:
             budget = (self.config.budget_ms / 1000.0
                       if self.config.latest_only and self.config.budget_ms > 0 else None)
-            results = self.tracker.update(masks, stamp_ns, detections, budget)
+            results = self._update(stamp_ns, items, budget)
         except Exception as err:  # a tracker bug must not take the room's node down
             log.error(f"tracking failed on frame {stamp_ns}: {err!r}; restarting the track")
             self.tracker.reset(forget_shape=False)
@@ -301,6 +307,20 @@ class BodyTrackerNode(Node):
         for error in built.errors:  # a degenerate pose must not stop the node
             log.error(error, throttle_duration_sec=5.0)
         self._publish_diagnostics(stamp_ns, results, seconds, picked)
+
+    def _update(self, stamp_ns: int, items: dict, budget: float | None) -> list:
+        """The trackers' results of one frame set (its masks by camera, its detections)."""
+        assert self.rig is not None and self.tracker is not None  # sets come once the rig came
+        masks = []
+        for cam in self.rig.cameras:
+            mask = items.get(cam.name)
+            if mask is not None and mask.shape != (cam.height, cam.width):
+                self.get_logger().error(
+                    f"{cam.name}/foreground is {mask.shape[1]}x{mask.shape[0]}, the rig says "
+                    f"{cam.width}x{cam.height}: view dropped", throttle_duration_sec=5.0)
+                mask = None
+            masks.append(mask)
+        return self.tracker.update(masks, stamp_ns, items.get(DETECTIONS), budget)
 
     def _log_transition(self, k: int, result, seconds: float) -> None:
         log = self.get_logger()
@@ -368,7 +388,7 @@ class BodyTrackerNode(Node):
                 0 if joints is None else int((joints > 0).sum()))))
         level = DiagnosticStatus.OK if result.state in ("tracking", "initialising", "searching") else \
             DiagnosticStatus.WARN
-        return DiagnosticStatus(level=level, name=f"{NODE_NAME}: {body}", message=result.state,
+        return DiagnosticStatus(level=level, name=f"{self.node_name}: {body}", message=result.state,
                                 values=values)
 
 
