@@ -155,7 +155,8 @@ def _given_masks(source: _Source, rig, msgs: dict, warn) -> list:
             continue
         if mask.shape != (cam.height, cam.width):
             warn(f"{topic}: {mask.shape[1]}x{mask.shape[0]}, the rig says {cam.width}x{cam.height} (view dropped)")
-            mask = None
+            out.append(None)
+            continue
         out.append(mask)
     return out
 

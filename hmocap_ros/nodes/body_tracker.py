@@ -131,7 +131,7 @@ class BodyTrackerNode(Node):
         if self.config.threads < 1:
             self.get_logger().fatal(f"threads must be >= 1, got {self.config.threads}")
             raise SystemExit(2)
-        numba.set_num_threads(min(self.config.threads, numba.config.NUMBA_NUM_THREADS))
+        numba.set_num_threads(min(self.config.threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]  # set at import
         if self.config.max_people < 1:
             self.get_logger().fatal(f"max_people must be >= 1, got {self.config.max_people}")
             raise SystemExit(2)
