@@ -52,7 +52,7 @@ test-jazzy:
 	$(JAZZY_VENV)/bin/python -m pytest -q -p no:cacheprovider
 
 test-slow: setup
-	$(PY) -m pytest -q -m slow
+	$(PY) -m pytest -q -p no:cacheprovider -m slow
 
 test-mutants: setup
 	$(PY) -m pytest -q -p no:cacheprovider -m mutants test/test_mutants.py

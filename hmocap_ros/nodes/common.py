@@ -314,6 +314,18 @@ def depth_from_msg(msg, encodings, logger):
         return None
 
 
+def rgb_from_msg(msg, topic: str, logger):
+    """The RGB image (H, W, 3) of a colour camera's Image message, or None (logged, throttled)
+    when it cannot be converted."""
+    from hmocap_ros.io.conversions import ConversionError, image_to_rgb
+
+    try:
+        return image_to_rgb(msg)
+    except ConversionError as err:
+        logger.error(f"{topic}: {err}", throttle_duration_sec=5.0)
+        return None
+
+
 def message_class(typename: str):
     """The rclpy message class for 'pkg/msg/Name' (ImportError with a clear text if unknown)."""
     import importlib

@@ -50,7 +50,7 @@ from hmocap_ros.detection.tflite_model import ModelFileError
 from hmocap_ros.frame_intake import FrameSetIntake
 from hmocap_ros.frame_sets import PickedSet
 from hmocap_ros.geometry.rig import Rig
-from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb
+from hmocap_ros.io.conversions import ConversionError, image_to_numpy
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.point_clouds import array_to_pointcloud2
 from hmocap_ros.nodes.common import (
@@ -59,6 +59,7 @@ from hmocap_ros.nodes.common import (
     image_qos,
     image_reliability_param,
     param,
+    rgb_from_msg,
     run_node,
     take_rig,
 )
@@ -168,10 +169,8 @@ class ExtremityDetectionNode(Node):
         def on_image(msg: Image) -> None:
             if self.rig is None or name not in self.images:
                 return
-            try:
-                rgb = image_to_rgb(msg)
-            except ConversionError as err:
-                self.get_logger().error(f"{name}/image_raw: {err}", throttle_duration_sec=5.0)
+            rgb = rgb_from_msg(msg, f"{name}/image_raw", self.get_logger())
+            if rgb is None:
                 return
             recent = self.images[name]
             recent[stamp_to_ns(msg.header.stamp)] = rgb

@@ -35,10 +35,9 @@ from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
 from hmocap_ros.detection.tflite_model import ModelFileError
 from hmocap_ros.frame_intake import FrameSetIntake
 from hmocap_ros.geometry.rig import Rig
-from hmocap_ros.io.conversions import ConversionError, image_to_rgb
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.nodes.body_tracker import BodyTrackerNode, BodyTrackerNodeConfig
-from hmocap_ros.nodes.common import RESULT_QOS, declare_parameters, image_qos, param, run_node
+from hmocap_ros.nodes.common import RESULT_QOS, declare_parameters, image_qos, param, rgb_from_msg, run_node
 from hmocap_ros.params import group
 from hmocap_ros.room_pipeline import RoomPipeline
 from hmocap_ros.segmentation import ForegroundParams
@@ -104,12 +103,9 @@ class RoomPipelineNode(BodyTrackerNode):
         def on_image(msg: Image) -> None:
             if self.intake is None or self.rig is None or name not in self.rig:
                 return
-            try:
-                rgb = image_to_rgb(msg)
-            except ConversionError as err:
-                self.get_logger().error(f"{name}/image_raw: {err}", throttle_duration_sec=5.0)
-                return
-            self.intake.add(name, stamp_to_ns(msg.header.stamp), rgb)
+            rgb = rgb_from_msg(msg, f"{name}/image_raw", self.get_logger())
+            if rgb is not None:
+                self.intake.add(name, stamp_to_ns(msg.header.stamp), rgb)
 
         return on_image
 
