@@ -237,8 +237,8 @@ def test_rep155_topics_body_frames_and_confidence_of_one_body(tmp_path):
              *EVERY_FRAME, *FAST, *remaps], "kernels ready")
     env = loopback_dds_env()
     out = tmp_path / "out.mcap"
-    topics = ["/skeleton", "/tf", f"{BODY_0}/joint_states", f"{BODY_0}/body_shape", "/body_shape",
-              "/diagnostics"]
+    topics = ["/skeleton", "/skeleton_markers", "/tf", f"{BODY_0}/joint_states", f"{BODY_0}/body_shape",
+              "/body_shape", "/diagnostics"]
     with NodeProcess("listener", [sys.executable, "-c", TRACKED_LISTENER], env, tmp_path) as listener:
         assert listener.wait_for_output("listening", 60), listener.output()
         result = replay_through_nodes(
@@ -259,6 +259,7 @@ def test_rep155_topics_body_frames_and_confidence_of_one_body(tmp_path):
         skeletons = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
         joints = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages([f"{BODY_0}/joint_states"])}
         tf_msgs = {stamp_to_ns(m.msg.transforms[0].header.stamp): m.msg for m in reader.messages(["/tf"])}
+        markers = {stamp_to_ns(m.msg.markers[0].header.stamp): m.msg for m in reader.messages(["/skeleton_markers"])}
         shapes = [m.msg for m in reader.messages([f"{BODY_0}/body_shape"])]
         plain_shapes = [m.msg for m in reader.messages(["/body_shape"])]
         latched = reader.topics()[f"{BODY_0}/body_shape"].latched
@@ -289,6 +290,16 @@ def test_rep155_topics_body_frames_and_confidence_of_one_body(tmp_path):
         np.testing.assert_allclose(positions, _points(sk), atol=1e-6)
         up = pose["body_b0"][:3, 2]  # REP-155: z towards the head; the room is +Y up
         assert up[1] > 0.7, up
+    # skeleton_markers: per pose the joints as spheres and the bones as lines, in the body's namespace
+    assert set(markers) == set(skeletons)
+    for stamp, array in markers.items():
+        spheres, bones = array.markers
+        sk = skeletons[stamp]
+        assert (spheres.type, bones.type) == (spheres.SPHERE_LIST, bones.LINE_LIST)
+        assert spheres.ns == bones.ns == sk.body_id == "b0"
+        assert spheres.header.frame_id == bones.header.frame_id == "room"
+        np.testing.assert_allclose([[p.x, p.y, p.z] for p in spheres.points], _points(sk))
+        assert len(bones.points) == 2 * sum(1 for parent in sk.parents if parent >= 0)
     # confidence: one per joint in [0, 1] once the filter tracks (empty on start-up frames),
     # the pelvis surer than the wrists, which the particles place less alike
     confident = [np.array(sk.confidence) for sk in skeletons.values() if len(sk.confidence)]
