@@ -144,6 +144,7 @@ class FrameSetIntake:
                 self.queue.period.add(synced.stamp_ns)  # its stamp still measures the period
                 self._prune(self._held, synced.stamp_ns)
             else:
+                self._held.clear()  # their companions' stage is gone: none will come
                 items[self.companion] = None
                 self.queue.put(synced.stamp_ns, items, now)
 

@@ -130,13 +130,17 @@ def test_a_companion_before_its_set_waits_for_it():
         it.close()
 
 
-def test_without_an_expected_companion_sets_go_on_with_none():
+def test_without_an_expected_companion_sets_go_on_with_none_and_held_ones_are_let_go():
     rec = Recorder()
     it = intake(rec, companion="extremities")
+    it.companion_expected = True
     try:
         add_set(it, 0)
+        it.companion_expected = False  # the keypoint stage is gone
+        add_set(it, 1)
         assert rec.wait_for(1)
-        assert rec.sets[0].items["extremities"] is None
+        assert rec.sets[0].stamp_ns == T0 + PERIOD and rec.sets[0].items["extremities"] is None
+        assert not it._held  # set 0 waits for nothing that will come
     finally:
         it.close()
 
