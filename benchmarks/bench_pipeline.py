@@ -6,7 +6,7 @@ A multi-view bag (4 cameras, 640x480, 25 fps) is replayed in real time (``--rate
 over DDS on loopback with its shipped defaults (each takes the newest frame set when it falls
 behind, ``latest_only``), or with ``--composed`` into ``room_pipeline``, the three stages in one
 process, while a depth bag (640x480, 30 fps) is replayed into ``gesture_detection`` alongside.
-A monitor in this process subscribes to the last camera's images, the depth images and every
+A monitor in this process subscribes to the cameras' images, the depth images and every
 output, and notes when each arrives. Reported:
 
 - frame sets in, poses out, poses per second of the stream while a person is in view (and from
@@ -232,8 +232,9 @@ def run(ns) -> dict:
         raise BagReadError(f"{bag}: no <camera>/image_raw topics")
     out_dir = Path(ns.logs)
     env = loopback_dds_env(domain_id=ns.domain_id)
-    last_image = topics.camera_image(cameras[-1])
-    watch = {last_image: "sensor_msgs/msg/Image", "/skeleton": "hmocap_interfaces/msg/Skeleton",
+    # every camera's images (the replay waits for the monitor on each), the last one's counted
+    watch = {**{topics.camera_image(c): "sensor_msgs/msg/Image" for c in cameras},
+             "/skeleton": "hmocap_interfaces/msg/Skeleton",
              "/extremities": "hmocap_interfaces/msg/Extremities"}
     if not ns.composed:
         watch.update({topics.camera_foreground(c): "sensor_msgs/msg/Image" for c in cameras})
@@ -248,14 +249,17 @@ def run(ns) -> dict:
         print(f"nodes up: {', '.join(procs)}; replaying {bag.name}"
               + (f" and {Path(ns.depth_bag).name}" if ns.depth_bag else "") + f" at rate {ns.rate:g}", flush=True)
         cpu0 = {n: process_cpu_seconds(p.proc.pid) or 0.0 for n, p in procs.items()}
+        # the monitor and every node that takes the images, so none loses the first frames
+        image_takers = 1 + (1 if ns.composed else 2)
         replays = [NodeProcess.module("replay", "hmocap_ros.cli",
-                                      ["replay", str(bag), "--rate", str(ns.rate), "--wait-subscribers", "1",
+                                      ["replay", str(bag), "--rate", str(ns.rate), "--wait-subscribers",
+                                       str(image_takers),
                                        "--topics", topics.CAMERA_RIG, *(topics.camera_image(c) for c in cameras)],
                                       env, out_dir)]
         if ns.depth_bag is not None:
             replays.append(NodeProcess.module("replay_depth", "hmocap_ros.cli",
                                               ["replay", str(ns.depth_bag), "--rate", str(ns.rate),
-                                               "--wait-subscribers", "1",
+                                               "--wait-subscribers", "2",  # the monitor, gestures
                                                "--topics", topics.DEPTH_IMAGE, topics.DEPTH_INFO], env, out_dir))
         t0 = time.monotonic()
         for r in replays:
@@ -367,7 +371,8 @@ def report(ns, bag: Path, cameras: list[str], monitor: Monitor, cpu_s: dict, wal
         "poses_per_s": len([s for s in poses if s in truth]) / max(len(person_in) * period, 1e-9),
         "poses_per_s_tracking": tracking_rate(poses, inputs, truth, period),
         "frame_sets_skipped": monitor.skipped,
-        "out_of_order": {t: n for t, n in monitor.out_of_order.items() if t != topics.camera_image(cameras[-1])},
+        "out_of_order": {t: n for t, n in monitor.out_of_order.items()
+                         if t not in {topics.camera_image(c) for c in cameras}},
         **latency_summary(latency_ms(inputs, poses)),
         "mean_error_mm": float(np.mean(list(errors.values()))) if errors else float("nan"),
         "tracker_seconds_per_frame": (float(np.median(monitor.tracker_seconds)) if monitor.tracker_seconds

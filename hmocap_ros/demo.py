@@ -106,7 +106,8 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
          ("body_tracker", "hmocap_ros.nodes.body_tracker", ["--ros-args", *TRACKER_ARGS], "waiting for the rig")],
         record, out_bag, env, out / "logs",
         replay_topics=image_topics,
-        replay_rate=rate, settle=3.0, expect={"/skeleton": n_person})
+        # camera_rig_publisher, foreground_segmentation and extremity_detection take every image
+        replay_rate=rate, settle=3.0, expect={"/skeleton": n_person}, subscribers=3)
     elapsed = time.monotonic() - t0
 
     truth = _by_stamp(DEMO_BAG, [topics.GT_SKELETON, *(topics.gt_silhouette(c) for c in cameras)])

@@ -194,14 +194,16 @@ def replay_through_nodes(
     drain_timeout: float = 120.0,
     drain_topics: Sequence[str] | None = None,
     expect: Mapping[str, int] | None = None,
+    subscribers: int = 1,
 ) -> ReplayResult:
     """Replay ``bag`` into ``nodes`` (separate processes over DDS) while recording ``record_topics``.
 
     ``nodes`` are ``(name, module, args, ready_text)``: each is started with ``python -m module
     args`` and waited for until ``ready_text`` appears in its output. The recorder starts first;
     the replay starts once the recorder has matched a publisher of every recorded topic (both
-    sides of discovery: a best-effort link drops what comes before), and waits itself for a
-    subscriber on each replayed topic (``--wait-subscribers 1``, plus its ``--settle``).
+    sides of discovery: a best-effort link drops what comes before), and waits itself for
+    ``subscribers`` subscribers on each replayed topic (``--wait-subscribers``, plus its
+    ``--settle``): as many as the nodes that subscribe to it, so none loses the first frames.
     After the replay ends, the nodes may still be working through a backlog (a slow or loaded
     machine, or one still compiling on its first frames): they are stopped only once every
     topic of ``expect`` has at least that many messages recorded, and then nothing new has been
@@ -230,7 +232,7 @@ def replay_through_nodes(
         for topic in [t for t in record_topics if t not in (replay_topics or ())]:
             if not recorder.wait_for_output(f"receiving {topic} from", ready_timeout):
                 raise RuntimeError(f"the recorder never matched a publisher of {topic}:\n{recorder.output()}")
-        replay_args = ["replay", str(bag), "--rate", str(replay_rate), "--wait-subscribers", "1",
+        replay_args = ["replay", str(bag), "--rate", str(replay_rate), "--wait-subscribers", str(subscribers),
                        "--wait-timeout", str(ready_timeout)]
         if replay_topics:
             replay_args += ["--topics", *replay_topics]
