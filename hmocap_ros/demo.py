@@ -106,8 +106,9 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
          ("body_tracker", "hmocap_ros.nodes.body_tracker", ["--ros-args", *TRACKER_ARGS], "waiting for the rig")],
         record, out_bag, env, out / "logs",
         replay_topics=image_topics,
-        # camera_rig_publisher, foreground_segmentation and extremity_detection take every image
-        replay_rate=rate, settle=3.0, expect={"/skeleton": n_person}, subscribers=3)
+        # camera_rig_publisher, foreground_segmentation, extremity_detection and the recorder take
+        # every image
+        replay_rate=rate, settle=3.0, expect={"/skeleton": n_person}, subscribers=4)
     elapsed = time.monotonic() - t0
 
     truth = _by_stamp(DEMO_BAG, [topics.GT_SKELETON, *(topics.gt_silhouette(c) for c in cameras)])
@@ -173,7 +174,8 @@ def run_gesture_demo(out: Path, env: dict, rate: float = 1.0) -> bool:
           "detecting gestures")],
         ["/gestures", "/gestures/probability", topics.DEPTH_IMAGE, topics.DEPTH_INFO], out_bag, env,
         out / "logs",
-        replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], replay_rate=rate, settle=2.0)
+        replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], replay_rate=rate, settle=2.0,
+        subscribers=2)  # gesture_detection and the recorder
     elapsed = time.monotonic() - t0
     for line in procs["gesture_detection"].output().splitlines():  # what the node loaded and saw
         if "gesture forest" in line or "depth camera" in line:
