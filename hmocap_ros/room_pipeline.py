@@ -63,8 +63,10 @@ class RoomPipeline:
         self.detector = (ExtremityPipeline(rig.cameras, detection, model_path)
                          if detection is not None and tracker.tracking_method.uses_detector else None)
         self.people = PeopleTracker(model, rig, tracker, rng, max_people=max_people, ids=ids)
-        #: the last skeleton (label -> room position), which places the next frame set's crops
+        #: the last skeleton (label -> room position), which places the next frame set's crops,
+        #: and its stamp
         self.previous: dict | None = None
+        self.previous_stamp_ns: int | None = None
         #: the views :meth:`segment` dropped from its last frame set: (camera index, reason)
         self.dropped: list[tuple[int, str]] = []
 
@@ -106,16 +108,20 @@ class RoomPipeline:
         detections = None
         if self.detector is not None and images is not None:
             t1 = time.perf_counter()
-            detections = self.detector.detect(list(images), masks, self.previous)
+            detections = self.detector.detect(list(images), masks, self.previous, int(stamp_ns),
+                                              self.previous_stamp_ns)
             seconds["detection"] = time.perf_counter() - t1
         t2 = time.perf_counter()
         results = self.people.update(masks, int(stamp_ns), detections, budget_s)
         seconds["tracking"] = time.perf_counter() - t2
         posed = [r for r in results if r.has_pose]
-        self.previous = None
+        self.previous = self.previous_stamp_ns = None
         if posed:
             assert posed[0].joints is not None  # has_pose
             self.previous = skeleton_labels(list(posed[0].joint_names), posed[0].joints)
+            self.previous_stamp_ns = int(stamp_ns)
+        if self.detector is not None:  # what the keypoint stage's views per set leave room for
+            self.detector.report_other_stages(seconds.get("segmentation", 0.0) + seconds["tracking"])
         return RoomStep(int(stamp_ns), masks, detections, results, seconds)
 
     def saw(self, stamps_ns: Sequence[int]) -> None:
@@ -128,7 +134,7 @@ class RoomPipeline:
         self.people.reset(forget_shape=False)
         if self.detector is not None:
             self.detector.reset()
-        self.previous = None
+        self.previous = self.previous_stamp_ns = None
 
     def close(self) -> None:
         """Stop the detector's worker threads."""

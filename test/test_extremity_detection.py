@@ -167,7 +167,7 @@ def test_a_knocked_camera_is_left_out_counted_and_reported_in_the_diagnostics(ke
     head = frames.joint_names.index("head")
     rclpy.init(args=["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", "latest_only:=false",
                      "-p", "queue_depth:=20", "-p", "image_reliability:=reliable",
-                     "-p", "use_skeleton:=false"])
+                     "-p", "use_skeleton:=false", "-p", "keypoints.views_per_set:=0"])
     node = helper = None
     try:
         node = ExtremityDetectionNode()

@@ -69,6 +69,14 @@ class ExtremityPipeline:
                                                                     model_path)
         self.last_seconds = 0.0
 
+    def report_other_stages(self, seconds: float) -> None:
+        """A frame set's seconds outside the detection (segmentation, tracking) in the same
+        process, for a detector that sizes its work to a rate (the keypoint detector's
+        ``pose_rate_hz``); the others ignore it."""
+        report = getattr(self.detector, "report_other_stages", None)
+        if report is not None:
+            report(seconds)
+
     def reset(self) -> None:
         """Forget the detector's tracks (a recording that starts over)."""
         self.detector.reset()
@@ -78,15 +86,19 @@ class ExtremityPipeline:
         self.detector.close()
 
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
-               previous: dict | None = None) -> Detections:
+               previous: dict | None = None, stamp_ns: int | None = None,
+               previous_stamp_ns: int | None = None) -> Detections:
         """Detections of one frame set: per camera an RGB image (H, W, 3) uint8 and a
-        foreground mask (H, W) at the rig's resolution, either None where missing."""
+        foreground mask (H, W) at the rig's resolution, either None where missing;
+        ``stamp_ns`` the frame set's stamp and ``previous_stamp_ns`` the skeleton's (the
+        keypoint detector's views in rotation need both)."""
         t0 = time.perf_counter()
         if len(images) != len(self.cameras) or len(masks) != len(self.cameras):
             raise ValueError(f"expected {len(self.cameras)} images and masks, got "
                              f"{len(images)} and {len(masks)}")
         images, masks = _checked(self.cameras, images, masks)
-        out = self.detector.detect(images, masks, previous)
+        out = self.detector.detect(images, masks, previous, stamp_ns=stamp_ns,
+                                   previous_stamp_ns=previous_stamp_ns)
         self.last_seconds = time.perf_counter() - t0
         return out
 

@@ -50,6 +50,13 @@ from hmocap_ros.detection.keypoint_roi import Roi, box_roi, landmarks_roi, skele
 from hmocap_ros.detection.keypoint_triangulation import Keypoints3D, triangulate_views
 from hmocap_ros.detection.params import KeypointParams
 from hmocap_ros.detection.pose_detector import PoseDetector
+from hmocap_ros.detection.view_rotation import (
+    CostMeter,
+    SkeletonHistory,
+    carried_landmarks,
+    views_for_rate,
+    views_to_run,
+)
 from hmocap_ros.geometry import project_points
 
 __all__ = ["CROP_SOURCES", "KeypointDetector", "foreground_box", "previous_pixels"]
@@ -57,7 +64,9 @@ __all__ = ["CROP_SOURCES", "KeypointDetector", "foreground_box", "previous_pixel
 _LOG = logging.getLogger(__name__)
 #: masks are shrunk to about this width (pixels) to find the person's box
 _ROI_MASK_WIDTH = 160
-#: where a view's crop came from (module docstring), in the order they are tried
+#: where a view's crop came from (module docstring), in the order they are tried; a view
+#: whose network did not run this frame set and whose landmarks were carried forward
+#: (:mod:`.view_rotation`) is ``carried``
 CROP_SOURCES = ("track", "skeleton", "detector", "foreground")
 
 
@@ -148,14 +157,26 @@ class KeypointDetector:
         #: disagreeing with the other views')
         self.views_left_out: dict[str, int] = {}
         self.last_sources: list[str | None] = [None] * len(self.cameras)
+        #: per view, the stamp and landmarks of its last network run (:mod:`.view_rotation`)
+        self._landmarks: list[tuple[int, ViewLandmarks] | None] = [None] * len(self.cameras)
+        self._skeletons = SkeletonHistory()
+        self._cost = CostMeter()
+        #: seconds of a frame set's work outside this detector (segmentation, tracking),
+        #: which the caller measures: counted when ``pose_rate_hz`` chooses the views
+        self.other_stages_s = 0.0
+        #: the views whose network ran on the last frame set
+        self.last_views_run = 0
 
     def close(self) -> None:
         """Release the networks."""
         self._network = self._detector = None
 
     def reset(self) -> None:
-        """Drop every view's track: the next crops come from the skeleton or the detector."""
+        """Drop every view's track and carried landmarks: the next crops come from the
+        skeleton or the detector."""
         self._tracks = [None] * len(self.cameras)
+        self._landmarks = [None] * len(self.cameras)
+        self._skeletons.clear()
 
     def _skip(self, camera, cause: str) -> None:
         if cause not in self._reported:
@@ -211,13 +232,26 @@ class KeypointDetector:
         self._tracks[v] = roi if roi is not None and roi.overlaps(camera.width,
                                                                   camera.height) else None
 
+    def _views_per_set(self, n_views: int) -> int:
+        p = self.params
+        if p.pose_rate_hz > 0:
+            return views_for_rate(p.pose_rate_hz, self._cost.per_view_s,
+                                  self._cost.other_s + self.other_stages_s, n_views)
+        return int(p.views_per_set) if p.views_per_set > 0 else n_views
+
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
-               previous: dict[str, np.ndarray] | None = None) -> Keypoints3D:
+               previous: dict[str, np.ndarray] | None = None, stamp_ns: int | None = None,
+               previous_stamp_ns: int | None = None) -> Keypoints3D:
         """3D keypoints of one frame set: per camera an RGB uint8 image (or None) and a uint8
         foreground mask (or None; ``masks=None``: none at all); ``previous``: label -> (3,) room
         position of the last skeleton's keypoints, optional. A view without an image, with an
         image of the wrong size or type, or with a mask without foreground is skipped, logged
-        once per cause; so is a view where the detector finds nobody (without a mask)."""
+        once per cause; so is a view where the detector finds nobody (without a mask).
+
+        ``stamp_ns``: the frame set's stamp, and ``previous_stamp_ns`` the skeleton's: with
+        ``views_per_set`` or ``pose_rate_hz`` set, the network runs on some views and the
+        others' landmarks are carried forward (:mod:`.view_rotation`); without a stamp every
+        view runs."""
         masks = [None] * len(self.cameras) if masks is None else list(masks)
         if len(images) != len(self.cameras) or len(masks) != len(self.cameras):
             raise ValueError(f"need one image and one mask per camera ({len(self.cameras)}), "
@@ -233,8 +267,23 @@ class KeypointDetector:
                 self._skip(camera, "no foreground")
                 continue
             plans[v] = plan
+        for v, plan in enumerate(plans):
+            if plan is None:
+                self._landmarks[v] = None
+        if previous and previous_stamp_ns is not None:
+            self._skeletons.add(int(previous_stamp_ns), previous)
+        candidates = [v for v, plan in enumerate(plans) if plan is not None]
+        rotating = stamp_ns is not None and (self.params.views_per_set > 0
+                                             or self.params.pose_rate_hz > 0)
+        jobs = candidates
+        if rotating:
+            assert stamp_ns is not None
+            oldest = stamp_ns - self.params.max_carry_ms * 1e6
+            self._landmarks = [item if item is not None and item[0] >= oldest else None
+                               for item in self._landmarks]
+            jobs = views_to_run([None if item is None else item[0] for item in self._landmarks],
+                                candidates, self._views_per_set(len(self.cameras)))
         t1 = time.perf_counter()
-        jobs = [v for v, plan in enumerate(plans) if plan is not None]
         results = [self._infer(images[v], *plans[v]) for v in jobs]
         t2 = time.perf_counter()
         views: list = [None] * len(self.cameras)
@@ -245,8 +294,22 @@ class KeypointDetector:
             self.last_sources[v] = source if landmarks is not None else None
             timings[f"network/{self.cameras[v].name}"] = seconds
             self._follow(v, self.cameras[v], landmarks)
+            self._landmarks[v] = (None if landmarks is None or stamp_ns is None
+                                  else (int(stamp_ns), landmarks))
             if landmarks is None:
                 self._skip(self.cameras[v], "the pose detector finds nobody")
+        if rotating:
+            assert stamp_ns is not None
+            now = self._skeletons.at(stamp_ns)
+            for v in sorted(set(candidates) - set(jobs)):
+                item = self._landmarks[v]
+                if item is None:
+                    continue
+                views[v] = carried_landmarks(self.cameras[v], item[1],
+                                             self._skeletons.at(item[0]), now)
+                self.last_sources[v] = "carried"
+                self._follow(v, self.cameras[v], views[v])
+        self.last_views_run = len(jobs)
         used_masks = [m if plan is not None else None for m, plan in zip(masks, plans)]
         result = triangulate_views(self.cameras, views, used_masks, previous, self.params)
         for v in result.views_left_out:
@@ -255,4 +318,5 @@ class KeypointDetector:
         t3 = time.perf_counter()
         timings.update(triangulation=t3 - t2, total=t3 - t0)
         self.last_timings = timings
+        self._cost.add(t2 - t1, len(jobs), (t1 - t0) + (t3 - t2))
         return result

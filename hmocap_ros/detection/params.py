@@ -55,6 +55,17 @@ class KeypointParams:
     swap_margin: float = param(
         0.5, "The sides of views are renamed only when the consensus gained exceeds this share "
              "of the renamed views' weight (>= 0).")
+    views_per_set: int = param(
+        2, "Views whose landmark network runs per frame set (at least 2), in rotation (the "
+           "oldest landmarks first); the other views' latest landmarks are carried to the set's "
+           "stamp by the tracked skeleton's motion. 0: every view, every set.")
+    pose_rate_hz: float = param(
+        0.0, "When > 0, the views per frame set are chosen per set from the measured cost so "
+             "that a frame set takes at most 1/pose_rate_hz seconds (at least two views; "
+             "views_per_set is then ignored). Depends on the machine's speed: 0 where runs "
+             "must repeat bit for bit.")
+    max_carry_ms: float = param(
+        400.0, "Landmarks older than this (ms) are not carried to a later frame set (> 0).")
     threads: int = param(
         1, "LiteRT threads of the landmark network and the pose detector (>= 1): one, as the "
            "room's other stages run beside it; more only on a machine with cores to spare.")
@@ -73,6 +84,8 @@ class KeypointParams:
             "min_views": int(self.min_views) == self.min_views and self.min_views >= 2,
             "min_score": 0 <= self.min_score <= 1,
             "threads": int(self.threads) >= 1,
+            "views_per_set": int(self.views_per_set) == self.views_per_set and self.views_per_set >= 0,
+            "pose_rate_hz": self.pose_rate_hz >= 0, "max_carry_ms": self.max_carry_ms > 0,
             "swap_margin": self.swap_margin >= 0,
         }
         bad = [name for name, ok in checks.items() if not ok]

@@ -27,12 +27,23 @@ class KeypointsDetector:
         """Per camera name, the frame sets whose landmarks disagreed with the others."""
         return self.network.views_left_out
 
+    @property
+    def views_run(self) -> int:
+        """The views whose landmark network ran on the last frame set."""
+        return self.network.last_views_run
+
+    def report_other_stages(self, seconds: float) -> None:
+        """A frame set's seconds outside the detector (segmentation, tracking), counted when
+        ``pose_rate_hz`` chooses the views per set."""
+        self.network.other_stages_s = float(seconds)
+
     def reset(self) -> None:
         self.network.reset()
 
     def close(self) -> None:
         self.network.close()
 
-    def detect(self, images, masks, previous=None) -> Detections:
-        kp = self.network.detect(images, masks, previous)
+    def detect(self, images, masks, previous=None, stamp_ns=None,
+               previous_stamp_ns=None) -> Detections:
+        kp = self.network.detect(images, masks, previous, stamp_ns, previous_stamp_ns)
         return Detections(self.name, tuple(kp.labels), kp.positions, kp.scores)

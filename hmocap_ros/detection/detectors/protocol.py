@@ -34,11 +34,13 @@ class ExtremityDetector(Protocol):
         """The detector of the rig ``cameras`` (see above)."""
 
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
-               previous: dict | None) -> Detections:
+               previous: dict | None, stamp_ns: int | None = None,
+               previous_stamp_ns: int | None = None) -> Detections:
         """The detections of one frame set: per camera an RGB image (H, W, 3) uint8 and a
         foreground mask (H, W) at the rig's resolution, either None where missing (the
         pipeline checked their sizes); ``previous`` the last skeleton, label -> (3,) room
-        position, or None."""
+        position, or None; ``stamp_ns`` and ``previous_stamp_ns`` the frame set's and the
+        skeleton's stamps (None: unknown), for a detector that carries work between sets."""
 
     def reset(self) -> None:
         """Forget what was carried from frame set to frame set (a recording that starts

@@ -50,7 +50,8 @@ class SkinDetector:
     def close(self) -> None:
         pass
 
-    def detect(self, images, masks, previous=None) -> Detections:
+    def detect(self, images, masks, previous=None, stamp_ns=None,
+               previous_stamp_ns=None) -> Detections:
         maps = [skin_probability(img, mask=m) if img is not None and m is not None else None
                 for img, m in zip(images, masks)]
         joints = (np.array(list(previous.values())) if previous else None)
