@@ -321,3 +321,42 @@ def test_kf_hpf_waits_for_keypoints_to_start_before_the_silhouette_start_up(mode
     fresh = BodyTracker(model, rig, from_flat(TrackerParams, settings), np.random.default_rng(0))
     res = fresh.update(list(masks), STAMP0, None)
     assert res.state != "searching" and res.timings["hull"] > 0
+
+
+def test_live_track_goes_on_from_its_prediction_without_keypoints_its_confidence_falling(
+        model, rig, arms_scene):
+    """Live (a budget given), a keypoint-first track whose keypoints stop (the keypoint stage
+    late or down) publishes its prediction, no silhouette filter run, every joint's confidence
+    falling set after set; keypoints back, the fit takes over again. A live tracker without a
+    track never starts one from the silhouettes, however long the keypoints stay away."""
+    params, masks = arms_scene
+    fit = landmark_fit(model)
+    rest = apply_shape(model, None)
+    rng = np.random.default_rng(11)
+    settings = {"method": "kf-hpf", "filter.particles": 40, "startup.particles": 30,
+                "startup.frames": 1, "startup.min_foreground": 30, "keypoints.shape_frames": 0}
+    tracker = BodyTracker(model, rig, from_flat(TrackerParams, settings), np.random.default_rng(0))
+    period = 40_000_000
+    for f in range(3):
+        res = tracker.update(list(masks), STAMP0 + f * period,
+                             keypoints(fit, params, rest, rng, noise=0.005), budget_s=0.0)
+    fitted, held = res.confidence.copy(), res.joints.copy()
+    confidences = []
+    for f in range(3, 9):
+        res = tracker.update(list(masks), STAMP0 + f * period, None, budget_s=0.0)
+        assert res.state == "tracking" and res.has_pose and res.layers == ()
+        assert res.timings["hull"] == 0 and res.timings["filter"] == 0
+        assert np.linalg.norm(res.joints - held, axis=1).max() < 0.03
+        confidences.append(res.confidence)
+    assert tracker.fallback_reason.startswith("no keypoints")
+    assert (confidences[0] < fitted).all()
+    assert all((b < a).all() for a, b in zip(confidences, confidences[1:]))
+    res = tracker.update(list(masks), STAMP0 + 9 * period,
+                         keypoints(fit, params, rest, rng, noise=0.005), budget_s=0.0)
+    assert tracker.fallback_reason == "" and res.timings["fit"] > 0
+    assert res.confidence.mean() > confidences[-1].mean() + 0.2
+    # no track and no keypoints, live: no silhouette start-up
+    fresh = BodyTracker(model, rig, from_flat(TrackerParams, settings), np.random.default_rng(0))
+    for f in range(0, 80, 8):
+        res = fresh.update(list(masks), STAMP0 + f * period, None, budget_s=0.05)
+        assert res.state == "searching" and res.timings["hull"] == 0

@@ -112,6 +112,10 @@ MAX_ELAPSED_PERIODS = 4
 #: the detector's region needs a few frames to find a person who just came in, and a silhouette
 #: start-up costs seconds of CPU per frame, which a live tracker cannot spend
 KEYPOINT_START_WAIT_S = 2.0
+#: Growth (m per second without keypoints) of the joints' spread while a live keypoint-first
+#: track goes on from its prediction (:meth:`BodyTracker.update` with a budget): the
+#: confidence exp(-spread / 0.05) of a joint fitted to 1 cm falls below 0.1 within 0.3 s
+COAST_SPREAD_M_PER_S = 0.4
 #: Share of the estimate's last frame-to-frame pelvis displacement added to the particles
 #: before filtering (module docstring): 1, a constant-velocity prior for the pelvis, where the
 #: thesis' kernel is a zero-velocity Gaussian; a walking person's 5-12 cm per frame are
@@ -207,6 +211,10 @@ class BodyTracker:
         self._bad_frames = 0
         self._absent_frames = 0
         self._keypoints_awaited_since: int | None = None
+        #: stamp of the first frame set a live track went on without keypoints (None: it has them)
+        self._coasting_since: int | None = None
+        #: the joints' spread of the last frame set fitted to keypoints
+        self._last_spread: np.ndarray | None = None
         self.research.reset()
         if self.driven is not None:
             self.driven.reset()
@@ -310,6 +318,9 @@ class BodyTracker:
                     self._keypoints_awaited_since = stamp_ns
                 if stamp_ns - self._keypoints_awaited_since < KEYPOINT_START_WAIT_S * 1e9:
                     return self._result(stamp_ns, obs, t_start, timings)
+            if budget_s is not None:  # live: a track starts from keypoints, never from a
+                self._fall_back("no keypoints to start a track", "none starts")  # silhouette start-up
+                return self._result(stamp_ns, obs, t_start, timings)
         if self.state.looking:
             t0 = time.perf_counter()
             started = self._start(masks, obs, stamp_ns, exclude)
@@ -360,12 +371,16 @@ class BodyTracker:
                          t_start: float, timings: dict,
                          budget_s: float | None = None) -> TrackResult:
         """One keypoint-first frame (:mod:`.keypoint_first`): fit, check, the filter on what
-        stays uncertain. Without keypoints, the silhouette filter."""
+        stays uncertain. Without keypoints, the silhouette filter; live (with a budget), the
+        prediction (:meth:`_coast`)."""
         kf = self.keypoint_first
         assert kf is not None  # called for a keypoint-first method only
         if detections is None or not len(kf.fitter.targets(detections)[0]):
+            if budget_s is not None:
+                return self._coast(obs, stamp_ns, t_start, timings)
             self._fall_back("no keypoints in the frame set")
             return self._track(None, obs, stamp_ns, t_start, timings)
+        self._coasting_since = None
         t0 = time.perf_counter()
         reference = self._predict()
         periods = min(self._elapsed[1], MAX_ELAPSED_PERIODS)
@@ -417,10 +432,34 @@ class BodyTracker:
                   if res is not None else self._fit_spread(fit))
         fit_cost = self._fit_cost(obs)
         self._check_loss(fit_cost, stamp_ns)
+        self._last_spread = spread
         self.last_keypoints = (tuple(fit.labels), tuple(dropped), tuple(uncertain))
         return self._result(stamp_ns, obs, t_start, timings, fit_cost,
                             res.layers if res is not None else (),
                             self._keypoint_assigned(fit, detections), spread)
+
+    def _coast(self, obs: Observation, stamp_ns: int, t_start: float,
+               timings: dict) -> TrackResult:
+        """A live keypoint-first track without keypoints (the keypoint stage late, absent or
+        crashed): the pose goes on from its prediction, the velocity step once and then held,
+        and every joint's spread grows by :data:`COAST_SPREAD_M_PER_S` per second from the
+        last keypoint frame's, so its confidence falls; no silhouette filter runs (its seconds
+        per frame set would stall a live room). Said once; the next frame set with keypoints
+        fits them again. Design choice where the thesis has no keypoints: the loss check is
+        left to the frame sets with keypoints (a stale pose is marked by its confidence)."""
+        if self._coasting_since is None:
+            self._coasting_since = stamp_ns
+        self._fall_back("no keypoints (live)", "the pose goes on from its prediction, its "
+                        "confidence falling,")
+        predicted = self._predict()
+        if predicted is not None:
+            self._previous_estimate = self.estimate = predicted  # the velocity step taken once
+        seconds = max(stamp_ns - self._coasting_since, 0) * 1e-9
+        base = (self._last_spread if self._last_spread is not None
+                else np.full(self.skel.n_joints, UNSEEN_SPREAD))
+        period = self.frame_period.period_ns or 0.0
+        spread = base + COAST_SPREAD_M_PER_S * (seconds + period * 1e-9)
+        return self._result(stamp_ns, obs, t_start, timings, self._fit_cost(obs), spread=spread)
 
     def _measure_shape(self, detections: Detections | None, dropped) -> bool:
         """Measure the keypoints of a new track's first ``keypoints.shape_frames`` frame sets
@@ -444,12 +483,11 @@ class BodyTracker:
         self.shape = shape
         return True
 
-    def _fall_back(self, reason: str) -> None:
-        """Note (once per cause, in the log and ``fallback_reason``) that a frame set runs the
-        silhouette filter instead of the keypoint-first one."""
+    def _fall_back(self, reason: str, doing: str = "tracking on the silhouettes alone") -> None:
+        """Note (once per cause, in the log and ``fallback_reason``) that a frame set is not
+        tracked on keypoints, and what it does instead."""
         if reason != self.fallback_reason:
-            log.warning("%s: tracking on the silhouettes alone until keypoints come back",
-                        reason)
+            log.warning("%s: %s until keypoints come back", reason, doing)
         self.fallback_reason = reason
 
     def _keypoint_assigned(self, fit: FitResult, detections: Detections) -> Assigned:
