@@ -35,7 +35,7 @@ from typing import Any
 from hmocap_ros.frame_sets import FrameSetQueue, PickedSet
 from hmocap_ros.stamp_sync import TIME_JUMP_BACK_NS, StampSynchronizer
 
-__all__ = ["HOLD_NS", "FrameSetIntake"]
+__all__ = ["HOLD_NS", "FrameSetIntake", "StageHandoff"]
 
 log = logging.getLogger(__name__)
 
@@ -212,3 +212,68 @@ class FrameSetIntake:
                 with self._cond:
                     self._busy = False
                     self._idle_since_ns = self.clock()
+
+
+class StageHandoff:
+    """The second stage of a two-stage pipeline in a thread of its own: ``put(item)`` hands an
+    item to ``work(item)`` and blocks while one item already waits for it. The first stage
+    (an intake's worker) works on the next frame set while this one works on the last, each
+    on a core of its own where their libraries release the GIL (OpenCV, LiteRT, numba), and
+    it starts the next set only when this stage is about to take it: nothing is done that the
+    second stage does not take, and items keep their order. on_error: called in the worker
+    with an exception ``work`` raised (default: logged)."""
+
+    def __init__(self, work: Callable[[Any], None], *,
+                 on_error: Callable[[Exception], None] | None = None, name: str = "stage") -> None:
+        self.work = work
+        self.on_error = on_error or (lambda err: log.error("stage work failed", exc_info=err))
+        self._item: Any = None
+        self._waiting = False
+        self._busy = False
+        self._closed = False
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def put(self, item: Any) -> bool:
+        """Hand ``item`` to the worker, once it took the one before; False when closed."""
+        with self._cond:
+            while self._waiting and not self._closed:
+                self._cond.wait()
+            if self._closed:
+                return False
+            self._item, self._waiting = item, True
+            self._cond.notify_all()
+            return True
+
+    def drain(self) -> None:
+        """Wait until the worker has done every item handed to it."""
+        with self._cond:
+            while (self._waiting or self._busy) and not self._closed:
+                self._cond.wait()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the worker once its current item is done (an item waiting is dropped)."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._waiting and not self._closed:
+                    self._cond.wait()
+                if self._closed:
+                    return
+                item, self._item, self._waiting, self._busy = self._item, None, False, True
+                self._cond.notify_all()
+            try:
+                self.work(item)
+            except Exception as err:  # a bug in one item must not stop the stage
+                self.on_error(err)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()

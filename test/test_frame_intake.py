@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from hmocap_ros.frame_intake import FrameSetIntake
+from hmocap_ros.frame_intake import FrameSetIntake, StageHandoff
 
 MS = 1_000_000
 PERIOD = 40 * MS
@@ -205,3 +205,35 @@ def test_close_stops_the_worker_and_bad_arguments_are_refused():
     assert not it._thread.is_alive()
     with pytest.raises(ValueError, match="max_wait_ns"):
         intake(Recorder(), max_wait_ns=0)
+
+
+def test_a_stage_handoff_keeps_the_order_and_lets_the_first_stage_run_one_item_ahead():
+    """The second stage works on the items in the order given; a put waits while one item
+    already waits (the first stage gets at most one item ahead); an error in one item is
+    reported and the stage goes on; drain waits for everything handed over."""
+    done, errors = [], []
+    release = threading.Event()
+
+    def work(item):
+        if item == 0:
+            release.wait(5)
+        if item == 3:
+            raise RuntimeError("bad item")
+        done.append(item)
+
+    stage = StageHandoff(work, on_error=errors.append)
+    try:
+        assert stage.put(0) and stage.put(1)  # 0 in hand, 1 waiting
+        third = threading.Thread(target=stage.put, args=(2,))
+        third.start()
+        third.join(0.3)
+        assert third.is_alive() and done == []  # blocked: 1 still waits
+        release.set()
+        third.join(5)
+        for item in (3, 4):
+            stage.put(item)
+        stage.drain()
+        assert done == [0, 1, 2, 4] and [str(e) for e in errors] == ["bad item"]
+    finally:
+        stage.close()
+    assert not stage.put(5)  # closed
