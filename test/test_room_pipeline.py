@@ -85,7 +85,8 @@ def test_the_composed_node_publishes_what_hmocap_track_computes_on_the_same_fram
     # every frame set whole, as the bag holds it (a view is waited for 2 s on a loaded machine)
     node = ("room_pipeline", "hmocap_ros.nodes.room_pipeline",
             ["--ros-args", "-p", f"rig_file:={DEMO_RIG}", "-p", f"learn_frames:={FOREGROUND['learn_frames']}",
-             "-p", "latest_only:=false", "-p", "queue_depth:=100", "-p", "max_wait_ms:=2000.0"], "in one process")
+             "-p", "latest_only:=false", "-p", "queue_depth:=100", "-p", "max_wait_ms:=2000.0",
+             "-p", "detection.keypoints.pose_rate_hz:=0.0"], "in one process")
     with BagReader(offline) as reader:
         expected = {stamp_to_ns(m.msg.header.stamp): m.msg for m in reader.messages(["/skeleton"])}
     procs = replay_through_nodes(DEMO_BAG, [node], ["/skeleton", "/extremities"], live, loopback_dds_env(),

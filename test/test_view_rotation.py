@@ -175,3 +175,19 @@ def test_two_views_per_set_keep_the_keypoints_of_a_moving_person(walking):
     assert "carried" in sources, sources
     assert len(gaps) > 100
     assert np.median(gaps) < 0.04, np.median(gaps)
+
+
+def test_the_measured_cost_adds_views_where_the_rate_leaves_room(walking):
+    """views_per_set is the floor; pose_rate_hz adds the views whose measured cost fits its
+    period: at 0.5 poses/s every view runs, at 1,000 only the floor."""
+    from hmocap_ros.detection.keypoint_detector import KeypointDetector
+    from hmocap_ros.detection.params import KeypointParams
+
+    frames, ks, images = walking
+    for rate, expect in ((0.5, 4), (1000.0, 2)):
+        detector = KeypointDetector(frames.rig, KeypointParams(views_per_set=2, pose_rate_hz=rate))
+        for k in ks[:3]:
+            stamp = int(frames.stamps[k])
+            detector.detect(images[stamp], [m * np.uint8(255) for m in frames.mask_list(k)], None,
+                            stamp)
+        assert detector.last_views_run == expect, rate

@@ -234,10 +234,11 @@ class KeypointDetector:
 
     def _views_per_set(self, n_views: int) -> int:
         p = self.params
+        k = int(p.views_per_set)
         if p.pose_rate_hz > 0:
-            return views_for_rate(p.pose_rate_hz, self._cost.per_view_s,
-                                  self._cost.other_s + self.other_stages_s, n_views)
-        return int(p.views_per_set) if p.views_per_set > 0 else n_views
+            k = max(k, views_for_rate(p.pose_rate_hz, self._cost.per_view_s,
+                                      self._cost.other_s + self.other_stages_s, n_views))
+        return k
 
     def detect(self, images: Sequence[np.ndarray | None], masks: Sequence[np.ndarray | None],
                previous: dict[str, np.ndarray] | None = None, stamp_ns: int | None = None,
@@ -249,9 +250,8 @@ class KeypointDetector:
         once per cause; so is a view where the detector finds nobody (without a mask).
 
         ``stamp_ns``: the frame set's stamp, and ``previous_stamp_ns`` the skeleton's: with
-        ``views_per_set`` or ``pose_rate_hz`` set, the network runs on some views and the
-        others' landmarks are carried forward (:mod:`.view_rotation`); without a stamp every
-        view runs."""
+        ``views_per_set`` > 0, the network runs on some views and the others' landmarks are
+        carried forward (:mod:`.view_rotation`); without a stamp every view runs."""
         masks = [None] * len(self.cameras) if masks is None else list(masks)
         if len(images) != len(self.cameras) or len(masks) != len(self.cameras):
             raise ValueError(f"need one image and one mask per camera ({len(self.cameras)}), "
@@ -273,8 +273,7 @@ class KeypointDetector:
         if previous and previous_stamp_ns is not None:
             self._skeletons.add(int(previous_stamp_ns), previous)
         candidates = [v for v, plan in enumerate(plans) if plan is not None]
-        rotating = stamp_ns is not None and (self.params.views_per_set > 0
-                                             or self.params.pose_rate_hz > 0)
+        rotating = stamp_ns is not None and self.params.views_per_set > 0
         jobs = candidates
         if rotating:
             assert stamp_ns is not None

@@ -56,14 +56,15 @@ class KeypointParams:
         0.5, "The sides of views are renamed only when the consensus gained exceeds this share "
              "of the renamed views' weight (>= 0).")
     views_per_set: int = param(
-        2, "Views whose landmark network runs per frame set (at least 2), in rotation (the "
-           "oldest landmarks first); the other views' latest landmarks are carried to the set's "
-           "stamp by the tracked skeleton's motion. 0: every view, every set.")
+        2, "Views whose landmark network runs per frame set (at least 2; more with "
+           "pose_rate_hz), in rotation (the oldest landmarks first); the other views' latest "
+           "landmarks are carried to the set's stamp by the tracked skeleton's motion. 0: every "
+           "view, every set.")
     pose_rate_hz: float = param(
-        0.0, "When > 0, the views per frame set are chosen per set from the measured cost so "
-             "that a frame set takes at most 1/pose_rate_hz seconds (at least two views; "
-             "views_per_set is then ignored). Depends on the machine's speed: 0 where runs "
-             "must repeat bit for bit.")
+        15.0, "When > 0 (and views_per_set > 0), more views per frame set than views_per_set "
+              "when the measured cost leaves room: as many as fit 1/pose_rate_hz seconds per set. "
+              "Depends on the machine's speed: 0 where runs must repeat bit for bit (hmocap track "
+              "sets 0).")
     max_carry_ms: float = param(
         400.0, "Landmarks older than this (ms) are not carried to a later frame set (> 0).")
     threads: int = param(

@@ -21,17 +21,17 @@ and carries every other view's latest landmarks to the new frame set's stamp:
   velocity feeds the tracker's frame-to-frame noise back into its own keypoints (docs/tracking.md,
   "Keypoints on some views per set", has the figures).
 - **Fusion**: the carried landmarks go into the same robust triangulation as the fresh ones,
-  with their own confidences (a design choice); the consensus (RANSAC over view pairs) leaves out a carried view that
-  disagrees with the fresh ones, as it does a wrong view.
+  with their own confidences (a design choice); the consensus (RANSAC over view pairs) leaves
+  out a carried view that disagrees with the fresh ones, as it does a wrong view.
 - **Age**: landmarks older than ``max_carry_ms`` are not carried (the view counts as missing
   until its turn comes).
-- **How many views** (:func:`views_for_rate`): with ``pose_rate_hz > 0``, ``k`` is chosen per
-  frame set from the measured cost: the largest ``k`` (at least :data:`MIN_VIEWS_PER_SET`)
-  with ``other + k * per_view <= 1 / pose_rate_hz``, ``per_view`` the landmark network's mean seconds per view and
-  ``other`` the rest of the frame set's work (the detector's own, plus what the caller reports
-  of the other stages), both exponential moving averages (:class:`CostMeter`). Its choice
-  depends on the machine's speed, so runs that must repeat bit for bit (the offline evaluation)
-  set ``views_per_set`` instead.
+- **How many views** (:func:`views_for_rate`): ``views_per_set`` at least; with
+  ``pose_rate_hz > 0``, more when the measured cost leaves room: the largest ``k`` with
+  ``other + k * per_view <= 1 / pose_rate_hz``, ``per_view`` the landmark network's mean
+  seconds per view and ``other`` the rest of the frame set's work (the detector's own, plus
+  what the caller reports of the other stages in its thread), both exponential moving averages
+  (:class:`CostMeter`). Its choice depends on the machine's speed, so runs that must repeat bit
+  for bit (``hmocap track``) set ``pose_rate_hz`` to 0.
 """
 from __future__ import annotations
 
