@@ -157,7 +157,8 @@ def test_full_size_frames_cross_hosts_and_every_answer_comes_back(room, tmp_path
             assert recorder.wait_for_output(f"receiving {topic} from", 60), recorder.output()
         camera = start("camera", "camera",
                        [python, CAMERA, "/cam_1/image_raw", "rgb8", "10", str(FRAMES), "reliable",
-                        "/cam_1/foreground", "sensor_msgs/msg/Image", "best_effort"])
+                        "/cam_1/foreground", "sensor_msgs/msg/Image", "best_effort",
+                        "2"])  # the segmenter and the rig publisher, on two other hosts
         assert camera.wait(120) == 0, camera.output()
         # the recorder's last messages may still be on their way
         recorder.wait_for_output(f"/cam_1/camera_info {FRAMES}", 10)
