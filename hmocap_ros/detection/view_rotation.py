@@ -1,7 +1,7 @@
 """The landmark network on a few views per frame set, the other views' landmarks carried forward.
 
-The network costs about 20-25 ms per view on one core (docs/tracking.md, sec. 2.4), the
-largest share of a frame set's work. With ``views_per_set`` (or ``pose_rate_hz``) the
+The network is the largest share of a frame set's work (docs/tracking.md, "Keypoints on some
+views per set", has its cost per view). With ``views_per_set`` (and ``pose_rate_hz``) the
 :class:`~.keypoint_detector.KeypointDetector` runs it on the views whose landmarks are oldest
 and carries every other view's latest landmarks to the new frame set's stamp:
 
