@@ -1,7 +1,7 @@
 """ament_python package hmocap_ros (colcon in a ROS install, `pip install -e .` in the venv)."""
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import find_namespace_packages, find_packages, setup
 
 PACKAGE = "hmocap_ros"
 
@@ -23,7 +23,10 @@ CONSOLE_SCRIPTS = [
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=find_packages(exclude=["test", "test.*", "examples", "examples.*"]) + ["hmocap_examples"],
+    # the shipped data folders (hmocap_ros/data/*) are listed as the namespace packages Python
+    # sees in them, so setuptools installs their files without asking
+    packages=(find_packages(exclude=["test", "test.*", "examples", "examples.*"])
+              + find_namespace_packages(include=["hmocap_ros.data", "hmocap_ros.data.*"]) + ["hmocap_examples"]),
     package_dir={"hmocap_examples": "examples"},
     package_data={PACKAGE: ["data/*", "data/**/*"]},
     include_package_data=True,
@@ -40,6 +43,5 @@ setup(
     maintainer_email="hmocap@example.org",
     description="Multi-view 3D body tracking and depth gesture localization for smart rooms (ROS 2 Jazzy).",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={"console_scripts": CONSOLE_SCRIPTS},
 )

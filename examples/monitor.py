@@ -3,7 +3,7 @@
 DDS stamps every sample with its writer's clock when it is published (``source_timestamp``)
 and the reader's when it arrives (``received_timestamp``); on one host both are the system
 clock of every process. Writes one JSON line per message: ``topic``, ``source_ns``,
-``received_ns`` and ``cdr`` (the serialized message, hex). Prints ``monitor: matched`` once
+``received_ns`` and ``cdr`` (the serialized message, hex). Logs ``monitor: matched`` once
 every topic of ``--ready`` (default: all) has a publisher, and stops on Ctrl-C or SIGTERM.
 
     python -m hmocap_examples.monitor OUT.jsonl /gestures:hmocap_interfaces/msg/GestureArray \\
@@ -54,7 +54,7 @@ def main(argv=None) -> int:
             rclpy.spin_once(node, timeout_sec=0.05)
             if not matched and all(sub.get_publisher_count() > 0 for sub in waited):
                 matched = True
-                print("monitor: matched", flush=True)
+                node.get_logger().info("monitor: matched")
         # what DDS delivered before the stop
         for _ in range(20):
             rclpy.spin_once(node, timeout_sec=0.0)

@@ -9,6 +9,8 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from hmocap_ros.terminal import TerminalManners
+
 
 def _split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
     if "--ros-args" in argv:
@@ -141,6 +143,19 @@ COMMAND_GROUPS = {
 }
 
 
+class DefaultsShown(argparse.HelpFormatter):
+    """Help that states every option's default: one whose text does not name it gets
+    ``(default VALUE)`` appended; options without a value by default (None, off) are left as
+    they are."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if (not action.option_strings or "default" in text.lower() or action.default is None
+                or action.default is False or action.default is argparse.SUPPRESS or action.default in ("", [])):
+            return action.help
+        return f"{text} (default %(default)s)"
+
+
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The ``hmocap`` parser from :data:`COMMANDS` and :data:`COMMAND_GROUPS`. Only the command
     ``argv`` names is imported (to add its options): ``hmocap record`` must not depend on the
@@ -154,7 +169,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, (module_name, help_text, description, takes_ros_args) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=description)
+        p = sub.add_parser(name, help=help_text, description=description, formatter_class=DefaultsShown)
         p.set_defaults(func=_run, command_module=module_name, takes_ros_args=takes_ros_args)
         if argv[:1] == [name]:
             importlib.import_module(module_name).add_arguments(p)
@@ -162,7 +177,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
         p = sub.add_parser(group, help=group_help, description=group_description)
         group_sub = p.add_subparsers(dest=f"{group}_kind", metavar="KIND", required=True)
         for kind, (module_name, help_text) in kinds.items():
-            sp = group_sub.add_parser(kind, help=help_text, description=help_text)
+            sp = group_sub.add_parser(kind, help=help_text, description=help_text, formatter_class=DefaultsShown)
             sp.set_defaults(func=_run, command_module=module_name, takes_ros_args=False)
             if argv[:2] == [group, kind]:
                 importlib.import_module(module_name).add_arguments(sp)
@@ -177,9 +192,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         from hmocap_ros.commands.bench import split_arguments
 
         own, extra = split_arguments(own)
-    ns = build_parser(own).parse_args(own)
-    ns.extra = extra
-    return int(ns.func(ns, ros_args) or 0)
+    manners = TerminalManners()
+    with manners:
+        ns = build_parser(own).parse_args(own)
+        ns.extra = extra
+        status = int(ns.func(ns, ros_args) or 0)
+        sys.stdout.flush()  # here, where a closed pipe is caught, not at the interpreter's exit
+        return status
+    assert manners.status is not None  # it ended Ctrl-C or a closed pipe
+    return manners.status
 
 
 if __name__ == "__main__":

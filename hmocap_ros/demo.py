@@ -5,24 +5,33 @@
    ``body_tracker``, with ``camera_rig_publisher`` serving the bag's rig
    (``data/demo/mocap_4cam_rig.yaml``) as in a room: ``camera_rig``, each image's
    ``camera_info`` and ``/tf_static`` (``world`` -> ``room`` -> cameras). Recorded to
-   ``<out>/body.mcap``: the images and their camera_info, the rig, ``/tf_static``, the
-   foregrounds, extremities, skeletons and markers, ``humans/bodies/tracked``, the body's joint
-   states (``/humans/bodies/b0/joint_states``), frames (``/tf``), shape and diagnostics, so the
-   bag opens in Foxglove (``config/hmocap_foxglove.json``) or RViz (``config/hmocap.rviz``)
-   with everything drawn. ``<out>/body_overlay.mp4`` shows the skeleton over the cameras,
-   coloured by its error against the bag's ground truth (``hmocap render overlay``).
+   ``<out>/body.mcap`` (:func:`body_topics`): the images and their camera_info, the rig,
+   ``/tf_static``, the foregrounds, extremities, skeletons and markers, ``humans/bodies/tracked``,
+   the body's joint states and shape, frames (``/tf``), shape and diagnostics, each output
+   logged with the images of its stamp (``hmocap record --log-time input``), so the bag opens in
+   Foxglove (``config/hmocap_foxglove.json``) or RViz (``config/hmocap.rviz``) with each skeleton
+   over its own images (the demo checks it: :func:`log_time_gap`). ``<out>/body_overlay.mp4``
+   (H.264) shows the skeleton over the cameras, coloured by its error against the bag's ground
+   truth (``hmocap render overlay``).
 2. Gestures: the shipped depth bag (``data/demo/gestures_depth.mcap``) is replayed into
    ``gesture_detection``; the depth images, camera_info, gestures and probability images are
    recorded to ``<out>/gestures.mcap``, and drawn in ``<out>/gestures_overlay.mp4``.
 
 Every node is its own process over DDS on loopback, with the one-host Fast DDS profile
-(``config/fastdds_local.xml``, :func:`hmocap_ros.processes.loopback_dds_env`). The demo then
-compares what came out with the bags' ground truth: foreground F1, 3D joint error (mm) and the
-tracker's time per frame; gestures found with the right class within 10 pixels (at 640x480,
+(``config/fastdds_local.xml``, :func:`hmocap_ros.processes.loopback_dds_env`); each stage's logs
+go to ``<out>/logs/body/`` and ``<out>/logs/gestures/``. The replay starts once its publishers
+have matched every subscription of the nodes and the recorder, which subscribe reliably: no
+frame is lost to discovery finishing late on a loaded machine. The background model learns
+only where the landmark network sees nobody, so it cannot learn the person either. The demo
+then compares what came out with the bags' ground truth: foreground F1, 3D joint error (mm) and
+the tracker's time per frame; gestures found with the right class within 10 pixels (at 640x480,
 scaled).
 The body tracker queues every frame (``queue_depth``) and works through them in stamp order
 (``latest_only:=false``) at its full particle budget; the demo waits for a pose per frame with
 a person.
+
+The run is written beside ``<out>`` and takes its place once complete: a run stopped with
+Ctrl-C leaves the previous results whole.
 """
 
 from __future__ import annotations
@@ -47,10 +56,22 @@ DEMO_BAG = DATA_DIR / "mocap_4cam.mcap"
 DEMO_RIG = DATA_DIR / "mocap_4cam_rig.yaml"
 GESTURE_BAG = DATA_DIR / "gestures_depth.mcap"
 
+#: Image subscriptions of the demo's nodes: reliable, so that the replay, which starts once its
+#: publishers have matched every node's subscription (``--wait-subscribers``), loses no frame to
+#: the subscriber's side of discovery finishing later (the replay's reliable publishers hold
+#: what was sent and send it again).
+RELIABLE_IMAGES = ["-p", "image_reliability:=reliable"]
 #: body_tracker settings of the demo: every frame is queued and tracked (a live room,
 #: ``latest_only`` as the node's default, would rather skip frames than lag).
-#: extremity_detection runs its default detector.
-TRACKER_ARGS = ["-p", "queue_depth:=100", "-p", "latest_only:=false"]
+TRACKER_ARGS = ["-p", "queue_depth:=100", "-p", "latest_only:=false", *RELIABLE_IMAGES]
+#: extremity_detection: its default detector, every frame set in stamp order.
+EXTREMITY_ARGS = ["-p", "queue_depth:=100", "-p", "latest_only:=false", *RELIABLE_IMAGES]
+#: foreground_segmentation settings of the demo: every frame in stamp order, the background
+#: learnt where the landmark network sees no person (``learn_from:=person_masks``), so even a
+#: replay whose first frames were lost could not learn the person into the background; blob and
+#: hole sizes for its 160x120 images.
+FOREGROUND_ARGS = ["-p", "learn_from:=person_masks", "-p", "learn_frames:=8", "-p", "latest_only:=false",
+                   "-p", "min_blob_area:=20", "-p", "max_hole_area:=60", *RELIABLE_IMAGES]
 
 
 def _cameras(bag: Path) -> list[str]:
@@ -79,8 +100,8 @@ def body_topics(cameras: list[str]) -> list[str]:
     ``config/hmocap_foxglove.json``)."""
     return [*(topics.camera_image(c) for c in cameras), *(f"/{c}/camera_info" for c in cameras),
             topics.CAMERA_RIG, "/tf_static", *(topics.camera_foreground(c) for c in cameras), "/extremities",
-            "/skeleton", "/skeleton_markers", "/humans/bodies/tracked", "/humans/bodies/b0/joint_states", "/tf",
-            "/body_shape", "/diagnostics"]
+            "/extremities/points", "/skeleton", "/skeleton_markers", "/humans/bodies/tracked",
+            "/humans/bodies/b0/joint_states", "/humans/bodies/b0/body_shape", "/tf", "/body_shape", "/diagnostics"]
 
 
 def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
@@ -99,12 +120,11 @@ def run_body_demo(out: Path, env: dict, rate: float = 0.25) -> bool:
         [("camera_rig_publisher", "hmocap_ros.nodes.camera_rig_publisher",
           ["--ros-args", "-p", f"rig_file:={DEMO_RIG}"], "serving rig"),
          ("foreground_segmentation", "hmocap_ros.nodes.foreground_segmentation",
-          ["--ros-args", "-p", f"cameras:=[{','.join(cameras)}]", "-p", "learn_frames:=8", "-p", "latest_only:=false",
-           "-p", "min_blob_area:=20", "-p", "max_hole_area:=60"], "segmenting"),
+          ["--ros-args", "-p", f"cameras:=[{','.join(cameras)}]", *FOREGROUND_ARGS], "segmenting"),
          ("extremity_detection", "hmocap_ros.nodes.extremity_detection",
-          ["--ros-args", "-p", "queue_depth:=100", "-p", "latest_only:=false"], "waiting for the rig"),
+          ["--ros-args", *EXTREMITY_ARGS], "waiting for the rig"),
          ("body_tracker", "hmocap_ros.nodes.body_tracker", ["--ros-args", *TRACKER_ARGS], "waiting for the rig")],
-        record, out_bag, env, out / "logs",
+        record, out_bag, env, out / "logs" / "body",
         replay_topics=image_topics,
         # camera_rig_publisher, foreground_segmentation, extremity_detection and the recorder take
         # every image
@@ -170,10 +190,10 @@ def run_gesture_demo(out: Path, env: dict, rate: float = 1.0) -> bool:
     t0 = time.monotonic()
     procs = replay_through_nodes(
         GESTURE_BAG,
-        [("gesture_detection", "hmocap_ros.nodes.gesture_detection", ["--ros-args", "-p", "latest_only:=false"],
-          "detecting gestures")],
+        [("gesture_detection", "hmocap_ros.nodes.gesture_detection",
+          ["--ros-args", "-p", "latest_only:=false", *RELIABLE_IMAGES], "detecting gestures")],
         ["/gestures", "/gestures/probability", topics.DEPTH_IMAGE, topics.DEPTH_INFO], out_bag, env,
-        out / "logs",
+        out / "logs" / "gestures",
         replay_topics=[topics.DEPTH_IMAGE, topics.DEPTH_INFO], replay_rate=rate, settle=2.0,
         subscribers=2)  # gesture_detection and the recorder
     elapsed = time.monotonic() - t0
@@ -218,25 +238,75 @@ def run_gesture_demo(out: Path, env: dict, rate: float = 1.0) -> bool:
 
 
 def run_demo(out: str | Path = "out/demo", domain_id: int | None = None) -> int:
-    """Run both demos; 0 when every node answered every frame."""
+    """Run both demos; 0 when every node answered every frame.
+
+    The run writes into ``.<out name>.partial`` beside ``out`` and takes the place of ``out``
+    only once it is complete: a run stopped half-way (Ctrl-C) leaves the previous results whole."""
     out = Path(out)
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
+    work = out.parent / f".{out.name}.partial"
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
     env = loopback_dds_env(domain_id=domain_id)
     print(f"demo: DDS domain {env.get('ROS_DOMAIN_ID', '0')}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
-          f"profile {env.get(DDS_PROFILE_VARIABLES[0], 'none')}; outputs and logs in {out}")
-    ok_body = run_body_demo(out, env)
-    body_video = render(out / "body.mcap", out / "body_overlay.mp4", DEMO_BAG)
-    ok_gestures = run_gesture_demo(out, env)
-    gesture_video = render(out / "gestures.mcap", out / "gestures_overlay.mp4", GESTURE_BAG)
-    ok = ok_body and ok_gestures and body_video is not None and gesture_video is not None
+          f"profile {env.get(DDS_PROFILE_VARIABLES[0], 'none')}; outputs and logs in {out} "
+          f"(written to {work} until the run ends)")
+    ok_body = run_body_demo(work, env)
+    gap = log_time_gap(work / "body.mcap", "/skeleton")
+    print(f"  viewers: every skeleton logged within {gap:.3f} s of its images' log time" if gap is not None
+          else "  viewers: no skeleton with its images in the bag")
+    body_video = render(work / "body.mcap", work / "body_overlay.mp4", DEMO_BAG)
+    ok_gestures = run_gesture_demo(work, env)
+    gesture_video = render(work / "gestures.mcap", work / "gestures_overlay.mp4", GESTURE_BAG)
+    _replace(out, work)
+    ok = (ok_body and ok_gestures and body_video is not None and gesture_video is not None
+          and gap is not None and gap <= MAX_LOG_TIME_GAP_S)
     print(f"demo: {'OK' if ok else 'FAILED'}.")
-    print(f"  videos: {body_video or '-'}  {gesture_video or '-'}")
+    print(f"  videos: {out / body_video.name if body_video else '-'}  "
+          f"{out / gesture_video.name if gesture_video else '-'}")
     print(f"  bags:   {out / 'body.mcap'}  {out / 'gestures.mcap'}")
+    print(f"  logs:   {out / 'logs' / 'body'}  {out / 'logs' / 'gestures'}")
     print(f"  look at the body bag in Foxglove with the layout {_config('hmocap_foxglove.json')}, or in RViz "
           f"with {_config('hmocap.rviz')} (docs/viewing.md); live: hmocap view")
     return 0 if ok else 1
+
+
+#: Largest log-time difference (s) between a skeleton and the images of its stamp in the demo's
+#: bag: a viewer playing it draws each skeleton over its own images.
+MAX_LOG_TIME_GAP_S = 0.1
+
+
+def log_time_gap(bag: Path, output_topic: str) -> float | None:
+    """The largest difference (s) between the log time of a message of ``output_topic`` and
+    that of the camera images with its header stamp; None when no output has images."""
+    with BagReader(bag) as reader:
+        available = reader.topics()
+        image_topics = [t for t, info in available.items()
+                        if t.endswith("/image_raw") and info.msgtype == "sensor_msgs/msg/Image"]
+        if output_topic not in available or not image_topics:
+            return None
+        images: dict[int, list[int]] = {}
+        outputs: list[tuple[int, int]] = []
+        for m in reader.messages([*image_topics, output_topic]):
+            stamp = stamp_to_ns(m.msg.header.stamp)
+            if m.topic == output_topic:
+                outputs.append((stamp, m.log_time_ns))
+            else:
+                images.setdefault(stamp, []).append(m.log_time_ns)
+    gaps = [abs(log_ns - image_ns) for stamp, log_ns in outputs for image_ns in images.get(stamp, [])]
+    return max(gaps) * 1e-9 if gaps else None
+
+
+def _replace(out: Path, work: Path) -> None:
+    """Put the finished run ``work`` in the place of ``out`` (the previous run, removed only now)."""
+    old = out.parent / f".{out.name}.previous"
+    if old.exists():
+        shutil.rmtree(old)
+    if out.exists():
+        out.rename(old)
+    work.rename(out)
+    if old.exists():
+        shutil.rmtree(old)
 
 
 def _config(name: str) -> str:

@@ -221,7 +221,7 @@ def replay_through_nodes(
     if drain_topics is None:
         drain_topics = [t for t in record_topics if t not in PERIODIC_TOPICS]
     recorder = NodeProcess.module("record", "hmocap_ros.cli",
-                                  ["record", "-o", str(out_bag), "--progress", "0.2", *record_topics],
+                                  ["record", "--out", str(out_bag), "--progress", "0.2", *record_topics],
                                   env, log_dir)
     procs["record"] = recorder
     try:

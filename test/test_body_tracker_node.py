@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 
 from hmocap_ros.body import BodyShape, apply_shape
+from hmocap_ros.body.human_description import URDF_JOINTS
 from hmocap_ros.demo import DEMO_BAG, DEMO_RIG
 from hmocap_ros.eval.metrics import match_joints
 from hmocap_ros.io.bag_reader import BagReader
@@ -76,7 +77,8 @@ def _joint_state_joints(model, msg, shapes: list) -> np.ndarray:
     of ``shapes`` (the model's proportions when there is none)."""
     dofs = list(model.skeleton.dof_names)
     params = np.zeros(len(dofs))
-    params[[dofs.index(n) for n in msg.name]] = msg.position
+    named = [(dofs.index(n), p) for n, p in zip(msg.name, msg.position) if n in dofs]  # the URDF's joints lead
+    params[[k for k, _ in named]] = [p for _, p in named]
     shape = None
     if shapes:
         last = shapes[-1]
@@ -131,7 +133,9 @@ def test_joint_states_with_input_stamps_and_bounded_error(tmp_path, model):
     assert set(joints) <= image_stamps and set(joints) == set(skeletons)
     assert len(joints) >= len(truth) - 2, (len(joints), len(truth))  # a pose for (nearly) every frame
     js = next(iter(joints.values()))
-    assert len(js.name) == 30 and len(js.position) == 30 and js.header.frame_id == "room"
+    # REP-155: the URDF's joints (humans/bodies/b0/urdf), then the tracker's 30 degrees of freedom
+    assert list(js.name) == [f"{n}_b0" for n in URDF_JOINTS] + list(model.skeleton.dof_names)
+    assert len(js.position) == len(js.name) and js.header.frame_id == "room"
     # each joint_states is the pose of its own frame set: on the shape published last, its
     # joints are the skeleton of the same stamp
     for stamp, msg in joints.items():
@@ -272,7 +276,7 @@ def test_rep155_topics_body_frames_and_confidence_of_one_body(tmp_path):
     assert all(ids in ([], ["b0"]) for ids in tracked.values())
     assert len(skeletons) >= len(person) - 1 and set(skeletons) <= person
     # the per-body topics of the one slot
-    assert set(joints) == set(skeletons) and all(len(js.name) == 30 for js in joints.values())
+    assert set(joints) == set(skeletons) and all(len(js.name) == len(URDF_JOINTS) + 30 for js in joints.values())
     assert latched and shapes and shapes[-1].body_id == "b0" and 1.5 < shapes[-1].height < 2.1
     assert plain_shapes and plain_shapes[-1].height == shapes[-1].height
     # /tf: one message per pose, room -> body_b0 -> ... -> every joint of the skeleton

@@ -64,8 +64,9 @@ def test_replay_loop_publishes_the_bag_again(tmp_path):
     _write_bag(src, n=3)
     out = tmp_path / "out.mcap"
     env = loopback_dds_env()
-    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(out), "--progress", "0.1", "/joints"],
-                            env, tmp_path) as rec:
+    # each pass repeats the bag's stamps: logged at receive time, the passes stay apart in the bag
+    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "--out", str(out), "--log-time", "receive",
+                                                      "--progress", "0.1", "/joints"], env, tmp_path) as rec:
         assert rec.wait_for_output("recording to", 30), rec.output()
         with NodeProcess.module("play", "hmocap_ros.cli",
                                 ["replay", str(src), "--loop", "--rate", "2", "--topics", "/joints",

@@ -20,7 +20,7 @@ from hmocap_ros.geometry import look_at, project_points, triangulate
 from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader
-from hmocap_ros.io.conversions import image_to_rgb
+from hmocap_ros.io.image_codec import decoded_rgb
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.io.rig_messages import rig_from_msg
 from hmocap_ros.video_import.camera_fit import rotate_camera, upright_turns
@@ -87,7 +87,7 @@ def _centroids(bag: Path):
         for _, msgs in reader.frame_sets(names, 0):
             row = []
             for topic in names:
-                grey = image_to_rgb(msgs[topic])[..., 0].astype(np.float64)
+                grey = decoded_rgb(msgs[topic])[..., 0].astype(np.float64)
                 weight = np.clip(grey - 100.0, 0.0, None)
                 ys, xs = np.mgrid[:grey.shape[0], :grey.shape[1]]
                 row.append([(weight * xs).sum() / weight.sum(), (weight * ys).sum() / weight.sum()])
@@ -222,7 +222,7 @@ def test_videos_of_different_lengths_import_to_the_shortest_with_a_warning(recor
     assert "warning: the videos have different lengths (cam1.avi 12, cam2.avi 14" in err
     assert "imported to the shortest (cam1.avi)" in err
     with BagReader(bag) as reader:
-        assert reader.topics()["/cam1/image_raw"].count == FRAMES
+        assert reader.topics(compressed_as_raw=True)["/cam1/image_raw"].count == FRAMES
 
 
 def test_views_a_few_pixels_larger_are_cut_to_the_others_size(tmp_path, capsys):
@@ -245,3 +245,26 @@ def test_views_a_few_pixels_larger_are_cut_to_the_others_size(tmp_path, capsys):
         assert np.linalg.norm(pixels[i, 1] - expected) < 1.0, (i, pixels[i, 1], expected)
         point = triangulate(list(rig.cameras), pixels[i][:, None, :])[0]
         assert np.linalg.norm(point - _ball(i)) < 0.025
+
+
+def test_images_are_jpeg_compressed_unless_raw(recording, capsys):
+    folder, _ = recording
+    videos = [str(folder / "cam1.avi"), "--calibration", str(folder / "calib.qca")]
+    jpeg, raw = folder / "jpeg.mcap", folder / "raw.mcap"
+    assert main(["import", "videos", *videos, "--out", str(jpeg), "--quiet"]) == 0
+    assert main(["import", "videos", *videos, "--out", str(raw), "--raw", "--quiet"]) == 0
+    with BagReader(jpeg) as reader:
+        stored = reader.topics()
+        assert "/cam1/image_raw" not in stored
+        assert stored["/cam1/image_raw/compressed"].msgtype == "sensor_msgs/msg/CompressedImage"
+        formats = {m.msg.format for m in reader.messages(["/cam1/image_raw/compressed"])}
+        compressed = [decoded_rgb(m.msg) for m in reader.messages(["/cam1/image_raw"])]
+    with BagReader(raw) as reader:
+        assert reader.topics()["/cam1/image_raw"].msgtype == "sensor_msgs/msg/Image"
+        plain = [decoded_rgb(m.msg) for m in reader.messages(["/cam1/image_raw"])]
+    assert formats == {"rgb8; jpeg compressed bgr8"} and len(compressed) == len(plain) == FRAMES
+    assert max(np.abs(a.astype(int) - b).mean() for a, b in zip(compressed, plain)) < 2.0
+    capsys.readouterr()
+    code = main(["import", "videos", *videos, "--out", str(folder / "bad.mcap"), "--jpeg-quality", "0", "--quiet"])
+    assert code == 2 and "JPEG quality must be 1 to 100" in capsys.readouterr().err
+    assert not (folder / "bad.mcap").exists()

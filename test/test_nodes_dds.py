@@ -131,8 +131,10 @@ def test_replay_rate_and_latched_topic(tmp_path):
             bag.write("/joints", msg, spacing_ns * i)
     env = loopback_dds_env()
     out = tmp_path / "out.mcap"
-    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "-o", str(out), "--progress", "0.1", "/joints",
-                                                      "/latched_text"], env, tmp_path) as rec:
+    # the pace is measured on the recorder's clock: logged at receive time
+    with NodeProcess.module("rec", "hmocap_ros.cli", ["record", "--out", str(out), "--log-time", "receive",
+                                                      "--progress", "0.1", "/joints", "/latched_text"],
+                            env, tmp_path) as rec:
         assert rec.wait_for_output("recording to", 30)
         with NodeProcess.module("play", "hmocap_ros.cli",
                                 ["replay", str(src), "--rate", str(rate), "--wait-subscribers", "1"],

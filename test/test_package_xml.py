@@ -35,6 +35,7 @@ MODULE_KEYS = {
     "mcap": "mcap-ros2-support",          # pip: mcap, no key of its own; comes with mcap-ros2-support
     "mcap_ros2": "mcap-ros2-support",     # pip: mcap-ros2-support
     "ai_edge_litert": "python3-ai-edge-litert-pip",  # pip: ai-edge-litert
+    "imageio_ffmpeg": "python3-imageio-ffmpeg-pip",  # pip: imageio-ffmpeg
 }
 #: Modules that no rosdep key installs, imported only by a command a ROS install has its own
 #: tool for (pip name; the venv installs them from requirements.txt). ``foxglove``: ``hmocap
@@ -45,7 +46,7 @@ PIP_ONLY_MODULES = {"foxglove": "foxglove-sdk"}
 ROS_PYTHON = {"rclpy", "launch", "launch_ros", "ament_index_python"}
 #: The keys that install with pip (rosdep pip rules) and their pip names.
 PIP_KEYS = {"python3-rosbags-pip": "rosbags", "mcap-ros2-support": "mcap-ros2-support",
-            "python3-ai-edge-litert-pip": "ai-edge-litert"}
+            "python3-ai-edge-litert-pip": "ai-edge-litert", "python3-imageio-ffmpeg-pip": "imageio-ffmpeg"}
 
 _TYPE_NAME = re.compile(r"^([a-z][a-z0-9_]*)/(msg|srv|action)/[A-Z]\w*$")
 

@@ -140,3 +140,60 @@ def test_render_overlay_names_what_is_missing(tmp_path, capsys, case, expected):
     assert hmocap(["render", "overlay", *args, "--out", str(tmp_path / "o.mp4")]) == 2
     err = capsys.readouterr().err
     assert expected in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+
+
+def _video_stream(path) -> str:
+    """ffmpeg's description of the file's video stream ("Video: h264 (High) ..., yuv420p, ...")."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    probe = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)],
+                           capture_output=True, text=True)
+    return next(line for line in probe.stderr.splitlines() if "Video:" in line)
+
+
+def test_the_video_plays_in_browsers_with_tiles_at_the_recorded_size_and_a_legend(tmp_path):
+    """H.264 in yuv420p with the index at the front (what browsers play inline), each camera's
+    tile at its recorded size, and a legend row naming the colours."""
+    from hmocap_ros.viz.overlay_bag import multiview_pictures, write_pictures
+
+    bag, outputs, stamps, _, _, rig = _cut(tmp_path)
+    pictures = list(multiview_pictures(bag, outputs))
+    width, height = rig.cameras[0].width, rig.cameras[0].height
+    picture = pictures[0].image
+    assert picture.shape[1] == 2 * width and picture.shape[0] > 2 * height
+    banner = picture[:picture.shape[0] - 2 * height]
+    for colour in ((255, 255, 255), (255, 77, 0)):  # the truth's and the tracked body's swatches
+        assert (np.abs(banner.astype(int) - colour).sum(axis=2) == 0).sum() >= 36, colour
+    count, video = write_pictures(iter(pictures), tmp_path / "overlay.mp4")
+    assert count == FRAMES
+    stream = _video_stream(video)
+    assert "h264" in stream and "yuv420p" in stream and f"{picture.shape[1]}x" in stream, stream
+    data = video.read_bytes()
+    assert data.index(b"moov") < data.index(b"mdat")  # +faststart: playable before fully loaded
+    assert not list(tmp_path.glob(".*partial*"))
+    _, webm = write_pictures(iter(pictures), tmp_path / "overlay.webm")
+    assert "vp9" in _video_stream(webm)
+
+
+def test_every_picture_of_a_video_has_one_size_with_and_without_a_body(tmp_path):
+    """Frame sets before the person is tracked have the legend of the others: one picture size
+    for the whole video, which ffmpeg needs."""
+    from hmocap_ros.viz.overlay_bag import multiview_pictures, write_pictures
+
+    bag, outputs, stamps, _, _, _ = _cut(tmp_path)
+    later = tmp_path / "later.mcap"  # neither a skeleton nor the truth in the first frame set
+    with BagReader(outputs) as skeletons, BagReader(bag) as truth, BagWriter(later) as writer:
+        for m in [*list(skeletons.messages(["/skeleton"]))[1:], *list(truth.messages([topics.GT_SKELETON]))[1:]]:
+            writer.write(m.topic, m.msg, m.log_time_ns)
+    pictures = list(multiview_pictures(bag, later, truth=later))
+    assert len({p.image.shape for p in pictures}) == 1
+    count, video = write_pictures(iter(pictures), tmp_path / "v.mp4")
+    import cv2
+
+    capture = cv2.VideoCapture(str(video))
+    frames = 0
+    while capture.read()[0]:
+        frames += 1
+    assert count == frames == FRAMES

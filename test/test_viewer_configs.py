@@ -24,6 +24,29 @@ def _rviz_topics(display: dict) -> list[str]:
     return [topic["Value"]] if isinstance(topic, dict) else []
 
 
+def foxglove_topics(layout: dict) -> set[str]:
+    """Every topic a Foxglove layout names: panels' topic settings, image and calibration
+    topics, message paths (``/topic.field``)."""
+    found: set[str] = set()
+
+    def walk(node):
+        if isinstance(node, dict):
+            for key, value in node.items():
+                if key == "topics" and isinstance(value, dict):
+                    found.update(k for k in value if k.startswith("/"))
+                elif key in ("imageTopic", "calibrationTopic", "topicPath", "topic") and isinstance(value, str) \
+                        and value.startswith("/"):
+                    found.add(value.split(".", 1)[0].split("{", 1)[0])
+                else:
+                    walk(value)
+        elif isinstance(node, list):
+            for item in node:
+                walk(item)
+
+    walk(layout["configById"])
+    return found
+
+
 def test_rviz_config_shows_the_demo_bag_in_the_world_frame():
     config = yaml.safe_load((ROOT / "config" / "hmocap.rviz").read_text())["Visualization Manager"]
     assert config["Global Options"]["Fixed Frame"] == DEFAULT_FIXED_FRAME == CameraRigPublisherConfig().fixed_frame
@@ -60,6 +83,8 @@ def test_foxglove_layout_shows_the_skeleton_over_every_camera_of_the_demo():
     scene = panels["3D!room"]
     assert scene["followTf"] == DEFAULT_FIXED_FRAME and scene["topics"]["/skeleton_markers"]["visible"]
     assert scene["layers"]["grid"]["frameId"] == DEFAULT_FIXED_FRAME
+
+    assert foxglove_topics(layout) <= recorded, foxglove_topics(layout) - recorded
 
     def leaves(node):
         return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])

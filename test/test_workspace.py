@@ -123,7 +123,7 @@ def test_every_rosdep_key_of_both_packages_resolves_on_jazzy():
     index = {line for line in KEYS.read_text().splitlines() if line and not line.startswith("#")}
     assert {"rclpy", "python3-numpy", "tf2_msgs", "hri_msgs"} <= index and len(index) > 1000
     own = own_pip_rules()
-    assert own == {"python3-ai-edge-litert-pip": ["ai-edge-litert"]}
+    assert own == {"python3-ai-edge-litert-pip": ["ai-edge-litert"], "python3-imageio-ffmpeg-pip": ["imageio-ffmpeg"]}
     assert not set(own) & index, "a rule of our own must not shadow one of the index"
     known = index | set(own)
     workspace = workspace_packages(readme_paths("rosdep"))

@@ -109,7 +109,9 @@ pkg=$(hash_of setup.py setup.cfg package.xml)
 # finds only the packages that existed when it was made (hmocap_ros, hmocap_sim, hmocap_examples)
 if ! fresh package "$pkg" || ! (cd / && "$VENV/bin/python" -c 'import hmocap_ros, hmocap_sim, hmocap_examples') 2>/dev/null; then
   say "installing hmocap_ros and hmocap_sim (editable)"
-  "$VENV/bin/python" -m pip install -q --no-build-isolation --no-deps -e . \
+  # setuptools' notice that every editable install gets (folders named as the package shadow
+  # it) is not a problem of this checkout: silenced, errors still show
+  PYTHONWARNINGS=ignore::UserWarning "$VENV/bin/python" -m pip install -q --no-build-isolation --no-deps -e . \
     || die "pip install -e . failed."
   mark package "$pkg"
 fi

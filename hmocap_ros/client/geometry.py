@@ -15,7 +15,7 @@ floor at z = 0. Places are a point or an axis-aligned box (:class:`PointPlace`,
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,12 +103,14 @@ class BoxPlace:
         return np.where(np.isfinite(mid), mid, 0.0)
 
 
-def nearest_hand(bodies: Iterable[Body], point, max_distance: float) -> tuple[Body, str, float] | None:
-    """``(body, side, distance)`` of the hand joint nearest to ``point`` (3,) over ``bodies``
-    (``side`` is ``"left"`` or ``"right"``), None when no hand is within ``max_distance`` m."""
+def nearest_hand(bodies: Iterable[Body] | Mapping[str, Body], point,
+                 max_distance: float) -> tuple[Body, str, float] | None:
+    """``(body, side, distance)`` of the hand joint nearest to ``point`` (3,) over ``bodies`` (Body
+    objects, or a mapping of ids to them such as ``Room.bodies``; ``side`` is ``"left"`` or
+    ``"right"``), None when no hand is within ``max_distance`` m."""
     best = None
     target = np.asarray(point, dtype=np.float64)
-    for body in bodies:
+    for body in (bodies.values() if isinstance(bodies, Mapping) else bodies):
         for side, (hand, _elbow) in HAND_JOINTS.items():
             p = body.joint(hand)
             if p is None:

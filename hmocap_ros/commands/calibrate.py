@@ -74,17 +74,18 @@ def _read(bag: Path, spec, every: int, log):
     from hmocap_ros.calibration.session import CalibrationSession
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.camera_info import camera_info_to_dict
-    from hmocap_ros.io.images import image_to_rgb
+    from hmocap_ros.io.image_codec import decoded_rgb
     from hmocap_ros.io.msg_factory import stamp_to_ns
     from hmocap_ros.io.rig_messages import rig_from_msg
 
     with BagReader(bag) as reader:
-        topics = reader.topics()
+        topics = reader.topics(compressed_as_raw=True)
         camera_of = {t: m.group(1) for t, info in topics.items()
-                     if (m := _IMAGE_TOPIC.match(t)) and info.msgtype == "sensor_msgs/msg/Image"}
+                     if (m := _IMAGE_TOPIC.match(t))
+                     and info.msgtype in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")}
         image_topics = sorted(camera_of)
         if not image_topics:
-            raise ValueError(f"{bag}: no /<camera>/image_raw topics of sensor_msgs/Image")
+            raise ValueError(f"{bag}: no /<camera>/image_raw topics of sensor_msgs/Image (nor their /compressed)")
         session = CalibrationSession([camera_of[t] for t in image_topics], spec)
         if "/camera_rig" in topics:
             for cam in rig_from_msg(reader.first("/camera_rig")):
@@ -106,7 +107,7 @@ def _read(bag: Path, spec, every: int, log):
             counts[k] += 1
             if (counts[k] - 1) % every:
                 continue
-            session.add_image(k, stamp_to_ns(item.msg.header.stamp), image_to_rgb(item.msg))
+            session.add_image(k, stamp_to_ns(item.msg.header.stamp), decoded_rgb(item.msg))
             done += 1
             if done % 200 == 0:
                 log(f"  {done} images searched for the board")

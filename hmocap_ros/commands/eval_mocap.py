@@ -52,7 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rig", metavar="RIG.yaml", default=None,
                         help="track with this rig (e.g. from hmocap calibrate) instead of the "
                              "bag's /camera_rig; the truth stays the bag's")
-    parser.add_argument("--threads", type=int, default=None, help="numba threads")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="numba threads (default: numba's, one per core)")
     parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
 
@@ -93,6 +94,11 @@ def main_from_args(ns: argparse.Namespace) -> int:
                                             default=json_default))
     if ns.plot:
         plot_errors(report, ns.plot)
+    for method, result in report["methods"].items():  # the result on stdout (progress went to stderr)
+        print(f"{Path(ns.bag).name} {method}: mean joint error {result['mean_mm']:.1f} mm "
+              f"(std {result['std_mm']:.1f}, median {result['median_mm']:.1f}) over "
+              f"{result['frames_with_pose']}/{result['frames']} frames, {result['seconds_per_frame']:.2f} s/frame"
+              + (f", {result['track_switches']} track switches" if ns.max_people > 1 else ""))
     failed = unevaluated_methods(report)
     if failed:
         print(f"hmocap eval mocap: no frame evaluated ({', '.join(failed)}: no pose on any of the "

@@ -77,6 +77,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default 0: the origin is on the floor)")
     parser.add_argument("--no-compress", dest="compress", action="store_false",
                         help="write the bag's chunks uncompressed (faster, about twice the size)")
+    parser.add_argument("--raw", dest="raw_images", action="store_true",
+                        help="write the images raw (sensor_msgs/Image rgb8 on /<camera>/image_raw; "
+                             "default: JPEG sensor_msgs/CompressedImage on /<camera>/image_raw/compressed, "
+                             "as image_transport's compressed transport; docs/real_sensors.md "
+                             "compares the two)")
+    parser.add_argument("--jpeg-quality", type=int, default=90, metavar="Q",
+                        help="JPEG quality of the images, 1-100 (default 90)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -104,7 +111,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
             offsets=None if offsets is None else tuple(int(v) for v in offsets),
             rotate=_rotations(ns.rotate), upright=ns.upright,
             calibration_format=ns.calibration_format, up=ns.up, units=ns.units, floor=ns.floor,
-            compress=ns.compress)
+            compress=ns.compress, raw_images=ns.raw_images, jpeg_quality=ns.jpeg_quality)
         result = import_videos(ns.videos, ns.calibration, out, options, progress)
     except (VideoImportError, ValueError) as error:
         if bar is not None:

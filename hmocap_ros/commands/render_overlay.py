@@ -12,8 +12,10 @@ The skeletons and gestures are the bag's own (a recording of the nodes, or what 
 track`` / ``hmocap detect gestures`` wrote), or those of ``--outputs BAG``, matched by stamp;
 ``--track`` tracks the bag on the fly first (``hmocap track`` with its defaults, into a
 temporary bag). The ground truth is the bag's, or that of ``--truth BAG`` (the recording the
-nodes were fed). ``--out`` ending in ``.mp4`` (or ``.avi``) writes a video at the bag's frame
-rate (``--fps``), anything else a folder of PNG frames.
+nodes were fed). ``--out`` ending in ``.mp4`` writes an H.264 video (``.webm``: VP9, ``.avi``:
+MJPEG) at the bag's frame rate (``--fps``), anything else a folder of PNG frames. Each camera's
+tile has its recorded size unless ``--width`` is given; a legend under the banner says what
+each colour is.
 
 Bad input (a bag that cannot be read, no rig, no images, no skeletons or gestures, a video
 that cannot be written) is one line on stderr and exit status 2.
@@ -33,7 +35,8 @@ PROG = "hmocap render overlay"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="multi-view bag (rig + camera images) or depth bag (.mcap or rosbag2 folder)")
     parser.add_argument("--out", required=True, type=Path,
-                        help="FILE.mp4 (or .avi): a video; any other name: a folder of PNG frames")
+                        help="FILE.mp4: an H.264 video that browsers play (FILE.webm: VP9, FILE.avi: MJPEG); "
+                             "any other name: a folder of PNG frames")
     parser.add_argument("--outputs", type=Path, default=None,
                         help="bag with the skeletons (/skeleton, /extremities) or gestures (/gestures) to "
                              "draw, matched by stamp (default: BAG's own)")
@@ -45,9 +48,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
                         help="with --track: a tracker setting by its dotted name (repeatable)")
     parser.add_argument("--width", type=int, default=None,
-                        help="width in pixels of each camera's tile (default 480) or of the depth picture (640)")
+                        help="width in pixels of each camera's tile (default: its recorded width) or of the "
+                             "depth picture (default 640)")
     parser.add_argument("--fps", type=float, default=None, help="video frame rate (default: the bag's)")
-    parser.add_argument("--frames", type=int, default=None, help="draw at most this many frames")
+    parser.add_argument("--frames", type=int, default=None, help="draw at most this many frames (default: all)")
 
 
 def main_from_args(ns: argparse.Namespace) -> int:

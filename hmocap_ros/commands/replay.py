@@ -21,7 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--loop", action="store_true", help="start again at the end")
     parser.add_argument("--topics", nargs="+", default=None, help="replay only these topics")
     parser.add_argument("--wait-subscribers", type=int, default=0, metavar="N",
-                        help="wait until every replayed topic has N subscribers before starting")
+                        help="wait until every replayed topic has N subscribers before starting "
+                             "(default 0: start at once)")
     parser.add_argument("--wait-timeout", type=float, default=10.0, help="seconds to wait for subscribers")
     parser.add_argument("--settle", type=float, default=1.0,
                         help="with --wait-subscribers: seconds to wait after they matched, for the "

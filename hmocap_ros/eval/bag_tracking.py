@@ -9,7 +9,9 @@ bag in the documented layout (:mod:`hmocap_ros.io.topics`; the rig from ``/camer
 stamp and logged at it. With a method that uses detections (``dd-hpf``) the extremity
 detection (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`, the
 ``extremity_detection`` node's code, fed back the last skeleton as the node is) runs on every
-frame set too, and its ``/extremities`` go into the bag. No ground truth is needed.
+frame set too, and its ``/extremities`` go into the bag, with the landmark network on a fixed
+``keypoints.views_per_set`` (``pose_rate_hz`` 0, not the live nodes' cost-driven choice, so
+that a run repeats). No ground truth is needed.
 
 Foreground (``silhouettes``): ``masks``: the bag's ``/<camera>/foreground`` (a recording of
 ``foreground_segmentation``); ``fg``: the images segmented as the foreground node does (a
@@ -120,7 +122,7 @@ def _learn_frames(reader, source: _Source, requested: int | None,
     if requested is not None or learn_from == "empty_room" and not truth:
         return source
     first = stamp_to_ns(reader.first(topics.GT_SKELETON).header.stamp)
-    present = [t for t in source.topics if t in reader.topics()]
+    present = [t for t in source.topics if t in reader.topics(compressed_as_raw=True)]
     n_empty = empty_room_frames(reader, present, int(SLOP_MS * 1e6), first)
     if n_empty > 0:
         source.learn_frames = int(np.clip(n_empty, 1, 100))
@@ -138,7 +140,7 @@ def _learn_frames(reader, source: _Source, requested: int | None,
 
 def _given_masks(source: _Source, rig, msgs: dict, warn) -> list:
     """The bag's mask of each camera of a frame set (None: a dropped view)."""
-    from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+    from hmocap_ros.io.image_codec import decoded_mono
 
     out: list[np.ndarray | None] = []
     for cam, topic in zip(rig.cameras, source.topics):
@@ -146,9 +148,7 @@ def _given_masks(source: _Source, rig, msgs: dict, warn) -> list:
             out.append(None)
             continue
         try:
-            mask = image_to_numpy(msgs[topic])
-            if mask.ndim != 2:
-                raise ConversionError(f"must be mono8, got {msgs[topic].encoding}")
+            mask = decoded_mono(msgs[topic])
         except ValueError as err:  # ConversionError is one
             warn(f"{topic}: {err} (view dropped)")
             out.append(None)
@@ -163,14 +163,14 @@ def _given_masks(source: _Source, rig, msgs: dict, warn) -> list:
 
 def _images(topics_: list, msgs: dict, warn, what: str) -> list:
     """Each camera's RGB image of a frame set (None: missing or not decodable, warned of)."""
-    from hmocap_ros.io.conversions import image_to_rgb
+    from hmocap_ros.io.image_codec import decoded_rgb
 
     out: list[np.ndarray | None] = []
     for topic in topics_:
         image = None
         if topic in msgs:
             try:
-                image = image_to_rgb(msgs[topic])
+                image = decoded_rgb(msgs[topic])
             except ValueError as err:
                 warn(f"{topic}: {err} ({what})")
         out.append(image)
@@ -195,11 +195,12 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                  learn_from: str | None = None, max_people: int = 1,
                  seed: int = 0, overrides: dict | None = None, body_id: str = "b0",
                  publish_tf: bool = True, rig_file: str | None = None, max_frames: int | None = None,
-                 progress=None) -> TrackCounts:
+                 progress=None, detection_overrides: dict | None = None) -> TrackCounts:
     """Track every frame set of ``bag`` and write body_tracker's messages to the new bag ``out``
     (module docstring). Returns ``frame_sets``, ``with_pose`` (frame sets with a body),
     ``silhouettes`` (the source used), ``notes``, ``warnings`` (text -> count) and ``topics``
-    (topic -> messages written). :class:`TrackError` for bad input."""
+    (topic -> messages written). ``detection_overrides``: extremity detection settings by dotted
+    name (``keypoints.views_per_set``, ...). :class:`TrackError` for bad input."""
     from hmocap_ros.body import load_body_model
     from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
     from hmocap_ros.detection.keypoint_network import ModelFileError
@@ -210,6 +211,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     from hmocap_ros.io.bag_writer import LATCHED, whole_bag
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.rig_messages import rig_from_msg
+    from hmocap_ros.params import replace_dotted
     from hmocap_ros.room_pipeline import RoomPipeline
     from hmocap_ros.segmentation import ForegroundParams
     from hmocap_ros.tracking.params import TrackerParams
@@ -225,12 +227,15 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     params = method_params(method or TrackerParams().method, overrides=overrides)
     counts: TrackCounts = {"frame_sets": 0, "with_pose": 0, "notes": [], "warnings": {}, "topics": {}}
     detection_params = ExtremityDetectionParams(detector=detector) if detector else ExtremityDetectionParams()
+    # the views per set fixed (keypoints.views_per_set), not by the machine's speed: a run repeats
+    detection_params = replace_dotted(detection_params, {"keypoints.pose_rate_hz": 0.0,
+                                                         **(detection_overrides or {})})
 
     def warn(text: str) -> None:
         counts["warnings"][text] = counts["warnings"].get(text, 0) + 1
 
     with BagReader(bag) as reader:
-        available = reader.topics()
+        available = reader.topics(compressed_as_raw=True)
         if rig_file:
             try:
                 rig = load_rig(rig_file)

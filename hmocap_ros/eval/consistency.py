@@ -172,7 +172,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
     from hmocap_ros.geometry.projection import project_points
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
-    from hmocap_ros.io.conversions import image_to_rgb
+    from hmocap_ros.io.image_codec import decoded_rgb
     from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.render import render_silhouettes
     from hmocap_ros.segmentation import ForegroundParams, background_models
@@ -182,7 +182,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
     labels = list(body.joints)
     params = KeypointParams()
     with BagReader(bag) as reader:
-        available = reader.topics()
+        available = reader.topics(compressed_as_raw=True)
         if topics.CAMERA_RIG not in available:
             raise ConsistencyError(f"{bag}: no {topics.CAMERA_RIG}: the cameras are unknown")
         rig = rig_from_msg(reader.first(topics.CAMERA_RIG))
@@ -202,7 +202,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
         n_frames = n_pose = 0
         rows = []
         for stamp, msgs in reader.frame_sets(present, 0, allow_partial=True, min_topics=1):
-            images = [image_to_rgb(msgs[t]) if t in msgs else None for t in image_topics]
+            images = [decoded_rgb(msgs[t]) if t in msgs else None for t in image_topics]
             views: list[ViewLandmarks | None] = []
             foregrounds: list[np.ndarray | None] = []
             for k, (name, image) in enumerate(zip(rig.names, images)):

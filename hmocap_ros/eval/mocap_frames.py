@@ -105,7 +105,7 @@ def empty_room_frames(reader, image_topics, slop_ns: int, first_truth) -> int:
 
 def _mask_row(use, msgs, stamp, bg, rgb_of) -> list:
     """One mask per camera of a frame set (segmented, or the bag's silhouette), or None."""
-    from hmocap_ros.io.conversions import image_to_numpy
+    from hmocap_ros.io.image_codec import decoded_image
 
     row: list[np.ndarray | None] = []
     for k, topic in enumerate(use):
@@ -117,7 +117,7 @@ def _mask_row(use, msgs, stamp, bg, rgb_of) -> list:
             if bg is not None:
                 mask = bg[k].apply(rgb_of(topic), stamp)
             else:
-                mask = image_to_numpy(msg)
+                mask = decoded_image(msg)
                 mask = mask[..., 0] if mask.ndim == 3 else mask
         except ValueError as err:
             log.warning("frame %d, %s: %s (view dropped)", stamp, topic, err)
@@ -133,7 +133,7 @@ def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, 
     ``use_present``), its detections when ``pipeline`` (an ExtremityPipeline) is given, its
     truth and the timing: ``(stamps, masks, truth, detections, shape_hw, segmentation s,
     detection s)``."""
-    from hmocap_ros.io.conversions import image_to_rgb
+    from hmocap_ros.io.image_codec import decoded_rgb
 
     stamps, masks, truth = [], [], []
     detections: list | None = [] if pipeline is not None else None
@@ -142,13 +142,13 @@ def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, 
     n_truth = 0
     read = list(use_present)
     if pipeline is not None:
-        read += [t for t in image_topics if t not in read and t in reader.topics()]
+        read += [t for t in image_topics if t not in read and t in reader.topics(compressed_as_raw=True)]
     for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True, min_topics=1):
         decoded: dict = {}  # each image decoded once, for its mask and its detections
 
         def rgb_of(topic: str, decoded: dict = decoded, msgs: dict = msgs) -> np.ndarray:
             if topic not in decoded:
-                decoded[topic] = image_to_rgb(msgs[topic])
+                decoded[topic] = decoded_rgb(msgs[topic])
             return decoded[topic]
 
         t0 = time.perf_counter()
@@ -218,7 +218,7 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     if silhouettes not in ("fg", "gt"):
         raise ValueError("silhouettes must be 'fg' or 'gt'")
     with BagReader(bag) as reader:
-        available = reader.topics()
+        available = reader.topics(compressed_as_raw=True)
         rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
         if rig_msg is None:
             raise ValueError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown")

@@ -7,6 +7,13 @@ cameras by their ``header.stamp`` with the same :class:`~hmocap_ros.stamp_sync.S
 the live nodes use. Type definitions come from the bag itself, so bags of other tools
 read as long as they are rosbag2 bags. A bag whose recording did not close (no MCAP summary)
 is read up to its last complete record, with a warning that names ``hmocap repair``.
+
+Camera images may be raw (``/<camera>/image_raw``, sensor_msgs/Image) or image_transport's
+``compressed`` (``/<camera>/image_raw/compressed``, sensor_msgs/CompressedImage): decoded reads
+(:meth:`BagReader.messages` without ``raw``, :meth:`BagReader.frame_sets`) give a compressed topic
+under its image topic's name when the bag has no raw one, and ``topics(compressed_as_raw=True)``
+lists it there, so a reader asks for ``/cam_1/image_raw`` and decodes what it gets with
+:mod:`hmocap_ros.io.image_codec`.
 """
 
 from __future__ import annotations
@@ -14,13 +21,14 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import ConnectionExtRosbag2, QosDurability
 
+from .image_codec import COMPRESSED_SUFFIX
 from .msg_factory import stamp_to_ns
 from .summaryless_mcap import summaryless_view
 from .typestore import hmocap_typestore
@@ -154,8 +162,24 @@ class BagReader:
     def end_ns(self) -> int:
         return self._reader.end_time
 
-    def topics(self) -> dict[str, TopicInfo]:
-        """Topics of the bag with type, message count and whether they were latched."""
+    def topics(self, compressed_as_raw: bool = False) -> dict[str, TopicInfo]:
+        """Topics of the bag with type, message count and whether they were latched; with
+        ``compressed_as_raw`` each compressed image topic also under its image topic's name
+        (:meth:`compressed_topics`), as decoded reads give it."""
+        out = self._stored_topics()
+        if compressed_as_raw:
+            out.update({raw: replace(out[topic], topic=raw) for raw, topic in self.compressed_topics().items()})
+        return out
+
+    def compressed_topics(self) -> dict[str, str]:
+        """Image topic -> its image_transport compressed topic, for each ``<topic>/compressed``
+        of type sensor_msgs/CompressedImage whose ``<topic>`` the bag does not hold."""
+        stored = {c.topic: c.msgtype for c in self._reader.connections}
+        return {topic[:-len(COMPRESSED_SUFFIX)]: topic for topic, msgtype in stored.items()
+                if topic.endswith(COMPRESSED_SUFFIX) and msgtype == "sensor_msgs/msg/CompressedImage"
+                and topic[:-len(COMPRESSED_SUFFIX)] not in stored}
+
+    def _stored_topics(self) -> dict[str, TopicInfo]:
         out = {}
         for topic, info in self._reader.topics.items():
             latched = any(
@@ -166,19 +190,29 @@ class BagReader:
             out[topic] = TopicInfo(topic, info.msgtype or "", info.msgcount, latched)
         return out
 
-    def check_topics(self, topics: Iterable[str]) -> None:
-        """Raise :class:`BagReadError` naming those of ``topics`` that the bag does not hold."""
+    def check_topics(self, topics: Iterable[str], compressed_as_raw: bool = False) -> None:
+        """Raise :class:`BagReadError` naming those of ``topics`` that the bag does not hold
+        (with ``compressed_as_raw``: nor as a compressed image topic)."""
         available = {c.topic for c in self._reader.connections}
+        if compressed_as_raw:
+            available |= set(self.compressed_topics())
         missing = sorted(set(topics) - available)
         if missing:
             raise BagReadError(f"{self.path}: no topic {', '.join(missing)} in the bag "
                                f"(it has {', '.join(sorted(available)) or 'none'})")
 
     def messages(self, topics: Iterable[str] | None = None, raw: bool = False) -> Iterator[BagMessage]:
-        """Messages in recording-time order, optionally only of ``topics``; decoded unless ``raw``."""
+        """Messages in recording-time order, optionally only of ``topics``; decoded unless ``raw``.
+        Decoded, an image topic the bag holds only compressed comes from its compressed topic,
+        under the name asked for (module docstring)."""
         wanted = None if topics is None else set(topics)
+        names: dict[str, str] = {}  # stored topic -> the name it is given
         if wanted is not None:
-            self.check_topics(wanted)
+            self.check_topics(wanted, compressed_as_raw=not raw)
+            if not raw:
+                names = {stored: topic for topic, stored in self.compressed_topics().items()
+                         if topic in wanted and stored not in wanted}
+                wanted |= set(names)
         connections = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if not connections:
             return
@@ -186,7 +220,7 @@ class BagReader:
         try:
             for conn, log_ns, data in self._reader.messages(connections=connections):
                 msg = data if raw else self._reader.deserialize(data, conn.msgtype)
-                yield BagMessage(conn.topic, conn.msgtype, log_ns, msg)
+                yield BagMessage(names.get(conn.topic, conn.topic), conn.msgtype, log_ns, msg)
                 n += 1
         except Exception as err:  # rosbags raises several error types for a damaged file
             raise unreadable(self.path, f"message {n + 1} in time order: {_reason(err)}") from err

@@ -309,8 +309,11 @@ class BagWriter:
         )
         self._channels[topic] = _Channel(channel_id, msgtype, qos_list, self.typestore.hash_rihs01(msgtype))
 
-    def write(self, topic: str, msg, stamp_ns: int, msgtype: str | None = None) -> None:
-        """Write one message: a rosbags dataclass, or raw CDR ``bytes`` with ``msgtype`` given."""
+    def write(self, topic: str, msg, stamp_ns: int, msgtype: str | None = None,
+              publish_ns: int | None = None) -> None:
+        """Write one message: a rosbags dataclass, or raw CDR ``bytes`` with ``msgtype`` given;
+        logged at ``stamp_ns``, with ``publish_ns`` (default ``stamp_ns``) as its MCAP publish time
+        (a recorder's receive time)."""
         mcap, stream = self._check_open()
         if isinstance(msg, (bytes, bytearray, memoryview)):
             if msgtype is None and topic not in self._channels:
@@ -324,7 +327,8 @@ class BagWriter:
             self.add_topic(topic, msgtype)
         channel = self._channels[topic]
         stamp_ns = int(stamp_ns)
-        self._guard(mcap.add_message, channel.channel_id, stamp_ns, raw, stamp_ns)
+        self._guard(mcap.add_message, channel.channel_id, stamp_ns, raw,
+                    stamp_ns if publish_ns is None else int(publish_ns))
         channel.count += 1
         self._unflushed += 1
         self._start_ns = min(self._start_ns, stamp_ns)

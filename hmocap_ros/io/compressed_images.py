@@ -61,17 +61,22 @@ def numpy_to_compressed(
 
     Args:
         array: ``HxWx3`` RGB or ``HxW`` mono ``uint8``; for ``"png"`` also ``HxWx4`` RGBA
-            ``uint8`` and ``HxW`` ``uint16`` (e.g. depth in mm).
-        fmt: ``"jpeg"`` (lossy) or ``"png"`` (lossless).
+            ``uint8`` and ``HxW`` ``uint16`` (e.g. depth in mm); for ``"compressedDepth"`` an
+            ``HxW`` ``uint16`` depth image in mm.
+        fmt: ``"jpeg"`` (lossy), ``"png"`` (lossless) or ``"compressedDepth"``
+            (compressed_depth_image_transport's: its 12-byte header, then a 16-bit PNG).
         quality: JPEG quality 1..100 (ignored for PNG).
 
     The ``format`` field is written as image_transport does, e.g.
-    ``"rgb8; jpeg compressed bgr8"`` or ``"16UC1; png compressed"``.
+    ``"rgb8; jpeg compressed bgr8"``, ``"16UC1; png compressed"`` or
+    ``"16UC1; compressedDepth png"``.
 
     Raises:
         CompressedImageError: unsupported format, dtype or shape, or encoder failure.
     """
     codec = fmt.lower().strip()
+    if codec == "compresseddepth":
+        return _compressed_depth(np.asarray(array), stamp_ns, frame_id, factory)
     if codec in ("jpg", "jpeg"):
         codec = "jpeg"
     elif codec != "png":
@@ -109,6 +114,26 @@ def numpy_to_compressed(
         header=make_header(factory, stamp_ns, frame_id),
         format=format_string,
         data=encoded.reshape(-1),
+    )
+
+
+def _compressed_depth(depth: np.ndarray, stamp_ns: int, frame_id: str, factory: Any) -> Any:
+    """A 16UC1 depth image (mm) as compressed_depth_image_transport writes it."""
+    if depth.dtype != np.uint16 or depth.ndim != 2 or depth.size == 0:
+        raise CompressedImageError(f"compressedDepth takes an HxW uint16 depth image (mm), got {depth.dtype} "
+                                   f"{depth.shape}")
+    ok, encoded = cv2.imencode(".png", depth)
+    if not ok:
+        raise CompressedImageError(f"OpenCV failed to png-encode shape {depth.shape}")
+    # ConfigHeader: the format (INV_DEPTH = 0) and the two quantisation parameters, which a
+    # 16UC1 image does not use
+    header = np.frombuffer(np.int32(0).tobytes() + np.zeros(2, "<f4").tobytes(), np.uint8)
+    factory = resolve_factory(factory)
+    return factory.make(
+        "sensor_msgs/msg/CompressedImage",
+        header=make_header(factory, stamp_ns, frame_id),
+        format="16UC1; compressedDepth png",
+        data=np.concatenate([header, encoded.reshape(-1)]),
     )
 
 

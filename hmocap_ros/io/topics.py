@@ -20,6 +20,9 @@ DEPTH_IMAGE = "/depth/image_raw"
 DEPTH_INFO = "/depth/camera_info"
 #: Ground-truth gestures of each depth frame (hmocap_interfaces/msg/GestureArray; empty = none).
 GT_GESTURES = "/ground_truth/gestures"
+#: Near misses of each depth frame (GestureArray; empty = none): the missed gesture's class and
+#: reference pixel, the near-miss kind as the name. Training draws background samples there.
+GT_NEAR_MISSES = "/ground_truth/near_misses"
 
 
 def camera_image(camera: str) -> str:

@@ -23,7 +23,7 @@ INTERFACE_PACKAGE = "hmocap_interfaces"
 INTERFACE_MESSAGES = ("Skeleton", "Extremities", "Gesture", "GestureArray", "BodyShape", "CameraRig",
                       "TrainerState")
 #: REP-155's message types the package writes, by package (not in rosbags' Jazzy store).
-REP155_MESSAGES = {"hri_msgs": ("IdsList",)}
+REP155_MESSAGES = {"hri_msgs": ("IdsList", "NormalizedPointOfInterest2D", "NormalizedRegionOfInterest2D", "Skeleton2D")}
 #: The source folder of each interface package in this repository.
 SOURCE_FOLDERS = {INTERFACE_PACKAGE: "msg_defs", "hri_msgs": "msg_defs_hri"}
 

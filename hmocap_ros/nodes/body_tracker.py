@@ -7,20 +7,30 @@ extremity node's keypoints of its stamp whenever they come, and runs
 (:class:`~hmocap_ros.tracking.people_tracker.PeopleTracker`).
 The default method, ``kf-hpf``, fits the skinned body to the keypoints, checks them against
 the silhouettes and runs the layered filter (alg. 5, weights eq. 2.8 and 2.15) only on the
-blocks they leave uncertain; without keypoints it runs the silhouette filter. ``method``
+blocks they leave uncertain. Live (``latest_only`` with ``budget_ms``) a track starts only from
+keypoints, and without keypoints (the keypoint stage late, absent or crashed) a track goes on
+from its prediction with falling confidence until they come back; offline (``hmocap track``,
+``hmocap eval mocap``) a frame set without keypoints runs the silhouette filter. ``method``
 selects the thesis' ``apf``, ``hpf``, ``hpf-apo`` and ``dd-hpf``
 (:data:`~hmocap_ros.tracking.methods.METHODS`).
 
 Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched), unless ``rig_file`` is set
-  ``<camera>/foreground`` (sensor_msgs/Image mono8), per rig camera
+  ``<camera>/foreground`` (sensor_msgs/Image mono8), or with ``image_transport:=compressed``
+  ``<camera>/foreground/compressed`` (sensor_msgs/CompressedImage PNG), per rig camera
   ``extremities`` (hmocap_interfaces/Extremities), with ``kf-hpf`` and ``dd-hpf``
 Publications (REP-155, stamped with the frame set):
   ``humans/bodies/tracked`` (hri_msgs/IdsList)
-  ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState)
+  ``humans/bodies/<id>/joint_states`` (sensor_msgs/JointState: the URDF's joints, then the
+  tracker's degrees of freedom)
+  ``humans/bodies/<id>/urdf`` (std_msgs/String, latched: human_description's URDF at the body's
+  shape), ``skeleton2d`` (hri_msgs/Skeleton2D), ``roi`` (hri_msgs/NormalizedRegionOfInterest2D),
+  ``position`` (geometry_msgs/PointStamped), ``velocity`` (geometry_msgs/TwistStamped), per body
+  (:mod:`hmocap_ros.rep155.body_outputs`)
   ``humans/bodies/<id>/body_shape``, ``body_shape`` (hmocap_interfaces/BodyShape, latched)
   ``skeleton`` (hmocap_interfaces/Skeleton), ``skeleton_markers`` (visualization_msgs/MarkerArray)
-  ``/tf`` (tf2_msgs/TFMessage, with ``publish_tf``), ``diagnostics``
+  ``/tf`` (tf2_msgs/TFMessage, with ``publish_tf``; ``frame_prefix``, ``joint_frames``),
+  ``/diagnostics``
 
 The topics in full, synchronisation and keeping up with live cameras: docs/tracking.md,
 section 7; the method, its choices and results: sections 1-5. Parameters: ``--help`` prints
@@ -40,7 +50,7 @@ from hmocap_interfaces.msg import Extremities, Skeleton
 from hri_msgs.msg import IdsList
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Image, JointState
+from sensor_msgs.msg import JointState
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
@@ -49,19 +59,24 @@ from hmocap_ros.detection.detections import detections_from_msg
 from hmocap_ros.frame_intake import FrameSetIntake
 from hmocap_ros.frame_sets import PickedSet
 from hmocap_ros.geometry.rig import Rig
-from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+from hmocap_ros.io.conversions import ConversionError
+from hmocap_ros.io.image_codec import decoded_mono
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.tf import TF_TOPIC
 from hmocap_ros.nodes.common import (
     LATCHED_QOS,
     RESULT_QOS,
+    create_image_subscription,
     declare_parameters,
     image_qos,
     image_reliability_param,
+    image_transport_param,
+    message_class,
     param,
     run_node,
     take_rig,
 )
+from hmocap_ros.rep155.body_outputs import Rep155Outputs, rep155_topics
 from hmocap_ros.tracking.detection_assignment import END_EFFECTORS
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.people_tracker import DEFAULT_BODY_ID, PeopleTracker, body_ids
@@ -73,8 +88,9 @@ DETECTIONS = "extremities"
 #: a frame set waits for its detections (however late they come) while the extremity topic has
 #: a publisher and detections came this recently, or none yet since the first mask this recently
 #: (the extremity node starts later than the masks); longer without any, the frame sets are
-#: tracked on the silhouettes
-KEYPOINTS_ALIVE_NS = 5_000_000_000
+#: tracked without them (live, a track goes on from its prediction with falling confidence:
+#: :meth:`~hmocap_ros.tracking.body_tracker.BodyTracker.update`)
+KEYPOINTS_ALIVE_NS = 2_000_000_000
 #: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, keep last 100)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -92,6 +108,7 @@ class BodyTrackerNodeConfig:
                                 "ones are dropped, so a live tracker works on recent frames; raise it "
                                 "when replaying a bag slowly and every frame must be tracked).")
     image_reliability: str = image_reliability_param()
+    image_transport: str = image_transport_param()
     latest_only: bool = param(True, "Live: when frame sets come faster than the tracker processes them, "
                                     "track the newest and skip (and count) the others, so the latency "
                                     "stays bounded. false: track every set in stamp order (slow bag "
@@ -102,6 +119,12 @@ class BodyTrackerNodeConfig:
                                    "does. 0: no limit.")
     publish_tf: bool = param(True, "Publish each tracked body's frames on /tf: room -> body_<id> (the "
                                    "pelvis) and <joint>_<id> along the skeleton (REP-155 names).")
+    joint_frames: bool = param(True, "With publish_tf, the joints' frames too; false: only room -> "
+                                     "body_<id>, for a robot_state_publisher per body that adds the "
+                                     "frames of humans/bodies/<id>/urdf from humans/bodies/<id>/joint_states.")
+    frame_prefix: str = param("", "Prefix of the bodies' frames on /tf (e.g. room_1/ gives "
+                                  "room_1/body_b0), so that two rooms on one DDS domain keep their "
+                                  "bodies apart; give robot_state_publisher the same frame_prefix.")
     seed: int = param(0, "Seed of the particle filter's random generator (repeatable runs).")
     threads: int = param(1, "Threads of the tracker's numba kernels (>= 1): one, as the room's other "
                             "stages run beside it; more only on a machine with cores to spare.")
@@ -159,8 +182,13 @@ class BodyTrackerNode(Node):
         self.pub_shapes[0].append(self.create_publisher(BodyShapeMsg, "body_shape", LATCHED_QOS))
         self.pub_tf = (self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
                        if self.config.publish_tf else None)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RESULT_QOS)
+        # per body: REP-155's urdf (latched), skeleton2d, roi, position and velocity
+        self.pub_rep155 = {topic: self.create_publisher(message_class(kind), topic,
+                                                        LATCHED_QOS if topic.endswith("/urdf") else RESULT_QOS)
+                           for body in self.ids for topic, kind in rep155_topics(body).items()}
         self.messages: TrackerMessages | None = None  # the outputs' builder, with the rig's frame
+        self.rep155: Rep155Outputs | None = None  # ... of REP-155's further outputs
         self.pub_by_topic = self._publishers_by_topic()
         if self.config.max_wait_ms <= 0:
             self.get_logger().fatal(f"max_wait_ms must be > 0, got {self.config.max_wait_ms}")
@@ -193,8 +221,8 @@ class BodyTrackerNode(Node):
             # Subscribe before compiling: masks that arrive during the (cold-cache) warm-up
             # wait in the subscriptions' queues instead of being published to nobody.
             for name in rig.names:
-                self.create_subscription(Image, f"{name}/foreground", self._on_mask(name),
-                                         self.mask_qos)
+                create_image_subscription(self, f"{name}/foreground", self.config.image_transport,
+                                          self._on_mask(name), self.mask_qos)
             if self.use_detections:
                 # as deep as the masks' queues: detections dropped while the tracker works
                 # would leave their frame sets incomplete
@@ -210,18 +238,15 @@ class BodyTrackerNode(Node):
         """The outputs' builder, in the rig's frame."""
         self.messages = TrackerMessages(self.model, self.ids, rig.frame_id, self.factory,
                                         publish_tf=self.pub_tf is not None)
+        self.rep155 = Rep155Outputs(self.ids, rig.frame_id, rig.cameras, self.factory,
+                                    frame_prefix=self.config.frame_prefix, joint_frames=self.config.joint_frames)
 
-    def _mono8(self, msg: Image, topic: str) -> np.ndarray | None:
+    def _mono8(self, msg, topic: str) -> np.ndarray | None:
         try:
-            image = image_to_numpy(msg)
+            return decoded_mono(msg)
         except ConversionError as err:
             self.get_logger().error(f"{topic}: {err}", throttle_duration_sec=5.0)
             return None
-        if image.ndim != 2:
-            self.get_logger().error(f"{topic} must be mono8, got {msg.encoding}",
-                                    throttle_duration_sec=5.0)
-            return None
-        return image
 
     def _on_extremities(self, msg: Extremities) -> None:
         if self.intake is None:
@@ -235,7 +260,7 @@ class BodyTrackerNode(Node):
         self.intake.add_companion(stamp_to_ns(msg.header.stamp), detections)
 
     def _on_mask(self, name: str):
-        def on_mask(msg: Image) -> None:
+        def on_mask(msg) -> None:
             if self.intake is None or self.rig is None or name not in self.rig:
                 return
             mask = self._mono8(msg, f"{name}/foreground")
@@ -300,8 +325,12 @@ class BodyTrackerNode(Node):
             if result.state != self.last_state[k]:
                 self._log_transition(k, result, seconds)
                 self.last_state[k] = result.state
-        built = self.messages.frame_set(stamp_ns, results, [t.model for t in self.tracker.trackers])
-        for topic, msg in built.messages:
+        models = [t.model for t in self.tracker.trackers]
+        built = self.messages.frame_set(stamp_ns, results, models)
+        heights = [float(r.shape.height(m)) if r.shape is not None else float("nan")
+                   for r, m in zip(results, models)]
+        assert self.rep155 is not None  # made with self.messages
+        for topic, msg in self.rep155.messages(stamp_ns, results, heights, built.messages):
             for pub in self.pub_by_topic[topic]:
                 pub.publish(msg)
         for error in built.errors:  # a degenerate pose must not stop the node
@@ -355,6 +384,7 @@ class BodyTrackerNode(Node):
             out[per_body_topic(body, "body_shape")] = self.pub_shapes[k][:1]
         if self.pub_tf is not None:
             out[TF_TOPIC] = [self.pub_tf]
+        out.update({topic: [pub] for topic, pub in self.pub_rep155.items()})
         return out
 
     def _publish_diagnostics(self, stamp_ns: int, results, seconds: float,

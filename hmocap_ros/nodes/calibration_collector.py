@@ -1,7 +1,9 @@
 """``hmocap calibrate --live``: the calibration session gathered from the cameras' topics.
 
-Subscribes to ``/<cam>/image_raw`` of the cameras named by ``--cameras`` (else of every
-``/<cam>/image_raw`` of type ``sensor_msgs/Image`` seen within a few seconds), their
+Subscribes to ``/<cam>/image_raw`` (sensor_msgs/Image), or where only that is published to
+image_transport's ``/<cam>/image_raw/compressed`` (sensor_msgs/CompressedImage, JPEG or PNG), of
+the cameras named by ``--cameras`` (else of every camera with such a topic seen within a few
+seconds), their
 ``/<cam>/camera_info`` and ``/camera_rig`` for the intrinsics when they are published (each
 topic once its publisher is seen, best effort when the publisher is, else reliable); groups
 the images by stamp (:class:`~hmocap_ros.calibration.live_collection.FrameSetCollector`, the
@@ -27,7 +29,7 @@ __all__ = ["collect_live"]
 _DISCOVERY_S = 3.0  # waiting for the image topics when --cameras is not given
 _MAX_QUEUED = 200  # frame sets waiting for the board search; more are dropped (counted)
 _PROGRESS_S = 2.0
-_IMAGE_TOPIC = re.compile(r"^/(.+)/image_raw$")
+_IMAGE_TOPIC = re.compile(r"^/(.+)/image_raw(/compressed)?$")
 
 
 def _discover(node, executor, log) -> list:
@@ -35,10 +37,12 @@ def _discover(node, executor, log) -> list:
     names: list = []
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.1)
-        names = sorted(m.group(1) for t, types in node.get_topic_names_and_types()
-                       if (m := _IMAGE_TOPIC.match(t)) and "sensor_msgs/msg/Image" in types)
+        names = sorted({m.group(1) for t, types in node.get_topic_names_and_types()
+                        if (m := _IMAGE_TOPIC.match(t))
+                        and ("sensor_msgs/msg/CompressedImage" if m.group(2) else "sensor_msgs/msg/Image") in types})
     if not names:
-        raise ValueError(f"no /<camera>/image_raw topic of sensor_msgs/Image within {_DISCOVERY_S:g} s; "
+        raise ValueError(f"no /<camera>/image_raw topic of sensor_msgs/Image (nor its /compressed) within "
+                         f"{_DISCOVERY_S:g} s; "
                          f"name the cameras with --cameras")
     log(f"cameras found: {', '.join(names)}")
     return names
@@ -52,13 +56,14 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
-    from sensor_msgs.msg import CameraInfo, Image
+    from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
     from hmocap_ros.calibration.detection import MIN_CORNERS
     from hmocap_ros.calibration.live_collection import FrameSetCollector, enough_views
     from hmocap_ros.calibration.session import CalibrationSession
     from hmocap_ros.io.camera_info import camera_info_to_dict
-    from hmocap_ros.io.images import image_to_rgb
+    from hmocap_ros.io.conversion_errors import ConversionError
+    from hmocap_ros.io.image_codec import decoded_rgb
     from hmocap_ros.io.msg_factory import stamp_to_ns
     from hmocap_ros.io.rig_messages import rig_from_msg
 
@@ -94,6 +99,14 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
                         counts["dropped"] += 1
             return callback
 
+        def rgb_of(k: int, msg):
+            """The image decoded, or None (logged) when it cannot be."""
+            try:
+                return decoded_rgb(msg)
+            except ConversionError as err:
+                log(f"  /{names[k]}/image_raw: {err} (image skipped)")
+                return None
+
         def on_info(name: str):
             def callback(msg) -> None:
                 if name not in session.intrinsics or session.intrinsics[name][4] == "/camera_rig":
@@ -112,6 +125,9 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(CameraRig, "/camera_rig", on_rig, latched)
         wanted = {f"/{name}/image_raw": (Image, on_image(k)) for k, name in enumerate(names)}
+        # image_transport's compressed topic, taken when it is published and the raw one is not
+        wanted.update({f"/{name}/image_raw/compressed": (CompressedImage, on_image(k))
+                       for k, name in enumerate(names)})
         wanted.update({f"/{name}/camera_info": (CameraInfo, on_info(name)) for name in names})
 
         def subscribe_published() -> None:
@@ -121,7 +137,10 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
                 if not infos:
                     continue
                 best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
+                if topic.endswith("/compressed") and node.get_publishers_info_by_topic(topic[:-11]):
+                    continue  # the raw topic is published too: it is taken
                 cls, callback = wanted.pop(topic)
+                wanted.pop(topic[:-11] if topic.endswith("/compressed") else topic + "/compressed", None)
                 node.create_subscription(cls, topic, callback, QoSProfile(
                     depth=30, reliability=ReliabilityPolicy.BEST_EFFORT if best_effort
                     else ReliabilityPolicy.RELIABLE))
@@ -161,8 +180,9 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
                     first = now if first is None else first
                     n_sets += 1
                     for k, msg in enumerate(msgs):
-                        detection = session.add_image(k, stamp, image_to_rgb(msg))
-                        seen[k] += detection.n >= MIN_CORNERS
+                        rgb = rgb_of(k, msg)
+                        if rgb is not None:
+                            seen[k] += session.add_image(k, stamp, rgb).n >= MIN_CORNERS
                 if now >= next_progress and first is not None:
                     next_progress = now + _PROGRESS_S
                     log(f"  {now - first:4.0f} s: {n_sets} frame sets, board seen by "
@@ -176,7 +196,9 @@ def collect_live(ns: argparse.Namespace, spec, ros_args: list, log=print):
             stamp, msgs = ready.get_nowait()
             n_sets += 1
             for k, msg in enumerate(msgs):
-                seen[k] += session.add_image(k, stamp, image_to_rgb(msg)).n >= MIN_CORNERS
+                rgb = rgb_of(k, msg)
+                if rgb is not None:
+                    seen[k] += session.add_image(k, stamp, rgb).n >= MIN_CORNERS
         log(f"collected {n_sets} frame sets ({collector.n_skipped} skipped for --fps, "
             f"{collector.n_dropped} images in no complete set, {counts['dropped']} sets dropped "
             f"while busy); board seen by "

@@ -7,7 +7,9 @@ publishes that camera's CameraInfo with the image's stamp, as a camera driver's 
 would, after checking that the image has the calibrated size.
 
 Subscriptions:
-  ``<camera>/image_raw`` (sensor_msgs/Image, ``image_reliability`` with a queue of
+  ``<camera>/image_raw`` (sensor_msgs/Image; with ``image_transport:=compressed``
+  ``<camera>/image_raw/compressed``, sensor_msgs/CompressedImage, its size read from the JPEG or
+  PNG header without decoding; ``image_reliability`` with a queue of
   ``queue_depth``: :func:`~hmocap_ros.nodes.common.image_qos`), for each served camera.
 Publications:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the whole rig.
@@ -32,16 +34,26 @@ from hmocap_interfaces.msg import CameraRig
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo
 from tf2_msgs.msg import TFMessage
 
 from hmocap_ros.config_files import find_config_file
 from hmocap_ros.geometry.rig import Rig, RigError, load_rig
-from hmocap_ros.io.conversions import dict_to_camera_info
+from hmocap_ros.io.conversions import ConversionError, dict_to_camera_info
+from hmocap_ros.io.image_codec import image_size
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.rig_messages import rig_to_msg
 from hmocap_ros.io.tf import DEFAULT_FIXED_FRAME, TF_STATIC_TOPIC, rig_transforms, tf_message
-from hmocap_ros.nodes.common import LATCHED_QOS, declare_parameters, image_qos, image_reliability_param, param, run_node
+from hmocap_ros.nodes.common import (
+    LATCHED_QOS,
+    create_image_subscription,
+    declare_parameters,
+    image_qos,
+    image_reliability_param,
+    image_transport_param,
+    param,
+    run_node,
+)
 
 NODE_NAME = "camera_rig_publisher"
 
@@ -57,6 +69,7 @@ class CameraRigPublisherConfig:
     queue_depth: int = param(25, "Images queued per camera while the node is busy, and CameraInfo messages kept "
                                  "for a slow reliable subscriber; 25 holds one second at 25 fps.")
     image_reliability: str = image_reliability_param()
+    image_transport: str = image_transport_param()
     publish_tf: bool = param(True, "Publish the room frame -> camera optical frame transforms of every rig "
                                    "camera on /tf_static (latched, as tf2's static broadcaster).")
     fixed_frame: str = param(DEFAULT_FIXED_FRAME, "The +Z-up fixed frame (REP 103) at the root of /tf_static, "
@@ -118,7 +131,8 @@ class CameraRigPublisher(Node):
                 continue
             pub = self.create_publisher(CameraInfo, f"{name}/camera_info",
                                         QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE))
-            sub = self.create_subscription(Image, f"{name}/image_raw", self._callback(name), self.image_qos)
+            sub = create_image_subscription(self, f"{name}/image_raw", self.config.image_transport,
+                                            self._callback(name), self.image_qos)
             self.served[name] = (info, pub, sub)
         self.rig, self.path = rig, path
         stamp = self.get_clock().now().nanoseconds
@@ -131,7 +145,8 @@ class CameraRigPublisher(Node):
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         changed = {p.name: p.value for p in params}
-        fixed = sorted(set(changed) & {"check_image_size", "queue_depth", "image_reliability", "publish_tf",
+        fixed = sorted(set(changed) & {"check_image_size", "queue_depth", "image_reliability", "image_transport",
+                                        "publish_tf",
                                         "fixed_frame"})
         if fixed:
             return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: read at start, restart the node")
@@ -150,14 +165,20 @@ class CameraRigPublisher(Node):
         return SetParametersResult(successful=True)
 
     def _callback(self, name: str):
-        def on_image(msg: Image) -> None:
+        def on_image(msg) -> None:
             served = self.served.get(name)
             if served is None:
                 return
             info = served[0]
-            if self.config.check_image_size and (msg.width, msg.height) != (info["width"], info["height"]):
+            if self.config.check_image_size:
+                try:
+                    width, height = image_size(msg)  # a compressed image's from its header
+                except ConversionError as err:
+                    self.get_logger().error(f"{name}/image_raw: {err}", throttle_duration_sec=5.0)
+                    return
+            if self.config.check_image_size and (width, height) != (info["width"], info["height"]):
                 self.get_logger().error(
-                    f"{name}/image_raw is {msg.width}x{msg.height} but the rig calibrates "
+                    f"{name}/image_raw is {width}x{height} but the rig calibrates "
                     f"{info['width']}x{info['height']}: no camera_info for this image",
                     throttle_duration_sec=5.0,
                 )

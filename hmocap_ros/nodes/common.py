@@ -87,15 +87,90 @@ def image_output_qos(depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-def create_image_publisher(node: Node, topic: str, depth: int):
-    """A ``sensor_msgs/Image`` publisher of ``topic`` with :func:`image_output_qos`, whose
-    reliability, history and depth a user may change with rclpy's standard parameters
-    (``qos_overrides./<namespace>/<topic>.publisher.reliability`` ..., read at start)."""
-    from rclpy.qos_overriding_options import QoSOverridingOptions
-    from sensor_msgs.msg import Image
+class ImagePublisher:
+    """An image output with image_transport's ``raw`` and ``compressed`` transports:
+    ``sensor_msgs/Image`` on ``topic`` and ``sensor_msgs/CompressedImage`` on
+    ``<topic>/compressed`` (PNG for mono images such as masks, lossless; JPEG for colour),
+    both with :func:`image_output_qos`. As image_transport does, the compressed image is encoded
+    only while that topic has subscribers. :meth:`publish` takes the raw message."""
 
-    return node.create_publisher(Image, topic, image_output_qos(depth),
-                                 qos_overriding_options=QoSOverridingOptions.with_default_policies())
+    def __init__(self, node: Node, topic: str, depth: int):
+        from rclpy.qos_overriding_options import QoSOverridingOptions
+        from sensor_msgs.msg import CompressedImage, Image
+
+        from hmocap_ros.io.image_codec import transport_topic
+
+        overriding = QoSOverridingOptions.with_default_policies()
+        self.topic = topic
+        self.raw = node.create_publisher(Image, topic, image_output_qos(depth), qos_overriding_options=overriding)
+        self.compressed = node.create_publisher(CompressedImage, transport_topic(topic, "compressed"),
+                                                image_output_qos(depth), qos_overriding_options=overriding)
+        self.logger = node.get_logger()
+
+    def publish(self, msg) -> None:
+        """Publish the ``sensor_msgs/Image`` ``msg``, and its compressed form when subscribed."""
+        self.raw.publish(msg)
+        if self.compressed.get_subscription_count() == 0:
+            return
+        from hmocap_ros.io.conversions import ConversionError, image_to_numpy, image_to_rgb, numpy_to_compressed
+        from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
+
+        try:
+            pixels = image_to_numpy(msg)
+            if pixels.ndim == 3:
+                pixels = image_to_rgb(msg)
+            out = numpy_to_compressed(pixels, "png" if pixels.ndim == 2 else "jpeg",
+                                      stamp_to_ns(msg.header.stamp), msg.header.frame_id, RclpyFactory())
+        except ConversionError as err:
+            self.logger.error(f"{self.topic}/compressed: {err}", throttle_duration_sec=5.0)
+            return
+        self.compressed.publish(out)
+
+
+def create_image_publisher(node: Node, topic: str, depth: int) -> ImagePublisher:
+    """An :class:`ImagePublisher` of ``topic`` (raw and compressed) with :func:`image_output_qos`,
+    whose reliability, history and depth a user may change with rclpy's standard parameters
+    (``qos_overrides./<namespace>/<topic>.publisher.reliability`` ..., read at start)."""
+    return ImagePublisher(node, topic, depth)
+
+
+IMAGE_TRANSPORT_HELP = (
+    "Transport of the image inputs, as image_transport names it: raw (sensor_msgs/Image on "
+    "<camera>/image_raw) or compressed (sensor_msgs/CompressedImage, JPEG or PNG, on "
+    "<camera>/image_raw/compressed, decoded once on arrival); masks likewise on "
+    "<camera>/foreground or <camera>/foreground/compressed.")
+DEPTH_TRANSPORT_HELP = (
+    "Transport of the depth images, as image_transport names it: raw (sensor_msgs/Image on "
+    "depth/image_raw) or compressedDepth (sensor_msgs/CompressedImage, compressed_depth_image_transport's "
+    "PNG, on depth/image_raw/compressedDepth, decoded once on arrival).")
+
+
+def image_transport_param(depth: bool = False):
+    """The ``image_transport`` field (default ``raw``) of a node's config dataclass: the
+    transports of camera images and masks (:data:`~hmocap_ros.io.image_codec.CAMERA_TRANSPORTS`),
+    or with ``depth`` of depth images (:data:`~hmocap_ros.io.image_codec.DEPTH_TRANSPORTS`);
+    :func:`declare_parameters` checks the value."""
+    from dataclasses import field
+
+    from hmocap_ros.io.image_codec import CAMERA_TRANSPORTS, DEPTH_TRANSPORTS
+
+    return field(default="raw", metadata={"description": DEPTH_TRANSPORT_HELP if depth else IMAGE_TRANSPORT_HELP,
+                                          "read_only": False,
+                                          "transports": DEPTH_TRANSPORTS if depth else CAMERA_TRANSPORTS})
+
+
+def create_image_subscription(node: Node, topic: str, transport: str, callback, qos: QoSProfile):
+    """Subscribe the image topic ``topic`` in ``transport`` (``raw``: ``sensor_msgs/Image`` on
+    ``topic``; ``compressed``, ``compressedDepth``: ``sensor_msgs/CompressedImage`` on
+    ``<topic>/<transport>``);
+    ``callback`` takes either message and decodes it with :mod:`hmocap_ros.io.image_codec`.
+    ValueError (the node does not start) for another transport."""
+    from sensor_msgs.msg import CompressedImage, Image
+
+    from hmocap_ros.io.image_codec import transport_topic
+
+    name = transport_topic(topic, transport)
+    return node.create_subscription(Image if transport == "raw" else CompressedImage, name, callback, qos)
 
 
 def sensor_qos(depth: int) -> QoSProfile:
@@ -116,7 +191,8 @@ RESULT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 def declare_parameters(node: Node, config_cls):
     """Declare every leaf of ``config_cls`` as a parameter of ``node`` (groups by dotted
-    name, ``startup.min_views``); return the filled dataclass."""
+    name, ``startup.min_views``); return the filled dataclass. ValueError (the node does not
+    start) for an ``image_transport`` that is not one of its field's (:func:`image_transport_param`)."""
     from rclpy.parameter import Parameter
 
     values = {}
@@ -137,6 +213,11 @@ def declare_parameters(node: Node, config_cls):
             value = node.declare_parameter(
                 name, list(default) if isinstance(default, tuple) else default, descriptor).value
             values[name] = list(value) if isinstance(default, (list, tuple)) else value
+    from hmocap_ros.io.image_codec import check_transport
+
+    for name, field, _, _ in flat_fields(config_cls):  # checked now: nodes subscribe once the rig has come
+        if "transports" in field.metadata:
+            check_transport(str(values[name]), field.metadata["transports"])
     return from_flat(config_cls, values)
 
 
@@ -163,13 +244,21 @@ def parameter_table(config_cls) -> str:
     return "\n".join(rows)
 
 
-def print_help(node_name: str, doc: str, config_cls=None) -> None:
-    print(f"usage: {node_name} [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] [-r FROM:=TO ...]]\n")
-    print((doc or "").strip() + "\n")
-    if config_cls is not None:
-        print("parameters (ROS parameters, defaults from config/%s.yaml when present):" % node_name)
-        for cls in config_cls if isinstance(config_cls, (list, tuple)) else [config_cls]:
-            print(parameter_table(cls))
+def print_help(node_name: str, doc: str, config_cls=None) -> int:
+    """``--help``: usage, the module doc in plain text and the parameters; the exit status (141
+    when the reader of the help went away, as ``body_tracker --help | head``)."""
+    from hmocap_ros.terminal import TerminalManners, plain_text
+
+    manners = TerminalManners(node_name)
+    with manners:
+        print(f"usage: {node_name} [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] [-r FROM:=TO ...]]\n")
+        print(plain_text((doc or "").strip()) + "\n")
+        if config_cls is not None:
+            print("parameters (ROS parameters, defaults from config/%s.yaml when present):" % node_name)
+            for cls in config_cls if isinstance(config_cls, (list, tuple)) else [config_cls]:
+                print(plain_text(parameter_table(cls)))
+        sys.stdout.flush()
+    return manners.status or 0
 
 
 def ros_args_with_default_config(node_name: str, argv: Sequence[str]) -> list[str]:
@@ -211,8 +300,7 @@ def run_node(
     naming the problem and returns 2, without a traceback."""
     argv = list(sys.argv if args is None else args)
     if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv[1:2]:
-        print_help(node_name, doc, config_cls)
-        return 0
+        return print_help(node_name, doc, config_cls)
     flag = ShutdownFlag()
     rclpy.init(args=ros_args_with_default_config(node_name, argv), signal_handler_options=SignalHandlerOptions.NO)
     flag.install()
@@ -299,28 +387,36 @@ def depth_camera_from_info(msg, current, logger):
 
 
 def depth_from_msg(msg, encodings, logger):
-    """The image of a ``depth/image_raw`` message as a numpy array, or None (logged, throttled)
-    when its encoding is not one of ``encodings`` or it cannot be converted."""
-    from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+    """The image of a ``depth/image_raw`` message (sensor_msgs/Image, or compressedDepth's
+    CompressedImage: 16UC1 in mm, 32FC1 in m) as a numpy array, or None (logged, throttled) when
+    its encoding is not one of ``encodings`` or it cannot be converted."""
+    from hmocap_ros.io.conversions import ConversionError
+    from hmocap_ros.io.image_codec import decoded_image, image_encoding
 
-    if msg.encoding not in encodings:
-        logger.error(f"depth/image_raw has encoding '{msg.encoding}'; expected one of {encodings}",
+    try:
+        encoding = image_encoding(msg)
+    except ConversionError as err:
+        logger.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
+        return None
+    if encoding not in encodings:
+        logger.error(f"depth/image_raw has encoding '{encoding}'; expected one of {encodings}",
                      throttle_duration_sec=5.0)
         return None
     try:
-        return image_to_numpy(msg)
+        return decoded_image(msg)
     except ConversionError as err:
         logger.error(f"depth/image_raw: {err}", throttle_duration_sec=5.0)
         return None
 
 
 def rgb_from_msg(msg, topic: str, logger):
-    """The RGB image (H, W, 3) of a colour camera's Image message, or None (logged, throttled)
-    when it cannot be converted."""
-    from hmocap_ros.io.conversions import ConversionError, image_to_rgb
+    """The RGB image (H, W, 3) of a colour camera's Image or CompressedImage message, or None
+    (logged, throttled) when it cannot be converted or decoded."""
+    from hmocap_ros.io.conversions import ConversionError
+    from hmocap_ros.io.image_codec import decoded_rgb
 
     try:
-        return image_to_rgb(msg)
+        return decoded_rgb(msg)
     except ConversionError as err:
         logger.error(f"{topic}: {err}", throttle_duration_sec=5.0)
         return None

@@ -13,7 +13,9 @@ consume the detections. The detectors, their choices and results: docs/tracking.
 Subscriptions:
   ``camera_rig`` (hmocap_interfaces/CameraRig, latched): the calibration, unless ``rig_file``.
   ``<camera>/image_raw`` (sensor_msgs/Image, rgb8/bgr8/..., ``image_reliability``) and
-  ``<camera>/foreground`` (sensor_msgs/Image mono8, the foreground_segmentation node's), per
+  ``<camera>/foreground`` (sensor_msgs/Image mono8, the foreground_segmentation node's); with
+  ``image_transport:=compressed`` ``<camera>/image_raw/compressed`` and ``<camera>/foreground/compressed``
+  (sensor_msgs/CompressedImage) instead; per
   rig camera, at the rig's resolution.
   ``skeleton`` (hmocap_interfaces/Skeleton), when ``use_skeleton``: the last tracked skeleton,
   which places the keypoint crops and the skin carving box and labels the skin candidates.
@@ -22,7 +24,7 @@ Publications (with the stamp of the frame set):
   ``extremities/points`` (sensor_msgs/PointCloud2, fields x, y, z, probability): skin, the
   oriented surface points with their extremity probability (eq. 2.16-2.18); keypoints, the
   detections with their scores. For RViz/Foxglove.
-  ``diagnostics`` (diagnostic_msgs/DiagnosticArray): frame sets, detections, views, wall ms
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): frame sets, detections, views, wall ms
   per set and CPU ms per set (the process's CPU time while it detects: every worker thread).
 Synchronisation and keeping up (``slop_ms``, ``max_wait_ms``, ``min_views_to_sync``,
 ``latest_only``) as in body_tracker, over (image, foreground) pairs: docs/tracking.md,
@@ -42,7 +44,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Vector3
 from hmocap_interfaces.msg import Extremities, Skeleton
 from rclpy.node import Node
-from sensor_msgs.msg import Image, PointCloud2
+from sensor_msgs.msg import PointCloud2
 
 from hmocap_ros.detection.detections import fill_msg
 from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams, ExtremityPipeline, skeleton_labels
@@ -50,14 +52,17 @@ from hmocap_ros.detection.tflite_model import ModelFileError
 from hmocap_ros.frame_intake import FrameSetIntake
 from hmocap_ros.frame_sets import PickedSet
 from hmocap_ros.geometry.rig import Rig
-from hmocap_ros.io.conversions import ConversionError, image_to_numpy
+from hmocap_ros.io.conversions import ConversionError
+from hmocap_ros.io.image_codec import decoded_mono
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.io.point_clouds import array_to_pointcloud2
 from hmocap_ros.nodes.common import (
     RESULT_QOS,
+    create_image_subscription,
     declare_parameters,
     image_qos,
     image_reliability_param,
+    image_transport_param,
     param,
     rgb_from_msg,
     run_node,
@@ -85,6 +90,7 @@ class ExtremityNodeConfig:
                                     "newest and skip (and count) the others. false: every set, in stamp "
                                     "order (slow bag replays; raise queue_depth too).")
     image_reliability: str = image_reliability_param()
+    image_transport: str = image_transport_param()
     skeleton_max_age_ms: float = param(500.0, "A skeleton older than this (ms) before the frame set is "
                                               "not used.")
 
@@ -111,7 +117,7 @@ class ExtremityDetectionNode(Node):
         self.last_counts = (0, 0)
         self.pub = self.create_publisher(Extremities, "extremities", RESULT_QOS)
         self.pub_points = self.create_publisher(PointCloud2, "extremities/points", RESULT_QOS)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RESULT_QOS)
         self.create_timer(1.0, self._publish_diagnostics)
         if self.config.use_skeleton:
             self.create_subscription(Skeleton, "skeleton", self._on_skeleton, RESULT_QOS)
@@ -140,8 +146,9 @@ class ExtremityDetectionNode(Node):
             # subscriptions' queues instead of being published to nobody.
             qos = self.image_qos
             for name in rig.names:
-                self.create_subscription(Image, f"{name}/image_raw", self._on_image(name), qos)
-                self.create_subscription(Image, f"{name}/foreground", self._on_mask(name), qos)
+                transport = self.config.image_transport
+                create_image_subscription(self, f"{name}/image_raw", transport, self._on_image(name), qos)
+                create_image_subscription(self, f"{name}/foreground", transport, self._on_mask(name), qos)
         if self.pipeline is not None:
             self.pipeline.close()
         self.pipeline = self._make_pipeline(rig)
@@ -166,7 +173,7 @@ class ExtremityDetectionNode(Node):
                          skeleton_labels([str(n) for n in msg.joint_names], joints))
 
     def _on_image(self, name: str):
-        def on_image(msg: Image) -> None:
+        def on_image(msg) -> None:
             if self.rig is None or name not in self.images:
                 return
             rgb = rgb_from_msg(msg, f"{name}/image_raw", self.get_logger())
@@ -180,17 +187,13 @@ class ExtremityDetectionNode(Node):
         return on_image
 
     def _on_mask(self, name: str):
-        def on_mask(msg: Image) -> None:
+        def on_mask(msg) -> None:
             if self.intake is None or name not in self.images:
                 return
             try:
-                mask = image_to_numpy(msg)
+                mask = decoded_mono(msg)
             except ConversionError as err:
                 self.get_logger().error(f"{name}/foreground: {err}", throttle_duration_sec=5.0)
-                return
-            if mask.ndim != 2:
-                self.get_logger().error(f"{name}/foreground must be mono8, got {msg.encoding}",
-                                        throttle_duration_sec=5.0)
                 return
             stamp = stamp_to_ns(msg.header.stamp)
             image = self._image_for(name, stamp)
@@ -221,13 +224,14 @@ class ExtremityDetectionNode(Node):
 
     # ------------------------------------------------------------------ detection
 
-    def _previous(self, stamp_ns: int) -> dict | None:
+    def _previous(self, stamp_ns: int) -> tuple[dict | None, int | None]:
+        """The last skeleton and its stamp, (None, None) when none is recent enough."""
         if self.skeleton is None:
-            return None
+            return None, None
         stamp, joints = self.skeleton
         if abs(stamp_ns - stamp) > self.config.skeleton_max_age_ms * 1e6:
-            return None
-        return joints
+            return None, None
+        return joints, stamp
 
     def _process(self, picked: PickedSet) -> None:
         """Detect on one frame set (the intake's worker thread)."""
@@ -249,7 +253,8 @@ class ExtremityDetectionNode(Node):
             masks.append(mask)
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            det = self.pipeline.detect(images, masks, self._previous(stamp_ns))
+            previous, previous_stamp = self._previous(stamp_ns)
+            det = self.pipeline.detect(images, masks, previous, stamp_ns, previous_stamp)
         except Exception as err:  # a detector bug must not take the room's node down
             self.get_logger().error(f"extremity detection failed on frame {stamp_ns}: {err!r}")
             return

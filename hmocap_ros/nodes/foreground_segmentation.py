@@ -14,13 +14,15 @@ extremity node and the tracker take them; with ``latest_only:=false`` every fram
 order (bag replays that must answer every frame).
 
 Subscriptions:
-  ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8), per camera: ``image_reliability``
+  ``<camera>/image_raw`` (sensor_msgs/Image rgb8/bgr8/mono8), or with ``image_transport:=compressed``
+  ``<camera>/image_raw/compressed`` (sensor_msgs/CompressedImage JPEG/PNG), per camera: ``image_reliability``
   (best effort: any camera driver matches) with a queue of ``queue_depth`` frames
   (:func:`~hmocap_ros.nodes.common.image_qos`).
 Publications:
   ``<camera>/foreground`` (sensor_msgs/Image mono8, 0 or 255; the input's stamp and frame_id;
-  reliable, keep last ``queue_depth``: :func:`~hmocap_ros.nodes.common.image_output_qos`).
-  ``diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames,
+  reliable, keep last ``queue_depth``: :func:`~hmocap_ros.nodes.common.image_output_qos`), and
+  ``<camera>/foreground/compressed`` (sensor_msgs/CompressedImage PNG, encoded while subscribed).
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames,
   milliseconds per frame and state (learning or segmenting) per camera.
 Services:
   ``~/relearn`` (std_srvs/Trigger): forget the background of every camera and learn it again.
@@ -44,19 +46,21 @@ from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
-from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
 from hmocap_ros.frame_intake import FrameSetIntake
 from hmocap_ros.frame_sets import PickedSet
-from hmocap_ros.io.conversions import ConversionError, encoding_layout, image_to_rgb, numpy_to_image
+from hmocap_ros.io.conversions import ConversionError, encoding_layout, numpy_to_image
+from hmocap_ros.io.image_codec import decoded_rgb, image_encoding
 from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.nodes.common import (
     RESULT_QOS,
     create_image_publisher,
+    create_image_subscription,
     declare_parameters,
     image_qos,
     image_reliability_param,
+    image_transport_param,
     param,
     run_node,
 )
@@ -78,6 +82,7 @@ class ForegroundNodeConfig:
     max_wait_ms: float = param(100.0, "How long (ms, > 0) a frame set waits for a missing camera before the "
                                       "cameras it has are segmented.")
     image_reliability: str = image_reliability_param()
+    image_transport: str = image_transport_param()
     diagnostics_period: float = param(1.0, "Seconds between diagnostics messages (0 = none).")
     relearn_after_size_errors: int = param(25, "Relearn a camera's background after this many consecutive "
                                                "frames of a size other than the learnt one (0 = never).")
@@ -128,9 +133,10 @@ class ForegroundSegmentation(Node):
             latest_only=self.config.latest_only, on_start_over=self._start_over, on_error=self._work_failed,
             name=NODE_NAME)
         for name in self.cameras:
-            self.create_subscription(Image, f"{name}/image_raw", self._callback(name), images_qos)
+            create_image_subscription(self, f"{name}/image_raw", self.config.image_transport, self._callback(name),
+                                      images_qos)
         self.create_service(Trigger, "~/relearn", self._relearn)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", RESULT_QOS)
         if self.config.diagnostics_period > 0:
             self.create_timer(self.config.diagnostics_period, self._publish_diagnostics)
         self.get_logger().info(
@@ -141,14 +147,16 @@ class ForegroundSegmentation(Node):
         state = self.cameras[name]
         log = self.get_logger()
 
-        def on_image(msg: Image) -> None:
+        def on_image(msg) -> None:
             try:
-                rgb = image_to_rgb(msg)
+                rgb = decoded_rgb(msg)
+                encoding = image_encoding(msg)
+                is_colour(encoding)
             except ConversionError as err:
                 log.error(f"{name}/image_raw: {err}", throttle_duration_sec=5.0)
                 return
-            if state.encoding is not None and is_colour(msg.encoding) != is_colour(state.encoding):
-                log.error(f"{name}/image_raw is {msg.encoding}, the background was learnt from {state.encoding} "
+            if state.encoding is not None and is_colour(encoding) != is_colour(state.encoding):
+                log.error(f"{name}/image_raw is {encoding}, the background was learnt from {state.encoding} "
                           f"frames: frame refused (~/relearn learns it anew)", throttle_duration_sec=5.0)
                 return
             if state.model.shape is not None and rgb.shape[:2] != tuple(state.model.shape):
@@ -163,7 +171,7 @@ class ForegroundSegmentation(Node):
                               throttle_duration_sec=5.0)
                     return
             state.size_errors = 0
-            self.intake.add(name, stamp_to_ns(msg.header.stamp), (rgb, msg.encoding, msg.header.frame_id))
+            self.intake.add(name, stamp_to_ns(msg.header.stamp), (rgb, encoding, msg.header.frame_id))
 
         return on_image
 

@@ -122,8 +122,8 @@ def view(host: str, port: int, topics: list[str], period_s: float, ros_args: lis
     node = FoxgloveView(bridge, topics, period_s)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    print(f"serving the ROS topics to Foxglove at {bridge.url} (Open connection -> Foxglove WebSocket; "
-          f"layout: config/hmocap_foxglove.json). Ctrl-C to stop.", flush=True)
+    node.get_logger().info(f"serving the ROS topics to Foxglove at {bridge.url} (Open connection -> Foxglove "
+                           f"WebSocket; layout: config/hmocap_foxglove.json). Ctrl-C to stop.")
     try:
         while not flag.requested and rclpy.ok():
             executor.spin_once(timeout_sec=0.05)

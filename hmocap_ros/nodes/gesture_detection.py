@@ -6,7 +6,9 @@ passes the volume test (eq. 3.5) is a detection (:class:`~hmocap_ros.gestures.Ge
 
 Subscriptions:
   ``depth/image_raw`` (sensor_msgs/Image 16UC1/mono16 millimetres or 32FC1 metres by REP 118,
-  or any unit through ``depth_unit_m``; ``image_reliability`` with a queue of ``queue_depth``:
+  or any unit through ``depth_unit_m``; with ``image_transport:=compressedDepth``
+  ``depth/image_raw/compressedDepth``, sensor_msgs/CompressedImage; ``image_reliability`` with a
+  queue of ``queue_depth``:
   :func:`~hmocap_ros.nodes.common.image_qos`).
   ``depth/camera_info`` (sensor_msgs/CameraInfo, the images' QoS): the focal length, to which
   the forest's test offsets (trained at the focal length recorded in the forest file) and the
@@ -45,7 +47,7 @@ import numpy as np
 from hmocap_interfaces.msg import GestureArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo
 
 from hmocap_ros.frame_intake import FrameSetIntake
 from hmocap_ros.frame_sets import PickedSet
@@ -59,11 +61,13 @@ from hmocap_ros.io.msg_factory import RclpyFactory, stamp_to_ns
 from hmocap_ros.nodes.common import (
     RESULT_QOS,
     create_image_publisher,
+    create_image_subscription,
     declare_parameters,
     depth_camera_from_info,
     depth_from_msg,
     image_qos,
     image_reliability_param,
+    image_transport_param,
     param,
     run_node,
 )
@@ -86,6 +90,7 @@ class GestureNodeConfig:
                                     "newest and skip (and count) the others, so the latency stays bounded. "
                                     "false: every frame in stamp order (slow bag replays).")
     image_reliability: str = image_reliability_param()
+    image_transport: str = image_transport_param(depth=True)
     watch_period_s: float = param(1.0, "Seconds between checks of model_file on disk (0 = none): a forest file "
                                        "written again (gesture_trainer saving a taught gesture) is loaded "
                                        "without a restart.")
@@ -123,7 +128,7 @@ class GestureDetection(Node):
             queue_size=max(1, self.config.queue_depth), latest_only=self.config.latest_only,
             on_start_over=self._start_over, on_error=self._work_failed, name=NODE_NAME)
         self.create_subscription(CameraInfo, "depth/camera_info", self._on_info, depth_qos)
-        self.create_subscription(Image, "depth/image_raw", self._on_depth, depth_qos)
+        create_image_subscription(self, "depth/image_raw", self.config.image_transport, self._on_depth, depth_qos)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.model_watch = FileWatch(Path(self.config.model_file or DEFAULT_MODEL))
         if self.config.watch_period_s > 0:
@@ -177,8 +182,8 @@ class GestureDetection(Node):
                     self.get_logger().error(error)
                     return SetParametersResult(successful=False, reason=error)
             elif p.name in {f for f in DetectorParams.__dataclass_fields__} | {"publish_probability", "queue_depth",
-                                                                             "image_reliability", "watch_period_s",
-                                                                             "use_taught_thresholds"}:
+                                                                             "image_reliability", "image_transport",
+                                                                             "watch_period_s", "use_taught_thresholds"}:
                 return SetParametersResult(successful=False, reason=f"{p.name} is read at start: restart the node")
         return SetParametersResult(successful=True)
 
@@ -187,7 +192,7 @@ class GestureDetection(Node):
     def _on_info(self, msg: CameraInfo) -> None:
         self.camera = depth_camera_from_info(msg, self.camera, self.get_logger())
 
-    def _on_depth(self, msg: Image) -> None:
+    def _on_depth(self, msg) -> None:
         if self.detector is None:
             self.get_logger().error(f"{self.model_error}: depth frames are dropped", throttle_duration_sec=10.0)
             return
@@ -214,7 +219,7 @@ class GestureDetection(Node):
         self.intake.close()
         super().destroy_node()
 
-    def _detect(self, msg: Image, depth: np.ndarray) -> None:
+    def _detect(self, msg, depth: np.ndarray) -> None:
         log = self.get_logger()
         detector = self.detector  # a forest loaded meanwhile takes the next frame
         if detector is None:
@@ -229,8 +234,8 @@ class GestureDetection(Node):
             log.warning("no depth/camera_info yet: assuming the forest's training camera at this image width; "
                         "gestures have no 3D position", throttle_duration_sec=10.0)
             detector.set_focal(None)
-        elif (msg.width, msg.height) != (camera.width, camera.height):
-            log.error(f"depth/image_raw is {msg.width}x{msg.height} but camera_info says "
+        elif (depth.shape[1], depth.shape[0]) != (camera.width, camera.height):
+            log.error(f"depth/image_raw is {depth.shape[1]}x{depth.shape[0]} but camera_info says "
                       f"{camera.width}x{camera.height}: assuming the training camera at this width, "
                       f"no 3D positions", throttle_duration_sec=5.0)
             camera = None

@@ -10,7 +10,8 @@ picks it up without a restart (it watches the file).
 
 Subscriptions:
   ``depth/image_raw`` (sensor_msgs/Image 16UC1/mono16 millimetres or 32FC1 metres by REP 118,
-  or any unit through ``detector.depth_unit_m``; ``image_reliability`` with a queue of
+  or any unit through ``detector.depth_unit_m``; with ``image_transport:=compressedDepth``
+  ``depth/image_raw/compressedDepth``, sensor_msgs/CompressedImage; ``image_reliability`` with a queue of
   ``queue_depth``: :func:`~hmocap_ros.nodes.common.image_qos`), as gesture_detection reads it.
   ``depth/camera_info`` (sensor_msgs/CameraInfo, the same QoS): the focal length a new forest
   is grown at.
@@ -26,7 +27,7 @@ Publications:
   ``gesture_trainer/feedback`` (sensor_msgs/Image rgb8, only with ``publish_feedback``): the
   depth frame false-coloured with the box, the taught gesture's density, the detections and
   the instruction (fig. 3.11), for a screen in the room (Foxglove, rqt_image_view).
-  ``diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period`` s): frames
   received and processed, frames skipped (gaps in the stamps longer than 1.5 frame periods),
   mean and maximum milliseconds per frame, and the lag (how long the last frame waited in the
   queue between its arrival and its processing); WARN when frames were skipped in the period
@@ -60,7 +61,7 @@ from hmocap_interfaces.srv import TeachGesture
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.task import Future
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo
 from std_srvs.srv import Trigger
 
 from hmocap_ros.geometry import PinholeCamera
@@ -73,11 +74,13 @@ from hmocap_ros.io.msg_factory import RclpyFactory, ns_to_stamp, stamp_to_ns
 from hmocap_ros.nodes.common import (
     RESULT_QOS,
     create_image_publisher,
+    create_image_subscription,
     declare_parameters,
     depth_camera_from_info,
     depth_from_msg,
     image_qos,
     image_reliability_param,
+    image_transport_param,
     param,
     run_node,
 )
@@ -95,6 +98,7 @@ class TrainerNodeConfig:
     queue_depth: int = param(30, "Depth images queued while the node is busy (>= 1): frames that overflow "
                                  "it are lost and counted as skipped.")
     image_reliability: str = image_reliability_param()
+    image_transport: str = image_transport_param(depth=True)
     diagnostics_period: float = param(1.0, "Seconds between diagnostics messages (0 = none).")
     max_lag_s: float = param(0.5, "Diagnostics warn when processing is more than this many seconds behind "
                                   "the stream.")
@@ -179,9 +183,9 @@ class GestureTrainer(Node):
         self.state_pub = self.create_publisher(TrainerState, "gesture_trainer/state", RESULT_QOS)
         self.feedback_pub = (create_image_publisher(self, "gesture_trainer/feedback", self.config.queue_depth)
                              if self.config.publish_feedback else None)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", RESULT_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", RESULT_QOS)
         self.create_subscription(CameraInfo, "depth/camera_info", self._on_info, image)
-        self.create_subscription(Image, "depth/image_raw", self._on_depth, image)
+        create_image_subscription(self, "depth/image_raw", self.config.image_transport, self._on_depth, image)
         self._info_waiters: list = []
         self._teach_waiting = False
         self._last_frame_wall: float | None = None
@@ -349,7 +353,7 @@ class GestureTrainer(Node):
         status = trainer.status(self.stats.last_stamp or 0, *self._image_size())
         self._publish_state(replace(status, instruction=reason))
 
-    def _on_depth(self, msg: Image, info) -> None:
+    def _on_depth(self, msg, info) -> None:
         log = self.get_logger()
         stamp = stamp_to_ns(msg.header.stamp)
         received = info.get("received_timestamp", 0) if info else 0

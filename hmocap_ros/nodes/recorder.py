@@ -6,6 +6,15 @@ images), transient local when a publisher is latched (``camera_rig``), reliable 
 Messages are written as the serialized CDR bytes DDS delivered, so nothing is decoded.
 Publications: none. Parameters: none (command-line options).
 
+Log time (``--log-time``, :class:`~hmocap_ros.io.cdr_stamps.LogTimes`): with ``input`` (default)
+a message whose header stamp (``/tf`` and marker arrays: their first element's), read from the
+CDR bytes, is that of a message recorded before is logged at that message's log time, so that a
+viewer playing the bag (Foxglove, RViz with ``ros2 bag play``, ``hmocap replay``) shows every
+output with the input it was computed from, however late the node published it; the first
+message of a stamp, and one without a stamp, are logged when they arrive. With ``receive`` every
+message is logged when it arrived. The receive time is each message's MCAP publish time either
+way.
+
 Once a subscription has matched a publisher on its own side of DDS discovery (from then on
 nothing that publisher sends is dropped for being unknown), the recorder logs
 ``receiving <topic> from N publisher(s)``: a script that starts a source after the recorder
@@ -21,6 +30,7 @@ recorded. A write error (disk full) stops it too, with the bag kept as last flus
 
 from __future__ import annotations
 
+import sys
 import time
 
 import rclpy
@@ -31,6 +41,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 
 from hmocap_ros.io.bag_writer import BagWriteError, BagWriter, QosProfile
+from hmocap_ros.io.cdr_stamps import LOG_TIMES, LogTimes, stamp_ns, stamp_offset
 from hmocap_ros.nodes.common import ShutdownFlag, message_class
 
 # Topics of the ROS graph itself, never worth recording with --all.
@@ -40,9 +51,12 @@ _GRAPH_TOPICS = {"/rosout", "/parameter_events"}
 class Recorder(Node):
     """Discovers the requested topics and writes every message it receives to a BagWriter."""
 
-    def __init__(self, writer: BagWriter, topics: list[str], record_all: bool = False):
+    def __init__(self, writer: BagWriter, topics: list[str], record_all: bool = False,
+                 log_time: str = "input"):
         super().__init__("hmocap_recorder")
         self.writer = writer
+        self.log_times = LogTimes(by_stamp=log_time == "input")
+        self._stamp_offsets: dict[str, int | None] = {}
         self.requested = [self._absolute(t) for t in topics]
         self.record_all = record_all
         self._subs: dict[str, Subscription] = {}
@@ -94,6 +108,7 @@ class Recorder(Node):
                     self._unknown_types.add(typename)
                 continue
             qos, stored = self._qos_for(topic)
+            self._stamp_offsets[topic] = stamp_offset(typename, _fields)
             self.writer.add_topic(topic, typename, stored)
             self._subs[topic] = self.create_subscription(
                 cls, topic, self._make_callback(topic, typename), qos, raw=True
@@ -104,8 +119,10 @@ class Recorder(Node):
         def callback(data: bytes) -> None:
             if self.write_error is not None:
                 return
+            receive_ns = self.get_clock().now().nanoseconds
+            log_ns = self.log_times.log_time(stamp_ns(data, self._stamp_offsets[topic]), receive_ns)
             try:
-                self.writer.write(topic, data, self.get_clock().now().nanoseconds, msgtype=typename)
+                self.writer.write(topic, data, log_ns, msgtype=typename, publish_ns=receive_ns)
             except BagWriteError as err:
                 self.write_error = err
                 self.get_logger().error(str(err))
@@ -114,6 +131,16 @@ class Recorder(Node):
 
     def missing_topics(self) -> list[str]:
         return [t for t in self.requested if t not in self._subs]
+
+
+def _fields(typename: str) -> dict[str, str]:
+    """The fields of a message type in order (``pkg/msg/Name`` or ``pkg/Name``); none when unknown."""
+    parts = typename.split("/")
+    try:
+        cls = message_class("/".join([parts[0], "msg", parts[-1]]))
+    except ImportError:
+        return {}
+    return dict(cls.get_fields_and_field_types())
 
 
 def _flush_if_due(node: Recorder) -> None:
@@ -125,12 +152,16 @@ def _flush_if_due(node: Recorder) -> None:
 
 
 def record(output: str, topics: list[str], record_all: bool = False, duration: float | None = None,
-           ros_args: list[str] | None = None, quiet: bool = False, progress: float = 0.0) -> dict[str, int]:
+           ros_args: list[str] | None = None, quiet: bool = False, progress: float = 0.0,
+           log_time: str = "input") -> dict[str, int]:
     """Record until Ctrl-C/SIGTERM (or ``duration`` seconds); return messages written per topic.
 
-    With ``progress`` > 0, print ``written: N messages: /topic n, ...`` (the counts so far)
-    whenever they changed, at most every ``progress`` seconds: a script waits on it for the
-    outputs to come to rest."""
+    ``log_time``: one of :data:`LOG_TIMES` (module doc). With ``progress`` > 0, print
+    ``written: N messages: /topic n, ...`` (the counts so far) on stderr whenever they changed,
+    at most every ``progress`` seconds: a script waits on it for the outputs to come to rest.
+    What was recorded is printed on stdout at the end (unless ``quiet``)."""
+    if log_time not in LOG_TIMES:
+        raise ValueError(f"log time must be one of {', '.join(LOG_TIMES)}, got {log_time!r}")
     try:
         writer = BagWriter(output).open()
     except BagWriteError as err:
@@ -139,12 +170,13 @@ def record(output: str, topics: list[str], record_all: bool = False, duration: f
     flag = ShutdownFlag()
     rclpy.init(args=["hmocap_record", *(ros_args or [])], signal_handler_options=SignalHandlerOptions.NO)
     flag.install()
-    node = Recorder(writer, topics, record_all)
+    node = Recorder(writer, topics, record_all, log_time)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     if not quiet:
-        print(f"recording to {output}: {'all topics' if record_all else ' '.join(topics)} (Ctrl-C to stop)",
-              flush=True)
+        node.get_logger().info(f"recording to {output}: {'all topics' if record_all else ' '.join(topics)}, "
+                               f"logged {'with the input of their stamp' if log_time == 'input' else 'when received'} "
+                               f"(Ctrl-C to stop)")
     t_end = None if duration is None else time.monotonic() + duration
     shown = 0
     next_progress = time.monotonic()
@@ -157,7 +189,7 @@ def record(output: str, topics: list[str], record_all: bool = False, duration: f
                 total = sum(writer.counts.values())
                 if total != shown:
                     per_topic = ", ".join(f"{t} {n}" for t, n in sorted(writer.counts.items()))
-                    print(f"written: {total} messages: {per_topic}", flush=True)
+                    print(f"written: {total} messages: {per_topic}", file=sys.stderr, flush=True)
                     shown = total
                 next_progress = time.monotonic() + progress
         # Take what DDS has already delivered to us before closing the bag.

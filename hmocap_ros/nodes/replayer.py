@@ -19,8 +19,9 @@ until every replayed topic has N matched subscriptions. That is the publisher's 
 discovery only; a best-effort subscriber drops messages from a publisher that it has not
 matched in turn, so the replay then waits ``--settle`` seconds more for the other side.
 When the replay falls behind (a loaded machine), it publishes the overdue messages at once:
-subscribers need a queue that holds such a burst (see ``nodes.common.sensor_qos``). At the end
-it prints how it kept time, one line per pass
+subscribers need a queue that holds such a burst (see ``nodes.common.sensor_qos``). What it
+waits for and starts is logged (the ROS logger); at the end it prints on stdout what it published
+per topic and how it kept time, one line per pass
 (``replay timing: bag_s=20.000 wall_s=20.031 behind_max_s=0.012 behind_p95_s=0.004
 cpu_s=3.1``): the bag's span from the first to the last message over ``--rate``, the seconds
 the pass took from its first to its last publication, how late the messages went out
@@ -128,12 +129,13 @@ def replay(bag: str, rate: float = 1.0, loop: bool = False, topics: list[str] | 
             if wait_subscribers > 0:
                 short = node.wait_for_subscribers(wait_subscribers, wait_timeout, flag)
                 if short and not quiet:
-                    print(f"warning: no subscriber after {wait_timeout:.0f} s on: {', '.join(short)}")
+                    node.get_logger().warning(f"fewer than {wait_subscribers} subscribers after {wait_timeout:g} s "
+                                              f"on: {', '.join(short)}")
                 _pause(settle, flag)
             if not quiet:
-                print(f"replaying {bag}: {len(node.publishers_by_topic)} topics at rate {rate:g}"
-                      + (" (looping)" if loop else "")
-                      + (f", {CLOCK_TOPIC} at {clock_hz:g} Hz" if clock_hz is not None else ""), flush=True)
+                node.get_logger().info(f"replaying {bag}: {len(node.publishers_by_topic)} topics at rate {rate:g}"
+                                       + (" (looping)" if loop else "")
+                                       + (f", {CLOCK_TOPIC} at {clock_hz:g} Hz" if clock_hz is not None else ""))
             counts = _publish(node, reader, rate, loop, flag, None if clock_hz is None else 1.0 / clock_hz,
                               quiet)
             # Give DDS time to deliver the last messages before the publishers go away.

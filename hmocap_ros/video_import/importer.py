@@ -10,9 +10,12 @@ sets; :func:`import_videos` writes the bag. The bag is in the documented layout
 
 * ``/camera_rig`` (latched ``hmocap_interfaces/CameraRig``) and ``/tf_static`` (latched: the room
   frame to each camera's optical frame), at the first frame set's stamp;
-* per frame set and camera ``/<camera>/image_raw`` (rgb8) and ``/<camera>/camera_info``, all
-  stamped ``BASE_STAMP_NS + frame / fps`` (the first video's frame index and rate) and logged at
-  that stamp.
+* per frame set and camera ``/<camera>/image_raw/compressed`` (sensor_msgs/CompressedImage,
+  JPEG at ``jpeg_quality``, as image_transport's ``compressed`` transport publishes it), or with
+  ``raw_images`` ``/<camera>/image_raw`` (rgb8), and ``/<camera>/camera_info``, all stamped
+  ``BASE_STAMP_NS + frame / fps`` (the first video's frame index and rate) and logged at that
+  stamp. The package's readers take both kinds alike (:mod:`hmocap_ros.io.bag_reader`); a
+  replay sends the topics as stored, for nodes with ``image_transport:=compressed``.
 
 Matching: ``names`` gives the calibration's camera of each video; without it, each video's file
 stem when every stem is a calibration camera, else the calibration's cameras in order when the
@@ -72,7 +75,8 @@ class ImportOptions:
     clockwise quarter turns from the calibration's image to the video's; upright: turn each
     camera so that the room's up is the image's up; calibration_format, up, units, floor: how
     to read the calibration (:func:`hmocap_ros.calibration.formats.load_calibration_rig`);
-    compress: zstd-compress the bag's chunks.
+    compress: zstd-compress the bag's chunks; raw_images: write sensor_msgs/Image rgb8 instead
+    of JPEG CompressedImage; jpeg_quality: the JPEG quality (1-100).
     """
 
     names: tuple[str, ...] | None = None
@@ -87,6 +91,8 @@ class ImportOptions:
     units: str | None = None
     floor: float = 0.0
     compress: bool = True
+    raw_images: bool = False
+    jpeg_quality: int = 90
 
 
 @dataclass(frozen=True, eq=False)
@@ -292,6 +298,8 @@ def import_videos(video_paths, calibration, out, options: ImportOptions = Import
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_writer import BagWriteError, whole_bag
     from hmocap_ros.io.camera_info import dict_to_camera_info
+    from hmocap_ros.io.compressed_images import numpy_to_compressed
+    from hmocap_ros.io.image_codec import transport_topic
     from hmocap_ros.io.images import numpy_to_image
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.typestore import hmocap_typestore
@@ -300,7 +308,10 @@ def import_videos(video_paths, calibration, out, options: ImportOptions = Import
     rig = plan.rig
     factory = RosbagsFactory(hmocap_typestore())
     infos = [c.to_camera_info_dict() for c in rig]
-    image_topics = [topics.camera_image(c.name) for c in rig]
+    if not 1 <= options.jpeg_quality <= 100:
+        raise VideoImportError(f"the JPEG quality must be 1 to 100, got {options.jpeg_quality}")
+    transport = "raw" if options.raw_images else "compressed"
+    image_topics = [transport_topic(topics.camera_image(c.name), transport) for c in rig]
     info_topics = [f"/{c.name}/camera_info" for c in rig]
     written = 0
     total = plan.count if plan.count < 2**31 - 1 else None
@@ -316,8 +327,12 @@ def import_videos(video_paths, calibration, out, options: ImportOptions = Import
                     if written == 0:
                         _write_latched(writer, factory, rig, stamp)
                     for k, (camera, image) in enumerate(zip(rig, images)):
-                        writer.write(image_topics[k], numpy_to_image(image, "rgb8", stamp,
-                                                                     camera.frame_id, factory), stamp)
+                        if options.raw_images:
+                            msg = numpy_to_image(image, "rgb8", stamp, camera.frame_id, factory)
+                        else:
+                            msg = numpy_to_compressed(image, "jpeg", stamp, camera.frame_id, factory,
+                                                      quality=options.jpeg_quality)
+                        writer.write(image_topics[k], msg, stamp)
                         writer.write(info_topics[k], dict_to_camera_info(infos[k], stamp, factory), stamp)
                     written += 1
                     if progress is not None:

@@ -70,12 +70,14 @@ class DepthGesture:
 
 @dataclass
 class Banner:
-    """The text above a picture: one line, and a second (optional) with figures."""
+    """The text above a picture: one line, and a second (optional) with figures; ``legend``: the
+    joint error scale; ``keys``: ``(RGB colour, what it marks)`` pairs drawn as a legend below."""
 
     title: str
     detail: str = ""
     legend: bool = False
     extra: list = field(default_factory=list)
+    keys: list = field(default_factory=list)
 
 
 def error_colours(errors_mm) -> np.ndarray:
@@ -188,13 +190,36 @@ def tile(images: Sequence[np.ndarray], columns: int | None = None) -> np.ndarray
     return out
 
 
+def _key_rows(width: int, keys: Sequence, scale: float, swatch: int) -> list[list[tuple[int, tuple, str]]]:
+    """The legend's keys placed in rows that fit ``width``: (x, colour, label) each."""
+    rows: list[list[tuple[int, tuple, str]]] = [[]]
+    x = 6
+    for colour, label in keys:
+        (text_w, _), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, scale, max(1, int(round(scale * 2))))
+        step = swatch + 4 + text_w + 12
+        if rows[-1] and x + step > width:
+            rows.append([])
+            x = 6
+        rows[-1].append((x, tuple(int(c) for c in colour), label))
+        x += step
+    return rows if rows[0] else []
+
+
 def _banner(width: int, banner: Banner) -> np.ndarray:
     scale = max(0.45, width / 1600)
     line = int(round(26 * scale / 0.5))
     lines = [banner.title] + ([banner.detail] if banner.detail else []) + list(banner.extra)
-    out = np.zeros((line * len(lines) + line // 2, width, 3), np.uint8)
+    key_scale = scale * 0.8
+    swatch = max(6, line // 2)
+    key_rows = _key_rows(width, banner.keys, key_scale, swatch)
+    out = np.zeros((line * (len(lines) + len(key_rows)) + line // 2, width, 3), np.uint8)
     for k, text in enumerate(lines):
         _text(out, text, (6, line * (k + 1) - line // 4), scale)
+    for r, row in enumerate(key_rows):
+        base = line * (len(lines) + r + 1) - line // 4
+        for x, colour, label in row:
+            out[base - swatch:base, x:x + swatch] = colour
+            _text(out, label, (x + swatch + 4, base), key_scale)
     if banner.legend:  # the error scale, right-aligned on the first line
         bar = np.linspace(0.0, ERROR_SCALE_MM, 101)
         w = min(width // 4, 300)

@@ -14,9 +14,10 @@ Two kinds of bag (:func:`bag_kind`):
 The outputs (skeletons, gestures) may come from another bag than the images (``outputs``: the
 recording of the nodes, or a bag that ``hmocap track`` wrote); they are matched by stamp.
 What is missing (no rig, no images, no outputs) raises :class:`OverlayError` with one line
-naming it. :func:`write_pictures` writes an MP4 (OpenCV's ``mp4v`` codec) or a folder of PNGs;
-:func:`render_overlay` does the whole (tracking the bag first when asked), for the command and
-the demo.
+naming it. :func:`write_pictures` writes a video that browsers play inline (H.264 in MP4, or
+VP9 in WebM, by the ffmpeg that ``imageio-ffmpeg`` carries; MJPEG AVI by OpenCV) or a folder
+of PNGs; :func:`render_overlay` does the whole (tracking the bag first when asked), for the
+command and the demo. Each camera's tile is drawn at its recorded size unless a width is given.
 """
 
 from __future__ import annotations
@@ -34,7 +35,17 @@ import numpy as np
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
 from hmocap_ros.io.msg_factory import stamp_to_ns
-from hmocap_ros.viz.overlay import Banner, BodyDrawing, DepthGesture, depth_picture, multiview_picture
+from hmocap_ros.viz.overlay import (
+    BODY_COLOURS,
+    EXTREMITY_COLOUR,
+    GESTURE_COLOUR,
+    TRUTH_COLOUR,
+    Banner,
+    BodyDrawing,
+    DepthGesture,
+    depth_picture,
+    multiview_picture,
+)
 
 __all__ = ["EXTREMITIES", "GESTURES", "SKELETON", "OverlayError", "Picture", "bag_kind", "depth_pictures",
            "multiview_pictures", "render_overlay", "write_pictures"]
@@ -44,7 +55,8 @@ EXTREMITIES = "/extremities"
 GESTURES = "/gestures"
 #: Largest stamp difference (ns) between an output and its frame set (body_tracker's slop).
 SLOP_NS = 5_000_000
-VIDEO_SUFFIXES = {".mp4": "mp4v", ".avi": "MJPG"}
+#: Video file suffix -> codec: ffmpeg encoders (imageio-ffmpeg) for MP4 and WebM, OpenCV's fourcc for AVI.
+VIDEO_SUFFIXES = {".mp4": "libx264", ".webm": "libvpx-vp9", ".avi": "MJPG"}
 
 
 class OverlayError(ValueError):
@@ -62,7 +74,7 @@ class Picture:
 def _topics(path: Path) -> dict:
     try:
         with BagReader(path) as reader:
-            return reader.topics()
+            return reader.topics(compressed_as_raw=True)
     except BagReadError as err:
         raise OverlayError(str(err)) from err
 
@@ -120,10 +132,12 @@ def _body(msg, truth) -> BodyDrawing:
 
 
 def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = None,
-                       tile_width: int = 480, max_frames: int | None = None) -> Iterator[Picture]:
-    """The pictures of a multi-view bag (module docstring); OverlayError for what is missing."""
+                       tile_width: int | None = None, max_frames: int | None = None) -> Iterator[Picture]:
+    """The pictures of a multi-view bag (module docstring), each camera's tile ``tile_width``
+    wide (default: the widest camera's recorded width); OverlayError for what is missing."""
     from hmocap_ros.geometry.rig import RigError
-    from hmocap_ros.io.conversions import ConversionError, image_to_rgb
+    from hmocap_ros.io.conversions import ConversionError
+    from hmocap_ros.io.image_codec import decoded_rgb
     from hmocap_ros.io.rig_messages import rig_from_msg
 
     outputs = outputs or bag
@@ -148,6 +162,10 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
     extremities = _by_stamp(outputs, EXTREMITIES)
     truths = _by_stamp(truth, topics.GT_SKELETON)
     sk_stamps, ex_stamps, gt_stamps = (np.array(sorted(d), np.int64) for d in (skeletons, extremities, truths))
+    tile_width = tile_width or max(camera.width for camera in rig.cameras)
+    # one legend for the whole video: every picture of it has the same size
+    keys = multiview_keys(len({m.body_id for msgs in skeletons.values() for m in msgs}), bool(truths),
+                          bool(extremities))
     first = None
     with BagReader(bag) as reader:
         for n, (stamp, msgs) in enumerate(reader.frame_sets(present, SLOP_NS, allow_partial=True, min_topics=1)):
@@ -157,7 +175,7 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
             images = []
             for topic in image_topics:
                 try:
-                    images.append(image_to_rgb(msgs[topic]) if topic in msgs else None)
+                    images.append(decoded_rgb(msgs[topic]) if topic in msgs else None)
                 except ConversionError:
                     images.append(None)
             gt_msgs = _near(truths, gt_stamps, stamp)
@@ -170,7 +188,8 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
                                   if b.errors_mm is not None and np.isfinite(b.errors_mm).any() else "")
                 for b in bodies) or "no body tracked"
             banner = Banner(f"{bag.name}  t = {(stamp - first) * 1e-9:6.2f} s", detail,
-                            legend=gt is not None and bool(bodies))
+                            legend=gt is not None and bool(bodies),
+                            keys=keys)
             truth_body = BodyDrawing("truth", _points(gt), [int(p) for p in gt.parents]) if gt is not None else None
             yield Picture(stamp, multiview_picture(rig.cameras, images, bodies, banner, truth_body, ex_points,
                                                    tile_width))
@@ -193,6 +212,7 @@ def depth_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = 
         if topics.DEPTH_INFO in reader.topics():
             info = reader.first(topics.DEPTH_INFO)
     fx = float(info.k[0]) if info is not None and info.k[0] > 0 else None
+    keys = depth_keys(bool(true))
     det_stamps, gt_stamps = (np.array(sorted(d), np.int64) for d in (detected, true))
     first = None
     with BagReader(bag) as reader:
@@ -212,7 +232,7 @@ def depth_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = 
             detail = ", ".join(f"{g.name} {g.score:.2f}" for g in found) or "no gesture detected"
             if held:
                 detail += "   truth: " + ", ".join(g.name for g in held)
-            banner = Banner(f"{bag.name}  t = {(stamp - first) * 1e-9:6.2f} s", detail)
+            banner = Banner(f"{bag.name}  t = {(stamp - first) * 1e-9:6.2f} s", detail, keys=keys)
             yield Picture(stamp, depth_picture(depth, found, held, banner, fx, width))
 
 
@@ -224,42 +244,135 @@ def frame_rate(stamps: list[int], default: float = 25.0) -> float:
 
 
 def write_pictures(pictures: Iterator[Picture], out: Path, fps: float | None = None) -> tuple[int, Path]:
-    """Write the pictures to ``out``: a video for a ``.mp4``/``.avi`` name (``fps``: default the
-    stamps' rate), else a folder of ``frame_NNNNN.png``. Returns the count and the path;
-    OverlayError when no picture came or the video cannot be written."""
+    """Write the pictures to ``out``: a video for a name ending in one of :data:`VIDEO_SUFFIXES`
+    (``fps``: default the stamps' rate), else a folder of ``frame_NNNNN.png``. Returns the count
+    and the path; OverlayError when no picture came or the video cannot be written. A video is
+    written beside ``out`` and takes its name only once complete."""
     out = Path(out)
     if fps is None:  # the rate of the first frames, then on as they come
         pictures = iter(pictures)
         head = list(itertools.islice(pictures, 10))
         fps = frame_rate([p.stamp_ns for p in head])
         pictures = itertools.chain(head, pictures)
-    video = out.suffix.lower() in VIDEO_SUFFIXES
+    suffix = out.suffix.lower()
     count = 0
-    writer = None
-    try:
+    if suffix not in VIDEO_SUFFIXES:
         for picture in pictures:
-            bgr = np.ascontiguousarray(picture.image[:, :, ::-1])
-            if video:
-                if writer is None:
-                    out.parent.mkdir(parents=True, exist_ok=True)
-                    h, w = bgr.shape[:2]
-                    writer = cv2.VideoWriter(str(out), cv2.VideoWriter.fourcc(*VIDEO_SUFFIXES[out.suffix.lower()]),
-                                             fps, (w - w % 2, h - h % 2))
-                    if not writer.isOpened():
-                        raise OverlayError(f"{out}: OpenCV cannot write this video here (no {out.suffix} "
-                                           f"encoder); give a folder to write PNG frames")
-                writer.write(np.ascontiguousarray(bgr[:bgr.shape[0] - bgr.shape[0] % 2,
-                                                      :bgr.shape[1] - bgr.shape[1] % 2]))
-            else:
-                out.mkdir(parents=True, exist_ok=True)
-                cv2.imwrite(str(out / f"frame_{count:05d}.png"), bgr)
+            out.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(out / f"frame_{count:05d}.png"), np.ascontiguousarray(picture.image[:, :, ::-1]))
             count += 1
-    finally:
-        if writer is not None:
-            writer.release()
+    else:
+        partial = out.with_name(f".{out.stem}.partial{out.suffix}")
+        writer: _Video | None = None
+        try:
+            size = None
+            for picture in pictures:
+                if writer is None:
+                    size = (picture.image.shape[0] // 2 * 2, picture.image.shape[1] // 2 * 2)
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                    writer = _Video(partial, suffix, size[1], size[0], fps)
+                assert size is not None  # set with the writer
+                writer.write(_fitted(picture.image, size))
+                count += 1
+            if writer is not None:
+                writer.close()
+                partial.replace(out)
+        finally:
+            if writer is not None:
+                writer.abandon()
+            partial.unlink(missing_ok=True)
     if count == 0:
         raise OverlayError(f"nothing to draw: no frame in the bag (nothing written to {out})")
     return count, out
+
+
+def _fitted(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` cropped or padded (black, at the bottom and right) to ``size`` (height, width):
+    every frame of a video has the first one's size."""
+    if image.shape[:2] == size:
+        return image
+    out = np.zeros((*size, 3), np.uint8)
+    h, w = min(size[0], image.shape[0]), min(size[1], image.shape[1])
+    out[:h, :w] = image[:h, :w]
+    return out
+
+
+class _Video:
+    """A video being written: H.264 MP4 or VP9 WebM through imageio-ffmpeg's ffmpeg (yuv420p,
+    ``+faststart``: browsers and chat tools play it inline), MJPEG AVI through OpenCV."""
+
+    def __init__(self, path: Path, suffix: str, width: int, height: int, fps: float):
+        self.path = path
+        self._cv = None
+        self._ffmpeg = None
+        codec = VIDEO_SUFFIXES[suffix]
+        if suffix == ".avi":
+            self._cv = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*codec), fps, (width, height))
+            if not self._cv.isOpened():
+                raise OverlayError(f"{path}: OpenCV cannot write {codec} here; give a .mp4 name, or a folder "
+                                   f"to write PNG frames")
+            return
+        try:
+            import imageio_ffmpeg
+        except ImportError as err:
+            raise OverlayError(f"{path}: writing {suffix} needs imageio-ffmpeg (pip install imageio-ffmpeg; "
+                               f"make setup installs it), or give a folder to write PNG frames") from err
+        quality = ["-crf", "20", "-preset", "veryfast"] if suffix == ".mp4" else ["-crf", "32", "-b:v", "0"]
+        self._ffmpeg = imageio_ffmpeg.write_frames(
+            str(path), (width, height), fps=fps, codec=codec, pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
+            quality=None, macro_block_size=2, ffmpeg_log_level="error",
+            output_params=[*quality, *(["-movflags", "+faststart"] if suffix == ".mp4" else [])])
+        self._ffmpeg.send(None)
+
+    def write(self, rgb: np.ndarray) -> None:
+        if self._cv is not None:
+            self._cv.write(np.ascontiguousarray(rgb[:, :, ::-1]))
+            return
+        assert self._ffmpeg is not None  # one of the two writers is open
+        try:
+            self._ffmpeg.send(np.ascontiguousarray(rgb))
+        except (OSError, RuntimeError) as err:
+            raise OverlayError(f"{self.path}: ffmpeg failed: {err}") from err
+
+    def close(self) -> None:
+        """Finish the file (the encoder flushes its last frames)."""
+        if self._cv is not None:
+            self._cv.release()
+            self._cv = None
+        if self._ffmpeg is not None:
+            ffmpeg, self._ffmpeg = self._ffmpeg, None
+            try:
+                ffmpeg.close()
+            except (OSError, RuntimeError) as err:
+                raise OverlayError(f"{self.path}: ffmpeg failed: {err}") from err
+
+    def abandon(self) -> None:
+        """Stop writing (a no-op after :meth:`close`)."""
+        try:
+            self.close()
+        except OverlayError:
+            pass
+
+
+def multiview_keys(bodies: int, truth: bool, extremities: bool) -> list[tuple[tuple[int, int, int], str]]:
+    """The legend of a multi-view video, the same on every picture: what each colour means
+    (:class:`~hmocap_ros.viz.overlay.Banner`), for ``bodies`` body ids and whether the bag has
+    ground truth and extremities."""
+    keys = []
+    if truth:
+        keys.append((TRUTH_COLOUR, "ground truth"))
+        if bodies:
+            keys.append((BODY_COLOURS[0], "tracked (joints by error)"))
+    else:
+        keys += [(BODY_COLOURS[k % len(BODY_COLOURS)], f"tracked b{k}") for k in range(bodies)]
+    if extremities:
+        keys.append((EXTREMITY_COLOUR, "detected extremities"))
+    return keys
+
+
+def depth_keys(truth: bool) -> list[tuple[tuple[int, int, int], str]]:
+    """The legend of a depth picture."""
+    return [(GESTURE_COLOUR, "detected gesture, score")] + ([(TRUTH_COLOUR, "true gesture")] if truth else [])
 
 
 def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, overrides: dict | None = None,
@@ -292,7 +405,7 @@ def render_overlay(bag, out, *, outputs=None, truth=None, track: bool = False, o
             if path is not None and not path.exists():
                 raise OverlayError(f"{path}: does not exist")
         if kind == "multiview":
-            pictures = multiview_pictures(bag, outputs, truth, tile_width=width or 480, max_frames=max_frames)
+            pictures = multiview_pictures(bag, outputs, truth, tile_width=width, max_frames=max_frames)
         else:
             pictures = depth_pictures(bag, outputs, truth, width=width or 640, max_frames=max_frames)
         return write_pictures(_reported(pictures, progress), Path(out), fps)
