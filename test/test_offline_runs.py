@@ -114,6 +114,7 @@ def test_track_writes_the_tracker_topics_with_the_frame_sets_stamps(tracked, tmp
         markers = {stamp_to_ns(m.msg.markers[0].header.stamp) for m in reader.messages(["/skeleton_markers"])}
         tf = {stamp_to_ns(m.msg.transforms[0].header.stamp): m.msg for m in reader.messages(["/tf"])}
         shapes = [m.msg for m in reader.messages([f"{b0}/body_shape"])]
+        rep155 = {t: _by_stamp(reader, f"{b0}/{t}") for t in ("skeleton2d", "roi", "position", "velocity")}
     assert {"/humans/bodies/tracked", f"{b0}/joint_states", f"{b0}/body_shape", "/body_shape",
             "/skeleton", "/skeleton_markers", "/tf"} <= set(topics)
     assert topics[f"{b0}/body_shape"].latched and topics["/body_shape"].latched
@@ -123,7 +124,15 @@ def test_track_writes_the_tracker_topics_with_the_frame_sets_stamps(tracked, tmp
     posed = {s for s, (_, msg) in ids.items() if list(msg.ids) == ["b0"]}
     assert posed and posed == set(joints) == set(skeletons) == set(tf)
     assert all(list(msg.ids) in ([], ["b0"]) for _, msg in ids.values())
-    assert all(len(js.name) == 30 and js.header.frame_id == "room" for _, js in joints.values())
+    # the URDF's joints first (robot_state_publisher's), then the tracker's 30 DoFs; and the
+    # rest of REP-155's per-body outputs, as the node publishes them
+    from hmocap_ros.body.human_description import urdf_joint_names
+    urdf_joints = urdf_joint_names("b0")
+    assert all(list(js.name[:len(urdf_joints)]) == urdf_joints and len(js.name) == len(urdf_joints) + 30
+               and js.header.frame_id == "room" for _, js in joints.values())
+    assert topics[f"{b0}/urdf"].latched and topics[f"{b0}/urdf"].count >= 1
+    assert set(rep155["position"]) == posed
+    assert all(rep155[t] and set(rep155[t]) <= posed for t in rep155), {t: len(v) for t, v in rep155.items()}
     # the body frames on /tf place every joint where the skeleton has it
     for stamp, (_, sk) in skeletons.items():
         pose = {"room": np.eye(4)}

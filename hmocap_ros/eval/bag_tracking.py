@@ -3,10 +3,13 @@
 Runs the code of the nodes (no DDS; deterministic for a ``seed``) over every frame set of a
 bag in the documented layout (:mod:`hmocap_ros.io.topics`; the rig from ``/camera_rig`` or
 ``rig_file``), and writes what ``body_tracker`` publishes
-(:class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages`): ``/humans/bodies/tracked``,
-``/humans/bodies/<id>/joint_states``, ``/humans/bodies/<id>/body_shape`` and ``/body_shape``
-(latched), ``/skeleton``, ``/skeleton_markers`` and ``/tf``, each stamped with its frame set's
-stamp and logged at it. With a method that uses detections (``dd-hpf``) the extremity
+(:class:`~hmocap_ros.tracking.tracker_messages.TrackerMessages` and
+:class:`~hmocap_ros.rep155.body_outputs.Rep155Outputs`): ``/humans/bodies/tracked``,
+``/humans/bodies/<id>/joint_states`` (the URDF's joints, then the tracker's DoFs),
+``/humans/bodies/<id>/urdf``, ``/humans/bodies/<id>/body_shape`` and ``/body_shape`` (latched),
+``/humans/bodies/<id>/skeleton2d``, ``roi``, ``position`` and ``velocity``, ``/skeleton``,
+``/skeleton_markers`` and ``/tf``, each stamped with its frame set's stamp and logged at it.
+With a method that uses detections (``dd-hpf``) the extremity
 detection (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`, the
 ``extremity_detection`` node's code, fed back the last skeleton as the node is) runs on every
 frame set too, and its ``/extremities`` go into the bag, with the landmark network on a fixed
@@ -212,6 +215,7 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
     from hmocap_ros.io.msg_factory import RosbagsFactory
     from hmocap_ros.io.rig_messages import rig_from_msg
     from hmocap_ros.params import replace_dotted
+    from hmocap_ros.rep155.body_outputs import Rep155Outputs
     from hmocap_ros.room_pipeline import RoomPipeline
     from hmocap_ros.segmentation import ForegroundParams
     from hmocap_ros.tracking.params import TrackerParams
@@ -274,11 +278,14 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
         total = max(available[t].count for t in read)
         factory = RosbagsFactory()
         builder = TrackerMessages(model, ids, rig.frame_id, factory, publish_tf=publish_tf)
+        rep155 = Rep155Outputs(ids, rig.frame_id, rig.cameras, factory)
         latched = {"/" + t for t in latched_topics(ids)}
         last_report = time.monotonic()
         with whole_bag(out) as writer:
             for topic in sorted(latched):
                 writer.add_topic(topic, "hmocap_interfaces/msg/BodyShape", LATCHED)
+            for body in ids:
+                writer.add_topic(f"/humans/bodies/{body}/urdf", "std_msgs/msg/String", LATCHED)
             for stamp, msgs in reader.frame_sets(read, int(SLOP_MS * 1e6), allow_partial=True,
                                                  min_topics=min(MIN_VIEWS, len(read))):
                 images = None
@@ -294,10 +301,13 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                     writer.write(EXTREMITIES_TOPIC, _extremities_msg(step.detections, stamp, rig.frame_id,
                                                                      factory), stamp)
                 results = step.results
-                built = builder.frame_set(int(stamp), results, [t.model for t in room.people.trackers])
+                models = [t.model for t in room.people.trackers]
+                built = builder.frame_set(int(stamp), results, models)
                 for error in built.errors:
                     warn(error)
-                for topic, msg in built.messages:
+                heights = [float(r.shape.height(m)) if r.shape is not None else float("nan")
+                           for r, m in zip(results, models)]
+                for topic, msg in rep155.messages(int(stamp), results, heights, built.messages):
                     writer.write(topic if topic.startswith("/") else "/" + topic, msg, stamp)
                 counts["frame_sets"] += 1
                 counts["with_pose"] += any(r.has_pose for r in results)
