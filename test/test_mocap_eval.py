@@ -170,9 +170,10 @@ def test_the_subject_is_scored_on_the_nearest_track():
     assert _subject_track([nobody, nobody], truth, 0, 0) == 0
 
 
-def write_tiny_bag(path: Path, n_empty: int, n_subject: int = 3) -> None:
+def write_tiny_bag(path: Path, n_empty: int, n_subject: int = 3, foreground: bool = False) -> None:
     """A 2-camera 160x120 bag in the documented layout: RGB images of a grey room with the
-    subject's silhouette painted in, exact silhouettes, skeleton, body shape."""
+    subject's silhouette painted in, exact silhouettes, skeleton, body shape; with
+    ``foreground``, the exact silhouettes as a recording's ``/<camera>/foreground`` too."""
     from hmocap_ros.geometry.projection import project_batch
     from hmocap_ros.render import render_silhouettes
 
@@ -210,6 +211,9 @@ def write_tiny_bag(path: Path, n_empty: int, n_subject: int = 3) -> None:
                           numpy_to_image(img, "rgb8", stamp, cam.frame_id, factory), stamp)
                 bag.write(topics.gt_silhouette(cam.name),
                           numpy_to_image(mask, "mono8", stamp, cam.frame_id, factory), stamp)
+                if foreground:
+                    bag.write(topics.camera_foreground(cam.name),
+                              numpy_to_image(mask, "mono8", stamp, cam.frame_id, factory), stamp)
             if j >= 0:
                 bag.write(topics.GT_SKELETON, factory.make(
                     "hmocap_interfaces/msg/Skeleton", header=make_header(factory, stamp, "room"),
@@ -333,3 +337,23 @@ def test_eval_tracks_with_a_given_rig(tmp_path, capsys):
     capsys.readouterr()
     assert run_eval([str(DEMO_BAG), "--method", "hpf", "--rig", str(tmp_path / "other.yaml")]) == 2
     assert "are not the bag's" in capsys.readouterr().err
+
+
+def test_eval_takes_a_recordings_masks_as_hmocap_track_does(tmp_path, capsys):
+    """--silhouettes masks evaluates on the bag's /<camera>/foreground; auto takes them first,
+    as hmocap track does; a bag without them is refused in one line."""
+    bag = tmp_path / "recorded.mcap"
+    write_tiny_bag(bag, n_empty=2, foreground=True)
+    out = tmp_path / "r.json"
+    for choice in ("masks", "auto"):
+        assert run_eval([str(bag), "--json", str(out), *SMALL_BUDGET, "--silhouettes", choice,
+                         "--method", "hpf-apo", "--param", "startup.min_views=2"]) == 0
+        report = json.loads(out.read_text())
+        assert report["silhouettes"] == "masks", choice
+        assert report["methods"]["hpf-apo"]["frames_with_pose"] == 3
+    plain = tmp_path / "plain.mcap"
+    write_tiny_bag(plain, n_empty=2)
+    capsys.readouterr()
+    assert run_eval([str(plain), "--json", str(out), "--silhouettes", "masks"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "no foreground topics" in err[-1] and "Traceback" not in "\n".join(err)

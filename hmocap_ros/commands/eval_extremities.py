@@ -11,6 +11,7 @@ from pathlib import Path
 
 from hmocap_ros.detection.detectors import detector_names
 from hmocap_ros.eval.extremity_eval import evaluate_extremities
+from hmocap_ros.eval.mocap_frames import SILHOUETTES
 
 __all__ = ["add_arguments", "main_from_args"]
 
@@ -19,8 +20,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", help="multi-view bag with ground truth (hmocap sim mocap)")
     parser.add_argument("--detector", choices=detector_names(), default="keypoints",
                         help="extremity detector (default keypoints)")
-    parser.add_argument("--silhouettes", choices=("fg", "gt"), default="fg",
-                        help="fg: segment the images (default); gt: the bag's exact silhouettes")
+    parser.add_argument("--silhouettes", choices=SILHOUETTES, default="fg",
+                        help="masks: the bag's /<camera>/foreground; fg: segment the images "
+                             "(default); gt: the bag's exact silhouettes; auto: the first the bag "
+                             "has")
     parser.add_argument("--frames", type=int, default=None,
                         help="at most this many frame sets with ground truth")
     parser.add_argument("--radius", type=float, default=0.10,

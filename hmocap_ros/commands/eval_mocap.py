@@ -18,6 +18,7 @@ from hmocap_ros.eval.mocap_eval import (
     tracker_overrides,
     unevaluated_methods,
 )
+from hmocap_ros.eval.mocap_frames import SILHOUETTES
 from hmocap_ros.tracking.methods import method_names
 
 __all__ = ["add_arguments", "main_from_args"]
@@ -34,8 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=None,
                         help="score at most this many frames with ground truth")
     parser.add_argument("--seed", type=int, default=0, help="seed of the tracker (default 0)")
-    parser.add_argument("--silhouettes", choices=("fg", "gt"), default="fg",
-                        help="fg: segment the images (default); gt: the bag's exact silhouettes")
+    parser.add_argument("--silhouettes", choices=SILHOUETTES, default="fg",
+                        help="masks: the bag's /<camera>/foreground; fg: segment the images "
+                             "(default); gt: the bag's exact silhouettes; auto: the first the bag "
+                             "has")
     parser.add_argument("--learn-from", choices=("empty_room", "person_masks"), default=None,
                         help="how the background model learns with fg (default: empty_room when "
                              "the bag starts with an empty room, else person_masks)")

@@ -1,7 +1,7 @@
 """``hmocap eval mocap``: replay a multi-view bag through the body tracker and score it.
 
     hmocap eval mocap BAG [--method kf-hpf|apf|hpf|hpf-apo|dd-hpf ...] [--compare] [--particles N]
-        [--layers L] [--frames N] [--seed S] [--silhouettes fg|gt] [--max-people N]
+        [--layers L] [--frames N] [--seed S] [--silhouettes auto|masks|fg|gt] [--max-people N]
         [--json OUT] [--plot OUT.png]
 
 No DDS: the bag is read with :class:`~hmocap_ros.io.bag_reader.BagReader` and every frame set
@@ -257,7 +257,8 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
 
     out = sys.stderr if out is None else out
     t0 = time.perf_counter()
-    print(f"{Path(bag).name}: reading the bag, segmenting the images"
+    print(f"{Path(bag).name}: reading the bag"
+          + (", segmenting the images" if silhouettes == "fg" else "")
           + (" and detecting extremities" if any(get_method(m).uses_detector for m in methods) else "")
           + " ...", file=out, flush=True)
     frames = load_frames(bag, silhouettes, max_frames, fg_params=fg_params, out=out,

@@ -22,9 +22,13 @@ if TYPE_CHECKING:
     from hmocap_ros.body import BodyShape
     from hmocap_ros.geometry.rig import Rig
 
-__all__ = ["BagFrames", "empty_room_frames", "load_frames"]
+__all__ = ["SILHOUETTES", "BagFrames", "empty_room_frames", "load_frames"]
 
 log = logging.getLogger(__name__)
+#: the silhouettes a bag's frames are evaluated on, as ``hmocap track`` takes them: auto (the
+#: first the bag has of the next three), masks (the bag's ``/<camera>/foreground``), fg (the
+#: images segmented), gt (the bag's exact silhouettes)
+SILHOUETTES = ("auto", "masks", "fg", "gt")
 
 
 @dataclass
@@ -196,8 +200,8 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                 detector=None, rig=None) -> BagFrames:
     """Read a bag, segment (or read) the silhouettes of every frame set, collect the truth.
 
-    max_frames: stop after this many frame sets with a ground-truth skeleton. fg_params:
-    ForegroundParams fields to override. The background is learnt as ``fg_params``'s
+    silhouettes: one of :data:`SILHOUETTES`. max_frames: stop after this many frame sets with
+    a ground-truth skeleton. fg_params: ForegroundParams fields to override. The background is learnt as ``fg_params``'s
     ``learn_from`` says, by default from the bag's empty-room frames (the frames before the
     first skeleton: ``learn_frames`` is set from them) and, in a bag without them, where the
     landmark network's person masks leave the room free (``person_masks``); ``empty_room``
@@ -215,8 +219,9 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
     given_rig = rig
     fg_params = dict(fg_params or {})
     learn_from = fg_params.pop("learn_from", None)
-    if silhouettes not in ("fg", "gt"):
-        raise ValueError("silhouettes must be 'fg' or 'gt'")
+    if silhouettes not in SILHOUETTES:
+        raise ValueError(f"silhouettes must be one of {', '.join(SILHOUETTES)}, "
+                         f"got {silhouettes!r}")
     with BagReader(bag) as reader:
         available = reader.topics(compressed_as_raw=True)
         rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
@@ -232,7 +237,12 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
         names = rig.names
         image_topics = [topics.camera_image(n) for n in names]
         gt_topics = [topics.gt_silhouette(n) for n in names]
+        mask_topics = [topics.camera_foreground(n) for n in names]
         present_images = [t for t in image_topics if t in available]
+        if silhouettes == "auto":  # the first the bag has, as hmocap track's
+            silhouettes = next((kind for kind, ts in (("masks", mask_topics), ("fg", image_topics),
+                                                      ("gt", gt_topics))
+                                if any(t in available for t in ts)), "fg")
         if not present_images and silhouettes == "fg":
             raise ValueError(f"{bag}: none of the image topics {image_topics} is in the bag")
         fallback = ""
@@ -251,11 +261,11 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                             "ground-truth silhouettes")
                 silhouettes = "gt"
                 print(f"hmocap eval mocap: {fallback}", file=out)
-        use = gt_topics if silhouettes == "gt" else image_topics
+        use = {"gt": gt_topics, "masks": mask_topics}.get(silhouettes, image_topics)
         use_present = [t for t in use if t in available]
         if not use_present:
-            raise ValueError(f"{bag}: no {'silhouette' if silhouettes == 'gt' else 'image'} "
-                             f"topics ({use})")
+            what = {"gt": "silhouette", "masks": "foreground"}.get(silhouettes, "image")
+            raise ValueError(f"{bag}: no {what} topics ({use})")
         bg = None
         if silhouettes == "fg":
             if learn_from == "empty_room":
