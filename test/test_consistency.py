@@ -99,6 +99,59 @@ def test_cli_checks_a_tracked_bag_and_writes_the_issue_keys(tmp_path, capsys, tr
     assert "a pose on 8 of 16 frame sets" in capsys.readouterr().out
 
 
+def _two_body_bag(path: Path) -> None:
+    """The demo bag's ground truth as body_0 and, 25 cm along the room's x axis, as body_1; a
+    third slot, body_2, that never tracked anybody."""
+    import copy
+
+    with BagReader(DEMO_BAG) as reader, whole_bag(path) as writer:
+        writer.add_topic("/body_shape", "hmocap_interfaces/msg/BodyShape", LATCHED)
+        for body in ("body_0", "body_1", "body_2"):
+            writer.add_topic(f"/humans/bodies/{body}/body_shape", "hmocap_interfaces/msg/BodyShape",
+                             LATCHED)
+            writer.add_topic(f"/humans/bodies/{body}/joint_states", "sensor_msgs/msg/JointState")
+        for item in reader.messages(["/ground_truth/skeleton", "/ground_truth/joint_states",
+                                     "/ground_truth/body_shape"]):
+            moved = copy.deepcopy(item.msg)
+            if item.topic.endswith("skeleton"):
+                moved.body_id = "body_1"
+                for p in moved.positions:
+                    p.x += 0.25
+                writer.write("/skeleton", item.msg, item.log_time_ns)
+                writer.write("/skeleton", moved, item.log_time_ns)
+            elif item.topic.endswith("joint_states"):
+                moved.position[list(moved.name).index("root_tx")] += 0.25
+                writer.write("/humans/bodies/body_0/joint_states", item.msg, item.log_time_ns)
+                writer.write("/humans/bodies/body_1/joint_states", moved, item.log_time_ns)
+            else:
+                moved.body_id = "body_1"
+                writer.write("/body_shape", item.msg, item.log_time_ns)
+                writer.write("/humans/bodies/body_0/body_shape", item.msg, item.log_time_ns)
+                writer.write("/humans/bodies/body_1/body_shape", moved, item.log_time_ns)
+
+
+def test_every_tracked_body_is_checked_and_the_frame_sets_counted_by_bodies(tmp_path, truth):
+    """Each body slot of the tracked bag gets its own figures under ``bodies`` (the first
+    body's also at the top level); the displaced body disagrees with the images, the slot that
+    tracked nobody has no pose; ``frames_with_bodies`` counts the frame sets by bodies posed."""
+    tracked = tmp_path / "two.mcap"
+    _two_body_bag(tracked)
+    out = tmp_path / "report.json"
+    assert main(["eval", "consistency", str(DEMO_BAG), "--tracked", str(tracked), "--json", str(out),
+                 "--frames", str(FRAMES), "--quiet"]) == 0
+    report = json.loads(out.read_text())
+    bodies = report["bodies"]
+    assert [b["body_id"] for b in bodies] == ["body_0", "body_1", "body_2"]
+    direct = consistency_report(DEMO_BAG, truth, max_frames=FRAMES)
+    for key in KEYS:
+        assert report[key] == pytest.approx(direct[key]), key
+    assert bodies[0]["reprojection_median_px"] == pytest.approx(direct["reprojection_median_px"])
+    assert bodies[1]["frames_with_pose"] == bodies[0]["frames_with_pose"] == FRAMES - 8
+    assert bodies[1]["reprojection_median_px"] > 2.5 * bodies[0]["reprojection_median_px"]
+    assert bodies[2]["frames_with_pose"] == 0 and bodies[2]["reprojection_median_px"] is None
+    assert report["frames_with_bodies"] == {"0": 8, "2": FRAMES - 8}
+
+
 def test_triangulated_points_fall_as_min_views_rises(tmp_path):
     # a point seen by 4 views is seen by 2: --min-views 4 keeps fewer points than 2, as some of
     # the body's joints are hidden from one or two of the 4 cameras (about 60 and 96 here)

@@ -65,4 +65,8 @@ def main_from_args(ns: argparse.Namespace) -> int:
           f"{show(report['silhouette_iou_mean'], '')}; "
           f"triangulation gap {show(report['triangulation_gap_mm'], ' mm')} "
           f"({report['triangulated_points']} points seen by >= {report['min_views']} views)")
+    for body in report["bodies"][1:]:
+        print(f"  {body['body_id']}: a pose on {body['frames_with_pose']} frame sets; reprojection median "
+              f"{show(body['reprojection_median_px'], ' px')} (p90 {show(body['reprojection_p90_px'], ' px')}); "
+              f"silhouette IoU {show(body['silhouette_iou_mean'], '')}")
     return 0

@@ -24,14 +24,17 @@ foreground from a background model per camera (``--learn-from``, default ``perso
 a recording without ground truth does not say that its room starts empty). Without
 ``--tracked`` the bag is tracked first with ``hmocap track``'s defaults
 (:func:`~hmocap_ros.eval.bag_tracking.track_to_bag`, into a temporary bag); with it, the tracked
-bag's first body (``/skeleton``, ``/humans/bodies/<id>/joint_states`` and ``body_shape``,
-:func:`~hmocap_ros.export.motion.read_motion`). A frame set is checked where the body has a
-skeleton at its stamp; a tracker that found nobody gives ``frames_with_pose`` 0 and null
-figures, not an error.
+bag's bodies (each slot with a ``/humans/bodies/<id>/joint_states`` topic; its ``/skeleton``
+messages and ``body_shape``, :func:`~hmocap_ros.export.motion.read_motion`). A body is checked
+on the frame sets where it has a skeleton at their stamp; a tracker that found nobody gives
+``frames_with_pose`` 0 and null figures, not an error.
 
-JSON (``--json``): ``frames``, ``frames_with_pose``, ``reprojection_median_px``,
-``reprojection_p90_px``, ``silhouette_iou_mean``, ``triangulation_gap_mm`` (median), and
-``per_joint``, ``per_view``, ``image_size``, ``keypoint_pairs``, ``triangulated_points``,
+JSON (``--json``): ``frames``; for the first body ``body_id``, ``frames_with_pose``,
+``reprojection_median_px``, ``reprojection_p90_px``, ``silhouette_iou_mean``,
+``triangulation_gap_mm`` (median), ``per_joint``, ``per_view``, ``keypoint_pairs``,
+``triangulated_points``; ``bodies``, every body's figures (those keys but the per-joint and
+per-view ones); ``frames_with_bodies``, the number of frame sets with each count of bodies
+with a pose (``{"0": 3, "1": 97}``); ``image_size``,
 ``tracked`` (the ``--tracked`` bag, null when tracked here) and ``tracking`` (the on-the-fly
 run's frame sets, frame sets with a body, foreground source and notes). ``--picture``: each view
 of a few frame sets with the foreground's outline (green), the rendered body's (magenta), the
@@ -40,7 +43,9 @@ Pixels are those of the bag's images.
 """
 from __future__ import annotations
 
+import re
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -162,24 +167,96 @@ _BONES = (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"),
           *((f"{s}_knee", f"{s}_ankle") for s in ("left", "right")))
 
 
+class _Scores:
+    """One body's checks, accumulated over the frame sets where it has a pose."""
+
+    def __init__(self, body: _Body, names: Sequence[str]):
+        self.body = body
+        self.labels = list(body.joints)
+        self.names = list(names)
+        self.reproj: dict[tuple[str, str], list[float]] = {(label, name): [] for label in self.labels
+                                                           for name in self.names}
+        self.gaps: dict[str, list[float]] = {label: [] for label in self.labels}
+        self.ious: dict[str, list[float]] = {name: [] for name in self.names}
+        self.n_pose = 0
+
+    def add(self, found, cameras, pixels, weights, keypoints, foregrounds, params, min_views: int):
+        """Score one frame set's pose ``found`` (:meth:`_Body.at`); returns its projected joints
+        and rendered silhouettes (for the picture)."""
+        from hmocap_ros.detection.keypoint_triangulation import TRIANGULATED_POINTS
+        from hmocap_ros.geometry.projection import project_points
+        from hmocap_ros.render import render_silhouettes
+
+        self.n_pose += 1
+        joints, vertices = found
+        points = np.array([joints[label] for label in self.labels])
+        projected = project_points(cameras, points)
+        rendered: list[np.ndarray | None] = [None] * len(cameras)
+        if vertices is not None:
+            mesh = project_points(cameras, vertices)
+            for k, camera in enumerate(cameras):
+                if np.all(mesh.depth[k] > 0):
+                    rendered[k] = render_silhouettes(mesh.pixels[k], self.body.model.faces,
+                                                     camera.height, camera.width)
+        for k, name in enumerate(self.names):
+            for j, label in enumerate(self.labels):
+                p = TRIANGULATED_POINTS.index(label)
+                if weights[k, p] >= params.confident_visibility and projected.depth[k, j] > 0:
+                    self.reproj[(label, name)].append(
+                        float(np.linalg.norm(projected.pixels[k, j] - pixels[k, p])))
+            silhouette, foreground = rendered[k], foregrounds[k]
+            if silhouette is not None and foreground is not None:
+                iou = silhouette_iou(silhouette, foreground)
+                if iou is not None:
+                    self.ious[name].append(iou)
+        triangulated = dict(zip(keypoints.labels, zip(keypoints.positions, keypoints.views_used)))
+        for label in self.labels:
+            if label in triangulated and triangulated[label][1] >= min_views:
+                self.gaps[label].append(1000.0 * float(np.linalg.norm(
+                    triangulated[label][0] - joints[label])))
+        return projected, rendered
+
+    def summary(self) -> dict:
+        """The body's figures (module docstring's JSON keys)."""
+        every_error = [e for values in self.reproj.values() for e in values]
+        every_gap = [g for values in self.gaps.values() for g in values]
+        every_iou = [v for values in self.ious.values() for v in values]
+        overall = _stats(every_error)
+        labels, names = self.labels, self.names
+        return {
+            "body_id": self.body.motion.body_id,
+            "frames_with_pose": self.n_pose,
+            "reprojection_median_px": overall["median"],
+            "reprojection_p90_px": overall["p90"],
+            "silhouette_iou_mean": float(np.mean(every_iou)) if every_iou else None,
+            "triangulation_gap_mm": _stats(every_gap)["median"],
+            "keypoint_pairs": overall["count"],
+            "triangulated_points": len(every_gap),
+            "per_joint": {label: {"reprojection": _stats([e for n in names for e in self.reproj[(label, n)]]),
+                                  "triangulation_gap_mm": _stats(self.gaps[label])} for label in labels},
+            "per_view": {name: {"reprojection": _stats([e for label in labels
+                                                        for e in self.reproj[(label, name)]]),
+                                "silhouette_iou_mean": (float(np.mean(self.ious[name]))
+                                                        if self.ious[name] else None)}
+                         for name in names},
+        }
+
+
 def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_views: int = 3,
                        max_frames: int | None = None, picture: Path | None = None,
                        progress=None) -> dict:
-    """The checks of the module docstring for ``bag`` and a tracked body's ``motion``
-    (:class:`~hmocap_ros.export.motion.BodyMotion`)."""
+    """The checks of the module docstring for ``bag`` and the tracked bodies' ``motion`` (a
+    :class:`~hmocap_ros.export.motion.BodyMotion`, or a list of them, the first body first)."""
     from hmocap_ros.detection.keypoint_triangulation import TRIANGULATED_POINTS, triangulate_views, view_keypoints
     from hmocap_ros.detection.params import KeypointParams
-    from hmocap_ros.geometry.projection import project_points
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_reader import BagReader
     from hmocap_ros.io.image_codec import decoded_rgb
     from hmocap_ros.io.rig_messages import rig_from_msg
-    from hmocap_ros.render import render_silhouettes
     from hmocap_ros.segmentation import ForegroundParams, background_models
     from hmocap_ros.segmentation.person_masks import PersonMasks
 
-    body = _Body(motion)
-    labels = list(body.joints)
+    motions = list(motion) if isinstance(motion, (list, tuple)) else [motion]
     params = KeypointParams()
     with BagReader(bag) as reader:
         available = reader.topics(compressed_as_raw=True)
@@ -190,16 +267,15 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
         present = [t for t in image_topics if t in available]
         if not present:
             raise ConsistencyError(f"{bag}: none of the image topics {', '.join(image_topics)}")
+        scores = [_Scores(_Body(m), rig.names) for m in motions]
         fg_models = background_models(ForegroundParams(learn_from=learn_from), rig.names)
         masks = PersonMasks(threads=params.threads)
         total = max(available[t].count for t in present)
         if max_frames is not None:
             total = min(total, max_frames)
         chosen = set(np.linspace(0, max(total - 1, 0), PICTURE_FRAMES).round().astype(int).tolist())
-        reproj: dict[tuple[str, str], list[float]] = {(label, name): [] for label in labels for name in rig.names}
-        gaps: dict[str, list[float]] = {label: [] for label in labels}
-        ious: dict[str, list[float]] = {name: [] for name in rig.names}
-        n_frames = n_pose = 0
+        n_frames = 0
+        with_bodies: dict[int, int] = {}
         rows = []
         for stamp, msgs in reader.frame_sets(present, 0, allow_partial=True, min_topics=1):
             images = [decoded_rgb(msgs[t]) if t in msgs else None for t in image_topics]
@@ -214,38 +290,18 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                 views.append(masks.segment(name, image)[0])
             pixels, weights = view_keypoints(rig.cameras, views, foregrounds, params)
             keypoints = triangulate_views(rig.cameras, views, foregrounds, None, params)
-            found = body.at(stamp)
             n_frames += 1
+            posed = 0
             tiles = []
-            if found is not None:
-                n_pose += 1
-                joints, vertices = found
-                points = np.array([joints[label] for label in labels])
-                projected = project_points(rig.cameras, points)
-                rendered: list[np.ndarray | None] = [None] * len(rig)
-                if vertices is not None:
-                    mesh = project_points(rig.cameras, vertices)
-                    for k, camera in enumerate(rig):
-                        if np.all(mesh.depth[k] > 0):
-                            rendered[k] = render_silhouettes(mesh.pixels[k], body.model.faces,
-                                                             camera.height, camera.width)
-                for k, name in enumerate(rig.names):
-                    for j, label in enumerate(labels):
-                        p = TRIANGULATED_POINTS.index(label)
-                        if weights[k, p] >= params.confident_visibility and projected.depth[k, j] > 0:
-                            reproj[(label, name)].append(
-                                float(np.linalg.norm(projected.pixels[k, j] - pixels[k, p])))
-                    silhouette, foreground = rendered[k], foregrounds[k]
-                    if silhouette is not None and foreground is not None:
-                        iou = silhouette_iou(silhouette, foreground)
-                        if iou is not None:
-                            ious[name].append(iou)
-                triangulated = dict(zip(keypoints.labels, zip(keypoints.positions, keypoints.views_used)))
-                for label in labels:
-                    if label in triangulated and triangulated[label][1] >= min_views:
-                        gaps[label].append(1000.0 * float(np.linalg.norm(
-                            triangulated[label][0] - joints[label])))
-                if picture is not None and n_frames - 1 in chosen:
+            for b, body_scores in enumerate(scores):
+                found = body_scores.body.at(stamp)
+                if found is None:
+                    continue
+                posed += 1
+                projected, rendered = body_scores.add(found, rig.cameras, pixels, weights, keypoints,
+                                                      foregrounds, params, min_views)
+                if b == 0 and picture is not None and n_frames - 1 in chosen:
+                    labels = body_scores.labels
                     for k in range(len(rig)):
                         if images[k] is None:
                             continue
@@ -254,6 +310,7 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                         tiles.append(_tile(images[k], foregrounds[k], rendered[k], pixels[k],
                                            weights[k] * (weights[k] >= params.confident_visibility),
                                            TRIANGULATED_POINTS, joint_pixels, _BONES))
+            with_bodies[posed] = with_bodies.get(posed, 0) + 1
             if tiles:
                 rows.append(tiles)
             if progress is not None:
@@ -262,50 +319,54 @@ def consistency_report(bag, motion, *, learn_from: str = "person_masks", min_vie
                 break
     if picture is not None and rows:
         _picture(Path(picture), rows)
-    every_error = [e for values in reproj.values() for e in values]
-    every_gap = [g for values in gaps.values() for g in values]
-    every_iou = [v for values in ious.values() for v in values]
-    overall = _stats(every_error)
+    bodies = [s.summary() for s in scores]
+    first = {k: v for k, v in bodies[0].items()}
     return {
         "bag": str(bag),
-        "tracked": str(motion.bag),
-        "body_id": motion.body_id,
+        "tracked": str(motions[0].bag),
+        **{k: first[k] for k in ("body_id", "frames_with_pose", "reprojection_median_px",
+                                 "reprojection_p90_px", "silhouette_iou_mean",
+                                 "triangulation_gap_mm", "keypoint_pairs", "triangulated_points")},
         "frames": n_frames,
-        "frames_with_pose": n_pose,
-        "reprojection_median_px": overall["median"],
-        "reprojection_p90_px": overall["p90"],
-        "silhouette_iou_mean": float(np.mean(every_iou)) if every_iou else None,
-        "triangulation_gap_mm": _stats(every_gap)["median"],
-        "keypoint_pairs": overall["count"],
-        "triangulated_points": len(every_gap),
         "min_views": int(min_views),
         "image_size": {name: [c.width, c.height] for name, c in zip(rig.names, rig)},
         "learn_from": learn_from,
-        "per_joint": {label: {"reprojection": _stats([e for n in rig.names for e in reproj[(label, n)]]),
-                              "triangulation_gap_mm": _stats(gaps[label])} for label in labels},
-        "per_view": {name: {"reprojection": _stats([e for label in labels for e in reproj[(label, name)]]),
-                            "silhouette_iou_mean": float(np.mean(ious[name])) if ious[name] else None}
-                     for name in rig.names},
+        "per_joint": first["per_joint"],
+        "per_view": first["per_view"],
+        "bodies": [{k: v for k, v in body.items() if k not in ("per_joint", "per_view")}
+                   for body in bodies],
+        "frames_with_bodies": {str(k): v for k, v in sorted(with_bodies.items())},
     }
 
 
-def _tracked_motion(path, name: str):
-    """The first body of body_tracker's output bag ``path``; a motion without frames when the
-    tracker found nobody (its ``/humans/bodies/tracked`` there, no ``/skeleton``)."""
-    from hmocap_ros.export.motion import BodyMotion, read_motion
+def _tracked_motions(path, name: str) -> list:
+    """Every body slot of body_tracker's output bag ``path`` (those with a
+    ``/humans/bodies/<id>/joint_states`` topic, the first body first), each a motion without
+    frames where the tracker never followed anybody in it."""
+    from hmocap_ros.export.motion import BodyMotion, ExportError, read_motion
     from hmocap_ros.io.bag_reader import BagReader
 
     with BagReader(path) as reader:
         available = reader.topics()
-    if "/skeleton" in available:
-        return read_motion(path, "tracked")
-    if "/humans/bodies/tracked" not in available:
+    if "/skeleton" not in available and "/humans/bodies/tracked" not in available:
         raise ConsistencyError(f"{name}: not body_tracker's output (no /skeleton, no "
                                f"/humans/bodies/tracked; make it with hmocap track)")
-    return BodyMotion(bag=Path(path), source="tracked", body_id="b0",
-                      stamps_ns=np.zeros(0, np.int64), point_names=(), parents=np.zeros(0, int),
-                      points=np.zeros((0, 0, 3)), dof_stamps_ns=np.zeros(0, np.int64),
-                      dof_names=(), dofs=np.zeros((0, 0)))
+    slots = [m.group(1) for t in available
+             if (m := re.fullmatch(r"/humans/bodies/([^/]+)/joint_states", t))]
+    ids = sorted(slots, key=lambda b: (len(b), b)) or ["b0"]
+    out = []
+    for body in ids:
+        try:
+            out.append(read_motion(path, "tracked", body) if "/skeleton" in available else None)
+        except ExportError:
+            out.append(None)
+        if out[-1] is None:
+            out[-1] = BodyMotion(bag=Path(path), source="tracked", body_id=body,
+                                 stamps_ns=np.zeros(0, np.int64), point_names=(),
+                                 parents=np.zeros(0, int), points=np.zeros((0, 0, 3)),
+                                 dof_stamps_ns=np.zeros(0, np.int64), dof_names=(),
+                                 dofs=np.zeros((0, 0)))
+    return out
 
 
 def evaluate_consistency(bag, tracked=None, *, learn_from: str = "person_masks",
@@ -322,10 +383,10 @@ def evaluate_consistency(bag, tracked=None, *, learn_from: str = "person_masks",
             with tempfile.TemporaryDirectory(prefix="hmocap_consistency_") as folder:
                 out = Path(folder) / "tracked.mcap"
                 tracking = track_to_bag(bag, out, max_frames=max_frames)
-                motion = _tracked_motion(out, f"{bag} tracked")
+                motion = _tracked_motions(out, f"{bag} tracked")
         else:
             tracking = None
-            motion = _tracked_motion(tracked, str(tracked))
+            motion = _tracked_motions(tracked, str(tracked))
     except (TrackError, ExportError, BagReadError) as error:
         raise ConsistencyError(str(error)) from None
     try:
