@@ -13,6 +13,7 @@ checks the images' and masks' sizes and times the detector.
 """
 from __future__ import annotations
 
+import inspect
 import logging
 import time
 from dataclasses import dataclass
@@ -67,6 +68,8 @@ class ExtremityPipeline:
         #: the registered detector ``detector`` names (:mod:`.detectors`)
         self.detector: ExtremityDetector = get_detector(p.detector)(self.cameras, p,
                                                                     model_path)
+        # a detector whose detect() takes no stamps (they are optional in the protocol)
+        self._takes_stamps = "stamp_ns" in inspect.signature(self.detector.detect).parameters
         self.last_seconds = 0.0
 
     def report_other_stages(self, seconds: float) -> None:
@@ -97,8 +100,11 @@ class ExtremityPipeline:
             raise ValueError(f"expected {len(self.cameras)} images and masks, got "
                              f"{len(images)} and {len(masks)}")
         images, masks = _checked(self.cameras, images, masks)
-        out = self.detector.detect(images, masks, previous, stamp_ns=stamp_ns,
-                                   previous_stamp_ns=previous_stamp_ns)
+        if self._takes_stamps:
+            out = self.detector.detect(images, masks, previous, stamp_ns=stamp_ns,
+                                       previous_stamp_ns=previous_stamp_ns)
+        else:
+            out = self.detector.detect(images, masks, previous)
         self.last_seconds = time.perf_counter() - t0
         return out
 

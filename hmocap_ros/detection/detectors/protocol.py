@@ -40,7 +40,8 @@ class ExtremityDetector(Protocol):
         foreground mask (H, W) at the rig's resolution, either None where missing (the
         pipeline checked their sizes); ``previous`` the last skeleton, label -> (3,) room
         position, or None; ``stamp_ns`` and ``previous_stamp_ns`` the frame set's and the
-        skeleton's stamps (None: unknown), for a detector that carries work between sets."""
+        skeleton's stamps (None: unknown), for a detector that carries work between sets (a
+        detector without these two parameters is called without them)."""
 
     def reset(self) -> None:
         """Forget what was carried from frame set to frame set (a recording that starts
