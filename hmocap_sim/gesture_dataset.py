@@ -10,6 +10,7 @@ topic                       type                                    content
 ``/depth/image_raw``        sensor_msgs/Image 16UC1                 millimetres, 0 = invalid
 ``/depth/camera_info``      sensor_msgs/CameraInfo                  fx = fy = 575 at 640x480
 ``/ground_truth/gestures``  hmocap_interfaces/GestureArray          zero or one Gesture
+``/ground_truth/near_misses`` hmocap_interfaces/GestureArray        zero or one near miss
 ==========================  ======================================  ==========================
 
 frame_id is ``depth_optical_frame`` everywhere.  A Gesture is present while a subject holds
@@ -21,7 +22,10 @@ contact point), ``position`` the 3D point of the person's surface seen at that p
 clean z-buffer depth, back-projected), in metres in the optical frame.  When the reference
 point is hidden (by the person's own body, e.g. a hand turned away, or anything else) or
 outside the image, the Gesture keeps its class and (u, v) but ``position_valid`` is false:
-evaluators should neither reward nor penalise a detection in such frames.
+evaluators should neither reward nor penalise a detection in such frames. On a near-miss
+frame (background), ``/ground_truth/near_misses`` holds one Gesture with the near-miss kind as
+its name, the class of the gesture it misses and that gesture's reference pixel: the hand
+that is almost the gesture, where training draws hard background samples.
 
 Sequence: the frames are split evenly between ``--subjects`` subjects with identities
 ``--subject-offset`` .. ``+ subjects - 1`` (a subject's body and clothing depend on its id
@@ -78,6 +82,7 @@ from hmocap_sim.gesture_labels import (
     frame_record,
     gesture_array,
     ground_truth,
+    near_miss_truth,
 )
 from hmocap_sim.gesture_takes import (
     HOLD_FRAMES,
@@ -205,6 +210,8 @@ class _FrameWriter:
                        stamp)
         self.bag.write(topics.DEPTH_INFO, dict_to_camera_info(cam.to_camera_info_dict(), stamp, factory), stamp)
         self.bag.write(topics.GT_GESTURES, gesture_array(factory, stamp, cam.frame_id, gt), stamp)
+        near = near_miss_truth(model, actor, state, layout)
+        self.bag.write(topics.GT_NEAR_MISSES, gesture_array(factory, stamp, cam.frame_id, near), stamp)
         self.records.append(frame_record(model, self.index, stamp, subject_id, scene.layout_id, state, gt, cam))
         self.index += 1
         self.stamp += self.period

@@ -23,7 +23,8 @@ NEGATIVE_WEIGHTS = {"idle": 2.0, "walk": 1.5, "random_arms": 2.0, "fold_arms": 1
 #: :mod:`hmocap_sim.gesture_near_misses`).
 NEAR_MISSES = {
     "tee_apart": "tee", "tee_fist": "tee",
-    "pause_curled": "pause", "pause_sideways": "pause", "pause_half": "pause",
+    "pause_curled": "pause", "pause_one_bent": "pause", "pause_together": "pause", "pause_tilted": "pause",
+    "pause_sideways": "pause", "pause_half": "pause",
     "silence_cheek": "silence", "silence_bent": "silence",
     "cross_apart": "cross", "cross_one": "cross",
     "ok_open": "ok", "ok_closed": "ok",

@@ -1,5 +1,7 @@
 """Ground truth of the gesture bag: the label of a frame (class, reference pixel, surface
-point, visibility), its ``/ground_truth/gestures`` message and its record in the labels JSON.
+point, visibility), its ``/ground_truth/gestures`` message and its record in the labels JSON;
+on a near-miss frame, where the hand that is almost a gesture is (:func:`near_miss_truth`, the
+``/ground_truth/near_misses`` message): training draws its hard background samples there.
 
 The reference point (:func:`hmocap_sim.gesture_set.reference_point`) is projected to get
 the pixel (u, v); the 3D position is the clean z-buffer depth at that pixel, back-projected,
@@ -59,6 +61,25 @@ def ground_truth(model, actor: Actor, state: FrameState, layout: Layout, render,
     gt.visible = bool(on_person and np.isfinite(z) and abs(z - depth) < SURFACE_TOLERANCE_M)
     gt.position = pixel_to_optical(cam, u, v, z if gt.visible else float(depth)).tolist()
     return gt
+
+
+def near_miss_truth(model, actor: Actor, state: FrameState, layout: Layout) -> GroundTruth:
+    """Where a near miss is: the reference point of the gesture it misses
+    (:data:`~hmocap_sim.gesture_kinds.NEAR_MISSES`), projected; ``class_id`` is that gesture's,
+    ``name`` the near-miss kind, ``visible`` whether the point projects into the image in front
+    of the camera. A frame that is no near miss (or the transition into one) gets an empty
+    :class:`GroundTruth`."""
+    missed = gs.NEAR_MISSES.get(state.kind)
+    if missed is None or not state.side or state.phase == "transition":
+        return GroundTruth()
+    cam = layout.camera
+    kin = gs.kinematics(model, actor.subject, state.params)
+    ref = gs.reference_point(model, kin, missed, state.side)[0]
+    pix, depth = cam.project(ref)
+    u, v = float(pix[0]), float(pix[1])
+    inside = bool(cam.in_image(pix) and depth > 0)
+    return GroundTruth(gs.class_id(missed), state.kind, u, v,
+                       pixel_to_optical(cam, u, v, float(depth)).tolist(), inside)
 
 
 def gesture_array(factory, stamp_ns: int, frame_id: str, gt: GroundTruth):

@@ -14,6 +14,9 @@ kind                misses       what is wrong
 tee_apart           tee          the top hand 9-15 cm above the stem's fingertips, not on them
 tee_fist            tee          the top hand a fist
 pause_curled        pause        the four fingers bent (knuckles 60-90 deg, middle joints 40-70), not open
+pause_one_bent      pause        one of the four fingers bent to the palm (a finger missing from the open hand)
+pause_together      pause        the fingers together (a flat hand, no spread) where pause spreads them
+pause_tilted        pause        the palm tilted 45-75 deg up or down about the forearm's lateral axis
 pause_sideways      pause        the open hand turned 65-110 deg in its plane (fingers sideways)
 pause_half          pause        the arm half raised: the palm 30-45 cm lower, below the shoulder
 silence_cheek       silence      the finger on the cheek, 4-7 cm beside the mouth
@@ -90,6 +93,29 @@ def _pause_curled(c: PoseContext) -> list:
         c.params[m.dof_index(f"{c.side}_{f}1_flex")] = np.deg2rad(c.rng.uniform(60, 90))
         c.params[m.dof_index(f"{c.side}_{f}2_flex")] = np.deg2rad(c.rng.uniform(40, 70))
     return stages
+
+
+def _pause_one_bent(c: PoseContext) -> list:
+    stages = GESTURES["pause"].build(c)
+    m = c.model.skeleton
+    f = ("index", "middle", "ring", "pinky")[int(c.rng.integers(4))]
+    for k, (lo, hi) in zip((1, 2, 3), ((75, 95), (85, 105), (45, 65))):
+        c.params[m.dof_index(f"{c.side}_{f}{k}_flex")] = np.deg2rad(c.rng.uniform(lo, hi))
+    return stages
+
+
+def _pause_together(c: PoseContext) -> list:
+    stages = GESTURES["pause"].build(c)
+    set_hand(c.model, c.params, c.side, "flat", c.rng, 3.0)
+    return stages
+
+
+def _pause_tilted(c: PoseContext) -> list:
+    stages = GESTURES["pause"].build(c)
+    angle = c.rng.uniform(45, 75) * (1 if c.rng.random() < 0.5 else -1)
+    # the palm's normal and the fingers turn together about the body's lateral axis
+    return _map_tasks(stages, lambda t: replace(t, target=_spin(t.target, c.lateral, angle), weight=0.3)
+                      if t.kind == "axis" and t.a in (f"{c.side}_volar", f"{c.side}_d") else t)
 
 
 def _pause_sideways(c: PoseContext) -> list:
@@ -200,7 +226,8 @@ def _raised_open(c: PoseContext) -> list:
 #: Builders of the near-miss kinds, in the order of :data:`~hmocap_sim.gesture_kinds.NEAR_MISSES`.
 NEAR_MISS_BUILDERS = {
     "tee_apart": _tee_apart, "tee_fist": _tee_fist,
-    "pause_curled": _pause_curled, "pause_sideways": _pause_sideways, "pause_half": _pause_half,
+    "pause_curled": _pause_curled, "pause_one_bent": _pause_one_bent, "pause_together": _pause_together,
+    "pause_tilted": _pause_tilted, "pause_sideways": _pause_sideways, "pause_half": _pause_half,
     "silence_cheek": _silence_cheek, "silence_bent": _silence_bent,
     "cross_apart": _cross_apart, "cross_one": _cross_one,
     "ok_open": _ok_open, "ok_closed": _ok_closed,

@@ -12,7 +12,8 @@ asks:
 - ``rehearse``: holds the known gesture the status names (``rehearsed``) in the box, as above;
 - ``release``: blends back to standing;
 - ``do_negatives``: takes of near misses of the taught gesture (a third of them:
-  :data:`~hmocap_sim.gesture_set.NEAR_MISSES`, what the instruction asks for), of everyday
+  :data:`~hmocap_sim.gesture_set.NEAR_MISSES`, what the instruction asks for, with the
+  missed gesture's reference point moved to the box centre as for a held gesture), of everyday
   motions (:data:`~hmocap_sim.gesture_set.NEGATIVE_KINDS`) and of the simulator's gestures
   the forest does not know, as the bag simulator draws them
   (:func:`~hmocap_sim.gesture_takes.take_frames`, poses at 10 fps blended to the
@@ -31,6 +32,8 @@ gestures`` trains offline on exactly the frames of a session (thesis sec. 3.4.2)
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -135,17 +138,21 @@ class GestureTeacher:
         pose = gs.place(self.model, lerp_pose(self.model, a, b, t), x, z, yaw)
         return self._in_box(pose, g, side, status.box)
 
-    def _negative_take(self, known, taught: str) -> list:
+    def _negative_take(self, known, taught: str, box) -> list:
         """Poses of one negative take at the frame rate (10 fps takes blended): a near miss of the
-        taught gesture (one take in :data:`NEAR_MISS_SHARE`, when the simulator has them), else
-        an everyday motion or a gesture the forest does not know."""
+        taught gesture (one take in :data:`NEAR_MISS_SHARE`, when the simulator has them) in the
+        box, else an everyday motion or a gesture the forest does not know."""
         near = gs.near_misses_of((taught,))
-        if near and self.rng.random() < NEAR_MISS_SHARE:
+        in_box = bool(near) and self.rng.random() < NEAR_MISS_SHARE
+        if in_box:
             kind = str(near[int(self.rng.integers(len(near)))])
         else:
             kinds = [k for k in gs.NEGATIVE_KINDS] + [g for g in gs.ALL_GESTURES if g not in known]
             kind = str(kinds[int(self.rng.integers(len(kinds)))])
         states = take_frames(self.model, self.actor, kind, self.layout, self.rng, 0, (8, 12))
+        if in_box:
+            states = [replace(s, params=self._in_box(s.params, taught, s.side, box)) if s.side else s
+                      for s in states]
         k = max(1, int(round(self.fps / 10.0)))
         poses, prev = [], self.actor.params
         for s in states:
@@ -186,7 +193,7 @@ class GestureTeacher:
             return self._held_pose(status)
         if mode == "negatives":
             known = set(status.known_gestures) | {g}
-            self.queue = self._negative_take(known, g)
+            self.queue = self._negative_take(known, g, status.box)
             return self.queue.pop(0)
         return self.actor.params
 

@@ -250,3 +250,21 @@ def test_eval_gestures_on_a_bag_without_depth_is_one_line(tmp_path, capsys):
                                                                      "stride=x"])) == 2
     assert "--param" in capsys.readouterr().err
     assert not (tmp_path / "r.json").exists()
+
+
+def test_eval_sets_each_gestures_threshold_from_the_bags(tmp_path, tiny_bag, capsys):
+    model, out = tmp_path / "tiny.npz", tmp_path / "with_thresholds.npz"
+    argv = [tiny_bag, "--out", model, "--trees", 2, "--depth", 8, "--samples-per-class", 300, "--quiet"]
+    assert train_gestures.main_from_args(command_args(train_gestures, argv)) == 0
+    argv = [tiny_bag, "--model", model, "--json", tmp_path / "e.json", "--threshold-bags", tiny_bag]
+    assert eval_gestures.main_from_args(command_args(eval_gestures, argv)) == 2
+    assert "--set-thresholds" in capsys.readouterr().err
+    argv += ["--set-thresholds", out, "--max-false-per-minute", 3, "--min-recall", 0]
+    assert eval_gestures.main_from_args(command_args(eval_gestures, argv)) == 0
+    forest = load_forest(out)
+    chosen = forest.meta["gesture_thresholds"]
+    assert set(chosen) == set(GESTURE_CLASSES) and all(0.1 <= t <= 1.0 for t in chosen.values())
+    assert forest.meta["threshold_curves"]["bags"] == [str(tiny_bag)] * 2
+    result = json.loads((tmp_path / "e.json").read_text())
+    assert result["node_thresholds"]["taught"] == pytest.approx(chosen)  # evaluated at them
+    assert result["false_detections"]["events_per_minute"] <= 3 + 1e-9

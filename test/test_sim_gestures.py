@@ -252,6 +252,9 @@ def test_near_misses_are_their_gesture_done_wrong(model, kind, k):
         "tee_apart": gap(f"{s}_hand_tip", f"{o}_palm") > 0.06,
         "tee_fist": gap(f"{o}_hand_tip", f"{o}_palm") < 0.07,
         "pause_curled": gap(f"{s}_hand_tip", f"{s}_palm") < 0.08,
+        "pause_one_bent": min(gap(f"{s}_{f}_tip", f"{s}_palm") for f in ("index", "hand", "ring", "pinky")) < 0.07,
+        "pause_together": gap(f"{s}_index_tip", f"{s}_pinky_tip") < 1.65 * gap(f"{s}_index1", f"{s}_pinky1"),
+        "pause_tilted": abs(volar[1]) > 0.5,  # the palm faces up or down, not the camera
         "pause_sideways": abs(d[1]) < 0.6,
         "pause_half": P(f"{s}_palm")[1] < P(f"{s}_shoulder")[1] - 0.05,
         "silence_cheek": gap(f"{s}_index_tip", "mouth") > 0.035,
@@ -333,8 +336,11 @@ def _check_bag(bag):
     assert info[topics.DEPTH_IMAGE].msgtype == "sensor_msgs/msg/Image"
     assert info[topics.DEPTH_INFO].msgtype == "sensor_msgs/msg/CameraInfo"
     assert info[topics.GT_GESTURES].msgtype == "hmocap_interfaces/msg/GestureArray"
+    with_near = topics.GT_NEAR_MISSES in info  # the shipped demo bag was made without it
+    if with_near:
+        assert info[topics.GT_NEAR_MISSES].msgtype == "hmocap_interfaces/msg/GestureArray"
     assert len(frames) == len(labels["frames"])
-    assert all(len(f) == 3 for f in frames.values())  # every frame has all three topics
+    assert all(len(f) == 3 + with_near for f in frames.values())  # every frame has every topic
     stamps = sorted(frames)
     assert stamps == [f["stamp_ns"] for f in labels["frames"]]
     assert np.all(np.diff(stamps) > 0)
@@ -348,6 +354,12 @@ def _check_bag(bag):
         K = cam["K"]
         gestures = f[topics.GT_GESTURES].gestures
         assert len(gestures) == (1 if record["class_id"] else 0)
+        near = f[topics.GT_NEAR_MISSES].gestures if with_near else []
+        is_near = record["kind"] in gs.NEAR_MISSES and record["phase"] == "negative"
+        assert not with_near or len(near) == int(is_near)
+        if near:  # a near miss: its kind, the class it misses, that gesture's reference pixel
+            assert near[0].name == record["kind"] and gestures == []
+            assert gs.GESTURE_CLASSES[near[0].class_id - 1] == gs.NEAR_MISSES[record["kind"]]
         if not gestures:
             continue
         g = gestures[0]
@@ -371,6 +383,7 @@ def test_bag_layout_and_ground_truth(small_bag):
     out, summary = small_bag
     labels, checked = _check_bag(out)
     assert summary.frames == 36 and checked >= 5
+    assert topics.GT_NEAR_MISSES in _read(out)[0]
     assert labels["format"] == gd.LABELS_FORMAT
     assert labels["classes"] == {str(i + 1): n for i, n in enumerate(gs.GESTURE_CLASSES)}
     assert sorted({f["subject"] for f in labels["frames"]}) == [40, 41]
@@ -379,6 +392,23 @@ def test_bag_layout_and_ground_truth(small_bag):
     assert all(1.3 < f["distance_m"] < 3.7 for f in labels["frames"])
     assert gd.sidecar_paths(out)[1].stat().st_size > 1000  # the contact sheet
     assert 0 < sum(f["class_id"] == 0 for f in labels["frames"]) < 36
+
+
+def test_near_miss_frames_carry_where_the_near_miss_is(tmp_path):
+    """A bag of near misses: each hold frame says which gesture it misses and where (the pixel of
+    that gesture's reference point), and training reads those frames as located background."""
+    from hmocap_ros.commands.train_gestures import read_training_bags
+
+    out = tmp_path / "near.mcap"
+    _generate(out, subject_offset=60, frames=30, gestures=(), negatives=0, near_misses=6,
+              near_of=gs.GESTURE_CLASSES, contact=False)
+    labels, _ = _check_bag(out)
+    near = [f for f in labels["frames"] if f["phase"] == "negative"]
+    assert len(near) >= 15 and all(f["kind"] in gs.NEAR_MISSES for f in near)
+    data, _ = read_training_bags([out])
+    located = [lab for lab in data.labels if lab is not None]
+    assert len(located) == sum(m is not None for m in data.near_misses) >= 10
+    assert all(lab[0] == 0 and 0 <= lab[1] < 160 and 0 <= lab[2] < 120 for lab in located)
 
 
 def test_same_seed_same_bytes(tmp_path, small_bag):

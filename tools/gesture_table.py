@@ -21,12 +21,16 @@ interrupted run resumes where it stopped)::
    (every number) and ``docs/figures/gesture_pr.png`` (precision-recall curves of the default
    forest, boosted kappa = 15 cm, on the test bag).
 
-The default forest (boosted, kappa 15 cm) is the one shipped as
-``hmocap_ros/data/gesture_forest.npz`` (``hmocap train gestures`` on the same three bags with
-its defaults writes the same file, see GESTURE_FOREST.md). ``--shipped`` scores the shipped
-forest as the node runs it (AP, the frames with a false detection at the node's thresholds, the
-near-miss bags); ``--near-forest`` trains the default variant with the near-miss bag added and
-scores it the same way (``--ship`` copies it to ``hmocap_ros/data/``).
+The shipped forest ``hmocap_ros/data/gesture_forest.npz`` is the default variant (boosted,
+kappa 15 cm) trained with a fourth, near-miss bag: ``--near-forest`` trains and scores it,
+``--ship`` writes it there without its per-gesture thresholds (see GESTURE_FOREST.md).
+``--shipped`` scores the shipped forest as the node runs it (AP, the frames with a false
+detection and the recall at the node's thresholds, the near-miss bags). Its near-miss frames are
+located (``/ground_truth/near_misses``): patch collection draws background samples on the hand
+that is almost a gesture and mining looks there first. Its per-gesture thresholds are chosen
+on the validation bags ``val`` and ``val_near`` (:mod:`hmocap_ros.eval.gesture_thresholds`,
+``--max-false-per-minute``, ``--min-recall``) and stored in the file; the held-out bags ``test``, ``test_close``
+and ``test_near`` score it at those thresholds.
 The defaults are chosen on the validation bag; the test bags are held out for this table.
 """
 
@@ -34,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -46,6 +49,7 @@ sys.path.insert(0, str(ROOT))
 
 from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal
 from hmocap_ros.eval.gesture_eval import SWEEP_MIN_SCORE, evaluate_gestures, plot_pr, read_gesture_bag
+from hmocap_ros.eval.gesture_thresholds import gesture_threshold_curves, set_gesture_thresholds
 from hmocap_ros.gestures.forest import train_forest_on_frames
 from hmocap_ros.gestures.forest_file import load_forest, save_forest
 from hmocap_ros.gestures.params import DetectorParams
@@ -71,9 +75,13 @@ TRAIN = ("train1", "train2", "train3")
 #: The near-miss forest: the default variant trained on :data:`TRAIN` and the near-miss bag.
 NEAR_TRAIN = TRAIN + ("train_near",)
 SHIPPED = ROOT / "hmocap_ros" / "data" / "gesture_forest.npz"
+#: The bags the shipped forest was trained on (hmocap_ros/data/GESTURE_FOREST.md).
+SHIPPED_TRAIN = NEAR_TRAIN
 EVAL = ("val", "test", "test_close")
 #: Bags of near misses only (no gesture): scored by the false detections at the node's thresholds.
 NEAR = ("val_near", "test_near")
+#: The validation bags the near-miss forest's per-gesture thresholds are chosen on (never the test bags).
+THRESHOLD_BAGS = ("val", "val_near")
 #: The variants are scored with the exact vote (every tree walked for an undecided pixel): the
 #: table compares forests, not the detector's speed setting (DetectorParams.vote_reach).
 EXACT = DetectorParams(min_score=SWEEP_MIN_SCORE, min_volume=0.0, vote_reach=1.0)
@@ -127,7 +135,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--near-forest", action="store_true",
                    help="train and score the default variant on the training bags and the near-miss bag: "
                         "docs/figures/gesture_near_forest.md and .json")
-    p.add_argument("--ship", action="store_true", help="with --near-forest: copy that forest to hmocap_ros/data/")
+    p.add_argument("--ship", action="store_true",
+                   help="with --near-forest: write that forest, without its per-gesture thresholds, to "
+                        "hmocap_ros/data/")
+    p.add_argument("--max-false-per-minute", type=float, default=1.0,
+                   help="with --near-forest: the node's false-event budget on the validation bags from which "
+                        "each gesture's threshold is chosen (split evenly over the gestures)")
+    p.add_argument("--min-recall", type=float, default=0.8,
+                   help="with --near-forest: the share of a gesture's validation frames its threshold must find")
     return p
 
 
@@ -177,7 +192,9 @@ def score_shipped(model: Path, bags: dict, train: tuple) -> dict:
     shown = model.relative_to(ROOT) if model.is_relative_to(ROOT) else model
     r = {"forest": str(shown), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
          "train_seconds": forest.meta["training"]["seconds_total"], "train_frames": forest.meta["training"]["n_frames"],
-         "train_samples": forest.meta["training"]["n_samples"], "bags": {b: sim_command(b) for b in train}}
+         "train_samples": forest.meta["training"]["n_samples"], "bags": {b: sim_command(b) for b in train},
+         "thresholds": dict(forest.meta.get("gesture_thresholds", {})),
+         "threshold_rule": forest.meta.get("threshold_curves", {}).get("rule", "")}
     for bag in EVAL + NEAR:
         data = read_gesture_bag(bags[bag])
         e = evaluate_gestures(data, forest)
@@ -209,6 +226,23 @@ def shipped_lines(r: dict, option: str) -> list[str]:
         fd = e["false_detections"]
         lines.append(f"| {bag} | " + " | ".join(cells) + f" | {100 * fd['per_frame']:.1f} % ({fd['frames']}/"
                      f"{fd['scored_frames']}) |")
+    th = r.get("thresholds") or {}
+    lines += ["", "At the node's thresholds (" + (", ".join(f"{g} {th[g]:.3f}" for g in gestures if g in th)
+                                                + f": {r.get('threshold_rule', '')}" if th else
+                                                "min_score 0.4, min_volume 0.3 for every gesture") + "): "
+              "frames of each gesture found / its frames, false events per minute.", "",
+              "| bag | " + " | ".join(gestures) + " | recall (all) | false events / min |",
+              "|---|" + "---:|" * (len(gestures) + 2)]
+    for bag in EVAL:
+        e = r[bag]
+        found = [e["found"][g] for g in gestures]
+        total = sum(f for f, _ in found) / max(sum(n for _, n in found), 1)
+        lines.append(f"| {bag} | " + " | ".join(f"{f}/{n}" for f, n in found)
+                     + f" | {total:.3f} | {e['false_detections']['events_per_minute']:.2f} |")
+    for bag in NEAR:
+        e = r[bag]
+        lines.append(f"| {bag} | " + " | ".join("-" for _ in gestures)
+                     + f" | - | {e['false_detections']['events_per_minute']:.2f} |")
     lines += ["", "Bags: " + "; ".join(f"{b}: `{r[b]['command']}`" for b in EVAL + NEAR)]
     return lines
 
@@ -296,14 +330,23 @@ def shipped(ns, work: Path) -> int:
     """``--shipped``: score the shipped forest; ``--near-forest``: train (cached) and score the
     near-miss forest, ``--ship`` copies it to the shipped one."""
     if ns.shipped:
-        name, option, train, model = "gesture_shipped", "--shipped", TRAIN, SHIPPED
+        name, option, train, model = "gesture_shipped", "--shipped", SHIPPED_TRAIN, SHIPPED
         scores = work / "scores_in_data.json"
     else:
         name, option, train, model = "gesture_near_forest", "--near-forest", NEAR_TRAIN, work / "forest_near.npz"
         scores = work / "scores_near.json"
     bags = {b: make_bag(work, b) for b in (() if ns.shipped else NEAR_TRAIN) + EVAL + NEAR}
     if not model.exists():
-        train_variant(ns, bags, True, 0.15, model, {}, NEAR_TRAIN)
+        trained = work / "forest_near_untuned.npz"
+        if not trained.exists():
+            train_variant(ns, bags, True, 0.15, trained, {}, NEAR_TRAIN)
+        forest = load_forest(trained)
+        curves = gesture_threshold_curves([read_gesture_bag(bags[b]) for b in THRESHOLD_BAGS], forest)
+        chosen = set_gesture_thresholds(forest, curves, ns.max_false_per_minute,
+                                        [f"{b}.mcap: {sim_command(b)}" for b in THRESHOLD_BAGS], ns.min_recall)
+        print("thresholds from " + ", ".join(THRESHOLD_BAGS) + ": "
+              + ", ".join(f"{g} {t:.3f}" for g, t in chosen.items()), flush=True)
+        save_forest(forest, model)
     if scores.exists() and not ns.shipped:
         r = json.loads(scores.read_text())
     else:
@@ -315,8 +358,12 @@ def shipped(ns, work: Path) -> int:
     (out / f"{name}.json").write_text(json.dumps(r, indent=1) + "\n")
     print(f"wrote {out / (name + '.md')}, {out / (name + '.json')}")
     if ns.ship and ns.near_forest:
-        shutil.copyfile(model, SHIPPED)
-        print(f"shipped {model} -> {SHIPPED}")
+        # the thresholds were chosen at 640x480; the node's defaults serve other cameras too
+        forest = load_forest(model)
+        forest.meta.pop("gesture_thresholds", None)
+        forest.meta.pop("threshold_curves", None)
+        save_forest(forest, SHIPPED)
+        print(f"shipped {model} -> {SHIPPED} (without per-gesture thresholds)")
     return 0
 
 

@@ -1,6 +1,10 @@
 """``hmocap eval gestures``: precision-recall and average precision per gesture on a depth bag,
 or the detections alone on a bag without ground truth (the evaluation:
-:mod:`hmocap_ros.eval.gesture_eval`). Exit status 2 with one line on bad input."""
+:mod:`hmocap_ros.eval.gesture_eval`). ``--set-thresholds OUT`` first chooses each gesture's
+threshold from the false-detection and recall curves on the bag and ``--threshold-bags``
+(:mod:`hmocap_ros.eval.gesture_thresholds`: validation bags, never the test bags), writes the
+forest with them to ``OUT`` and evaluates that forest. Exit status 2 with one line on bad
+input; nothing is written then."""
 
 from __future__ import annotations
 
@@ -18,7 +22,8 @@ from hmocap_ros.eval.gesture_eval import (
     plot_pr,
     read_gesture_bag,
 )
-from hmocap_ros.gestures.forest_file import ForestFileError, load_forest
+from hmocap_ros.eval.gesture_thresholds import gesture_threshold_curves, set_gesture_thresholds
+from hmocap_ros.gestures.forest_file import ForestFileError, load_forest, save_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_ros.io import topics
 from hmocap_ros.io.bag_reader import BagReader, BagReadError
@@ -46,6 +51,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a detector setting by name, e.g. depth_unit_m=0.000125 (repeatable; "
                              "gesture_detection --help lists them); with ground truth it applies on top "
                              "of the lowered thresholds of the precision-recall sweep")
+    parser.add_argument("--set-thresholds", metavar="OUT",
+                        help="choose each gesture's threshold on the annotated bag (and --threshold-bags): the "
+                             "lowest at which its false events stay within --max-false-per-minute split over "
+                             "the gestures; write the forest with them to OUT (the node uses them) and evaluate it")
+    parser.add_argument("--threshold-bags", nargs="+", default=[], metavar="BAG",
+                        help="more annotated validation bags pooled with the bag for --set-thresholds (e.g. a "
+                             "bag of near misses)")
+    parser.add_argument("--max-false-per-minute", type=float, default=1.0,
+                        help="the node's false-event budget per minute for --set-thresholds (default 1)")
+    parser.add_argument("--min-recall", type=float, default=0.8,
+                        help="for --set-thresholds: a gesture whose budget costs more than this share of its "
+                             "frames gets the highest threshold that finds this share (default 0.8)")
 
 
 def _print_detections(result: dict) -> None:
@@ -87,6 +104,10 @@ def main_from_args(ns) -> int:
         print(f"error: the ground truth of {ns.bag} belongs to {topics.DEPTH_IMAGE}: add --no-truth to "
               f"detect on {ns.depth_topic}", file=sys.stderr)
         return 2
+    if ns.set_thresholds and (ns.no_truth or not has_truth):
+        print(f"error: --set-thresholds needs an annotated bag ({topics.GT_GESTURES}); {ns.bag} "
+              + ("is read with --no-truth" if ns.no_truth else "has none"), file=sys.stderr)
+        return 2
     if ns.no_truth or not has_truth:
         if not ns.no_truth:
             print(f"no ground truth ({topics.GT_GESTURES}) in {ns.bag}: writing the detections")
@@ -103,6 +124,23 @@ def main_from_args(ns) -> int:
         data = read_gesture_bag(ns.bag)
     except GestureBagError as err:
         print(f"error: {err}", file=sys.stderr)
+        return 2
+    if ns.set_thresholds:
+        if ns.max_false_per_minute <= 0 or not 0.0 <= ns.min_recall <= 1.0:
+            print("error: --max-false-per-minute must be > 0 and --min-recall in [0, 1]", file=sys.stderr)
+            return 2
+        try:
+            bags = [data] + [read_gesture_bag(b) for b in ns.threshold_bags]
+        except GestureBagError as err:
+            print(f"error: --threshold-bags: {err}", file=sys.stderr)
+            return 2
+        chosen = set_gesture_thresholds(forest, gesture_threshold_curves(bags, forest, node_params=node_params),
+                                        ns.max_false_per_minute, [ns.bag] + list(ns.threshold_bags),
+                                        ns.min_recall)
+        save_forest(forest, ns.set_thresholds)
+        print(f"thresholds written to {ns.set_thresholds}: " + ", ".join(f"{g} {t:.3f}" for g, t in chosen.items()))
+    elif ns.threshold_bags:
+        print("error: --threshold-bags needs --set-thresholds", file=sys.stderr)
         return 2
     params = None
     if overrides:

@@ -6,7 +6,10 @@ into one compact uint16 millimetre stack, scales the pixel sizes of the defaults
 f = 525 px at 640x480) by ``fx / 525`` of the bags' camera, trains a forest with boosted (or
 plain bagged) learning and hard negative mining, and saves it. Frames whose gesture reference
 point is hidden (``position_valid`` false) are left out: they are neither a gesture sample nor
-background. All bags must share one image size and focal length.
+background. A near-miss frame (``/ground_truth/near_misses``, a hand that is almost a gesture)
+is background labelled with the missed gesture's reference pixel, ``(0, u, v)``: patch
+collection draws negatives on that hand and mining looks there first
+(:mod:`hmocap_ros.gestures.patches`). All bags must share one image size and focal length.
 
 The forest records the focal length it was trained at (``meta["training"]["focal_px"]``), so
 that the detector can rescale its test offsets to another camera.
@@ -54,8 +57,9 @@ def read_training_bags(paths, params: TrainParams | None = None) -> tuple[Gestur
     (``params.depth``; :func:`~hmocap_ros.gestures.depth_features.depth_to_millimetres`):
     background frames and gesture frames whose reference point is visible, in bag order. Each
     frame is converted as it is read and the others are dropped in place, so memory holds one
-    copy of the frames at 0.6 MB per 640x480 frame. Returns the frames and the number of frames
-    left out."""
+    copy of the frames at 0.6 MB per 640x480 frame. A near-miss frame's label is ``(0, u, v)``,
+    the missed gesture's reference pixel (background with a place). Returns the frames and the
+    number of frames left out."""
     params = params if params is not None else TrainParams()
     fmt, background = params.depth, params.features.background_depth_m
     data = read_gesture_bags(paths, frame_fn=lambda raw: depth_to_millimetres(raw, fmt, background))
@@ -64,20 +68,25 @@ def read_training_bags(paths, params: TrainParams | None = None) -> tuple[Gestur
     for j, i in enumerate(keep):  # per frame, not per pixel: compaction without a second stack
         if i != j:
             frames[j] = frames[i]
-    return GestureBag(frames[:keep.size], data.stamps_ns[keep], [data.labels[i] for i in keep],
-                      data.visible[keep], data.focal_px, data.class_names, data.sources), len(data.labels) - keep.size
+    near = data.near_misses or [None] * len(data.labels)
+    labels = [data.labels[i] if data.labels[i] is not None or near[i] is None else (0, near[i][1], near[i][2])
+              for i in keep]
+    return GestureBag(frames[:keep.size], data.stamps_ns[keep], labels, data.visible[keep], data.focal_px,
+                      data.class_names, data.sources, [near[i] for i in keep]), len(data.labels) - keep.size
 
 
 def train_params_for_focal(focal_px: float, *, n_trees: int = 15, max_depth: int = 20,
                            kappa_m: float | None = 0.15, boosted: bool = True,
-                           samples_per_class: int = 10000, mining_rounds: int = 1) -> TrainParams:
+                           samples_per_class: int = 10000, mining_rounds: int = 1,
+                           located_share: float = 1.0) -> TrainParams:
     """The default training parameters with the pixel sizes scaled from f = 525 px to
     ``focal_px`` (:meth:`TrainParams.for_focal`); ``kappa_m`` None = plain tests (eq. 3.3), else
     clipped tests (eq. 3.6)."""
     features = FeatureParams(feature_type="plain" if kappa_m is None else "clipped",
                              kappa_m=FeatureParams().kappa_m if kappa_m is None else float(kappa_m))
     forest = ForestParams(n_trees=n_trees, max_depth=max_depth, boosted=boosted,
-                          samples_per_class=samples_per_class, mining_rounds=mining_rounds)
+                          samples_per_class=samples_per_class, mining_rounds=mining_rounds,
+                          located_share=located_share)
     return TrainParams(features=features, forest=forest).for_focal(focal_px)
 
 
@@ -111,6 +120,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="balanced bag samples per class and tree (default 10000)")
     parser.add_argument("--mining-rounds", type=int, default=None,
                         help="rounds of hard negative mining on the training frames (default 1; 0 = none)")
+    parser.add_argument("--located-share", type=float, default=None,
+                        help="located near-miss negatives per tree bag, as a share of --samples-per-class "
+                             "(default 1; 0 = drawn as any background sample)")
     online = parser.add_argument_group("online forests (thesis sec. 3.3; --online or --resume)")
     online.add_argument("--online", action="store_true", help="grow an online random forest (alg. 6)")
     online.add_argument("--resume", metavar="FOREST", help="keep growing this online forest (its trees, depth, "
@@ -155,7 +167,8 @@ def main_from_args(ns) -> int:
         params = train_params_for_focal(data.focal_px, n_trees=_or(ns.trees, 15), max_depth=_or(ns.depth, 20),
                                         kappa_m=_kappa_m(ns), boosted=not ns.no_boost,
                                         samples_per_class=_or(ns.samples_per_class, 10000),
-                                        mining_rounds=_or(ns.mining_rounds, 1))
+                                        mining_rounds=_or(ns.mining_rounds, 1),
+                                        located_share=_or(ns.located_share, 1.0))
     except (GestureBagError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -186,7 +199,7 @@ def _or(value, default):
 
 def _offline_options(ns):
     return [("--no-boost", ns.no_boost), ("--samples-per-class", ns.samples_per_class is not None),
-            ("--mining-rounds", ns.mining_rounds is not None)]
+            ("--mining-rounds", ns.mining_rounds is not None), ("--located-share", ns.located_share is not None)]
 
 
 def _online_options(ns):
@@ -196,9 +209,10 @@ def _online_options(ns):
 
 
 def print_data_summary(data: GestureBag, n_hidden: int) -> None:
-    n_pos = sum(lab is not None for lab in data.labels)
+    n_pos = sum(lab is not None and lab[0] > 0 for lab in data.labels)
+    n_near = sum(m is not None for m in data.near_misses or ())
     print(f"{len(data.labels)} frames {data.width}x{data.height}, fx {data.focal_px:.1f} px "
-          f"(pixel sizes x{data.focal_px / REFERENCE_FOCAL_PX:.3f}); {n_pos} with a gesture, "
+          f"(pixel sizes x{data.focal_px / REFERENCE_FOCAL_PX:.3f}); {n_pos} with a gesture, {n_near} near misses, "
           f"{n_hidden} with a hidden reference point left out")
 
 

@@ -84,7 +84,9 @@ class GestureBag:
     """Depth frames of one camera with their gesture ground truth, in stamp order.
 
     ``depth`` (F, H, W) raw images as stored (16UC1 mm); ``labels[i]`` ``(class_id, u, v)`` or
-    None (background); ``visible[i]`` false where a gesture's reference point is hidden.
+    None (background); ``visible[i]`` false where a gesture's reference point is hidden;
+    ``near_misses[i]`` ``(missed class_id, u, v)`` on a near-miss frame of a bag with
+    ``/ground_truth/near_misses``, else None.
     """
 
     depth: np.ndarray
@@ -94,6 +96,7 @@ class GestureBag:
     focal_px: float
     class_names: tuple
     sources: list
+    near_misses: list | None = None
 
     @property
     def height(self) -> int:
@@ -145,6 +148,7 @@ def read_gesture_bags(paths, frame_fn: Callable[[np.ndarray], np.ndarray] | None
     n = 0
     labels: list[tuple[int, float, float] | None]
     stamps, labels, visible, names, focal, sources = [], [], [], {}, None, []
+    near: list[tuple[int, float, float] | None] = []
     first_path = None
     try:
         capacity = sum(_depth_count(p) for p in paths)
@@ -152,7 +156,8 @@ def read_gesture_bags(paths, frame_fn: Callable[[np.ndarray], np.ndarray] | None
             sources.append(str(path))
             n_bag = 0
             with BagReader(path) as reader:
-                for stamp, msgs in reader.frame_sets(wanted):
+                with_near = wanted + [topics.GT_NEAR_MISSES] * (topics.GT_NEAR_MISSES in reader.topics())
+                for stamp, msgs in reader.frame_sets(with_near):
                     fx = float(msgs[topics.DEPTH_INFO].k[0])
                     if fx <= 0:
                         raise GestureBagError(f"{path}: camera_info has no focal length (K[0] = {fx})")
@@ -184,6 +189,9 @@ def read_gesture_bags(paths, frame_fn: Callable[[np.ndarray], np.ndarray] | None
                     else:
                         labels.append(None)
                         visible.append(True)
+                    misses = list(msgs[topics.GT_NEAR_MISSES].gestures) if topics.GT_NEAR_MISSES in msgs else []
+                    near.append((int(misses[0].class_id), float(misses[0].u), float(misses[0].v))
+                                if misses and not gestures and misses[0].position_valid else None)
             if n_bag == 0:
                 raise GestureBagError(f"{path}: no frame with depth image, camera_info and gesture ground truth")
     except BagReadError as err:
@@ -193,7 +201,7 @@ def read_gesture_bags(paths, frame_fn: Callable[[np.ndarray], np.ndarray] | None
     assert depth is not None and focal is not None  # each bag gave a frame (n_bag > 0), paths is not empty
     # A prefix of a C-contiguous array is C-contiguous: no copy.
     return GestureBag(depth[:n], np.asarray(stamps, np.int64), labels, np.asarray(visible, bool),
-                      float(focal), _class_names(names), sources)
+                      float(focal), _class_names(names), sources, near)
 
 
 def average_precision(scores, correct, n_positives: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:

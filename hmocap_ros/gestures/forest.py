@@ -7,6 +7,12 @@ gets wrong (at most ``max_boost_fraction`` of a bag, chosen at random, not balan
 false positives) go into the next tree's bag, which is completed per class with replacement
 from the full set until each class has ``samples_per_class``.
 
+Located near-miss negatives (``SampleSet.located``: drawn on and around the hand of a
+near-miss frame, or mined there; :mod:`hmocap_ros.gestures.patches`) are a stratum of their own
+in every bag, ``located_share x samples_per_class`` of them beside the other background samples:
+in the background pool they are a few per cent, so a balanced bag of 10000 background samples
+would hold a few hundred of the poses the forest most needs to refuse.
+
 Hard negative mining (:func:`train_forest_on_frames`, ``mining_rounds``): the thesis draws the
 negatives uniformly outside the gesture's box (sec. 3.2.3, "Patch collection"), so the pixels a
 detector actually gets wrong (other hands, near-miss poses, the frames between two gestures,
@@ -100,9 +106,14 @@ def train_forest_on_samples(samples: SampleSet, params: ForestParams, features: 
     if progress is True:
         progress = _tqdm_progress()
     label = samples.label
-    by_class = [np.flatnonzero(label == c) for c in range(n_classes)]
+    # strata of the bag: the classes, and the located near-miss negatives (module docstring)
+    located = samples.located_mask & (params.located_share > 0)
+    stratum = np.where(located, n_classes, label)
+    by_class = [np.flatnonzero(stratum == c) for c in range(n_classes + 1)]
     present = np.array([p.size > 0 for p in by_class])
-    bag_size = params.samples_per_class * int(present.sum())
+    target = np.array([params.samples_per_class] * n_classes
+                      + [int(round(params.located_share * params.samples_per_class))])
+    bag_size = int(target[present].sum())
     cap = int(params.max_boost_fraction * bag_size)
     oob_sum = np.zeros((len(samples), n_classes), np.float32)
     oob_n = np.zeros(len(samples), np.int32)
@@ -112,8 +123,8 @@ def train_forest_on_samples(samples: SampleSet, params: ForestParams, features: 
     total_bag = 0
     for m in range(params.n_trees):
         t0 = time.perf_counter()
-        have = np.bincount(label[carried], minlength=n_classes)
-        need = np.where(present, np.maximum(params.samples_per_class - have, 0), 0)
+        have = np.bincount(stratum[carried], minlength=n_classes + 1)
+        need = np.where(present, np.maximum(target - have, 0), 0)
         bag = np.concatenate([carried, _balanced_bag(rng, by_class, need)])
         tree = grow_tree(samples, bag, params, features, rng)
         leaves = apply_tree(tree, features, samples.frames, samples.frame, samples.x, samples.y)

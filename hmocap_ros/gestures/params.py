@@ -130,13 +130,19 @@ class PatchParams:
              "of the hand, the arm, the face, which a detector sees next to the gesture.")
     near_half_size_px_m: float = param(
         85.0, "Half side of the near-negative square in pixel*metres (> 0; 85 = the test patch).")
+    n_near_miss: int = param(
+        128, "Negatives per near-miss frame (>= 0; a background frame annotated with the point of "
+             "the gesture it misses) drawn in the box around that point, on the hand (depth within "
+             "positive_depth_tolerance_m): where a near miss differs from its gesture. The frame "
+             "also gives n_negative_near negatives in the near square around the box and n_negative "
+             "anywhere.")
 
     def __post_init__(self):
         _check([(self.n_positive >= 1 and self.n_negative >= 0, "need n_positive >= 1, n_negative >= 0"),
                 (self.box_half_size_px_m > 0.0, "box_half_size_px_m must be > 0"),
                 (self.positive_depth_tolerance_m >= 0.0, "positive_depth_tolerance_m must be >= 0"),
                 (self.negative_exclusion_scale >= 1.0, "negative_exclusion_scale must be >= 1"),
-                (self.n_negative_near >= 0, "n_negative_near must be >= 0"),
+                (self.n_negative_near >= 0 and self.n_near_miss >= 0, "need n_negative_near, n_near_miss >= 0"),
                 (self.near_half_size_px_m > 0.0, "near_half_size_px_m must be > 0")],
                "PatchParams")
 
@@ -171,9 +177,15 @@ class ForestParams:
         4, "Grid step (pixels, 1 to 64) of the mining votes, as the detector's stride.")
     mining_exclusion_scale: float = param(
         2.0, "Votes within this many positive boxes (>= 1) of the annotated point are not mined.")
+    located_share: float = param(
+        1.0, "The located near-miss negatives (drawn on and around the hand of a near-miss frame, and "
+             "mined there) form a stratum of each tree's bag of their own: located_share x "
+             "samples_per_class of them per tree, beside the other background samples (>= 0; 0 = "
+             "they are drawn as any background sample).")
 
     def __post_init__(self):
         _check([(self.n_trees >= 1, "n_trees must be >= 1"),
+                (self.located_share >= 0.0, "located_share must be >= 0"),
                 (1 <= self.max_depth <= 64, "max_depth must be in [1, 64]"),
                 (self.n_tests >= 1 and self.n_thresholds >= 1, "need n_tests, n_thresholds >= 1"),
                 (self.min_samples_leaf >= 1, "min_samples_leaf must be >= 1"),

@@ -77,7 +77,10 @@ Design choices where the thesis is vague:
   wrong, a finger bent, the hand turned, the arm half raised): the thesis asks for "other
   gestures that should be distinguished"; the near misses of the taught gesture are the
   poses its detector most needs to refuse, and on-the-fly mining learns them where the forest
-  fires on them.
+  fires on them. Besides, each ``do_negatives`` frame gives ``patches.n_near_miss`` negatives
+  in the box, on the surface at its centre (:func:`~hmocap_ros.gestures.patches.hand_negatives`):
+  a near miss shown in the box is learnt where the gesture's positives were taken, whether or
+  not the forest fires on it yet (the located negatives of offline training).
 - **The threshold's parts** th+ and th- are kept beside it (``meta["gesture_threshold_parts"]``)
   so that another rho can be applied to a taught forest (``hmocap bench iml`` measures each).
 - **An offline forest** (e.g. the shipped one) is taught a gesture by continuing it online
@@ -112,7 +115,7 @@ from hmocap_ros.gestures.params import (
     OnlineTrainParams,
     PatchParams,
 )
-from hmocap_ros.gestures.patches import collect_samples
+from hmocap_ros.gestures.patches import collect_samples, hand_negatives
 from hmocap_ros.gestures.scene_motion import SceneMotion
 from hmocap_ros.gestures.trees import Forest, PendingTests, Tree
 from hmocap_ros.params import group, param
@@ -132,8 +135,8 @@ INSTRUCTIONS = {
     "update_positive": "Keep '{g}' in the box and vary your pose a little.",
     "release": "Release the gesture and wait.",
     "rehearse": "Show '{r}' (a gesture the room knows) in the box.",
-    "do_negatives": "Move around and do other things: '{g}' done wrong (a finger bent, the hand turned, the arm "
-                    "half raised), other poses; not '{g}', nor the room's other gestures.",
+    "do_negatives": "Move around and do other things: '{g}' done wrong in the box (a finger bent, the hand "
+                    "turned, the arm half raised), other poses; not '{g}', nor the room's other gestures.",
     "testing": "Testing: do '{g}' anywhere and check that it is found.",
     "done": "'{g}' is taught.",
 }
@@ -554,6 +557,9 @@ class Trainer:
                 if dens is not None and dens.size:
                     self.th_neg = moving_average(self.th_neg, float(dens.max()), self.params.sigma)
                 xs, ys = self._negatives(metres)
+                hx, hy = hand_negatives(metres, int(round(box[0])), int(round(box[1])), self.patches,
+                                        float(self.online.features.background_depth_m), self.rng)
+                xs, ys = np.concatenate([xs, hx]), np.concatenate([ys, hy])
                 labels = np.zeros(xs.size, np.int32)
             if self.record and (self.state == "do_negatives" or labels.size):
                 name = "" if self.state == "do_negatives" else self.online.class_names[int(labels.max())]
