@@ -216,12 +216,13 @@ class FrameSetIntake:
 
 class StageHandoff:
     """The second stage of a two-stage pipeline in a thread of its own: ``put(item)`` hands an
-    item to ``work(item)`` and blocks while one item already waits for it. The first stage
-    (an intake's worker) works on the next frame set while this one works on the last, each
-    on a core of its own where their libraries release the GIL (OpenCV, LiteRT, numba), and
-    it starts the next set only when this stage is about to take it: nothing is done that the
-    second stage does not take, and items keep their order. on_error: called in the worker
-    with an exception ``work`` raised (default: logged)."""
+    item to ``work(item)`` and returns once the worker has taken it. The first stage (an
+    intake's worker) works on the next frame set while this one works on the last, each on a
+    core of its own where their libraries release the GIL (OpenCV, LiteRT, numba); with
+    :meth:`wait_until_due` it starts the next set only when this stage is about to be free, so
+    the set it takes is the newest and waits no longer than it must. Nothing is done that the
+    second stage does not take, and items keep their order. on_error: called in the worker with
+    an exception ``work`` raised (default: logged)."""
 
     def __init__(self, work: Callable[[Any], None], *,
                  on_error: Callable[[Exception], None] | None = None, name: str = "stage") -> None:
@@ -230,13 +231,16 @@ class StageHandoff:
         self._item: Any = None
         self._waiting = False
         self._busy = False
+        self._started = 0.0
+        #: exponential moving average of the seconds ``work`` takes per item
+        self.work_s = 0.0
         self._closed = False
         self._cond = threading.Condition()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
     def put(self, item: Any) -> bool:
-        """Hand ``item`` to the worker, once it took the one before; False when closed."""
+        """Hand ``item`` to the worker and wait until it took it; False when closed."""
         with self._cond:
             while self._waiting and not self._closed:
                 self._cond.wait()
@@ -244,7 +248,20 @@ class StageHandoff:
                 return False
             self._item, self._waiting = item, True
             self._cond.notify_all()
-            return True
+            while self._waiting and not self._closed:
+                self._cond.wait()
+            return not self._closed
+
+    def wait_until_due(self, lead_s: float) -> None:
+        """Wait until the worker's item is expected to be done within ``lead_s`` seconds (by
+        :attr:`work_s`), or the worker is idle: the first stage then starts on the newest set
+        ``lead_s`` (its own time per item) before the worker is free."""
+        with self._cond:
+            while self._busy and not self._closed:
+                left = self.work_s - (time.monotonic() - self._started) - lead_s
+                if left <= 0:
+                    return
+                self._cond.wait(left)
 
     def drain(self) -> None:
         """Wait until the worker has done every item handed to it."""
@@ -268,6 +285,7 @@ class StageHandoff:
                 if self._closed:
                     return
                 item, self._item, self._waiting, self._busy = self._item, None, False, True
+                self._started = time.monotonic()
                 self._cond.notify_all()
             try:
                 self.work(item)
@@ -275,5 +293,7 @@ class StageHandoff:
                 self.on_error(err)
             finally:
                 with self._cond:
+                    took = time.monotonic() - self._started
+                    self.work_s = took if self.work_s == 0.0 else 0.8 * self.work_s + 0.2 * took
                     self._busy = False
                     self._cond.notify_all()

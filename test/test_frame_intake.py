@@ -208,8 +208,8 @@ def test_close_stops_the_worker_and_bad_arguments_are_refused():
 
 
 def test_a_stage_handoff_keeps_the_order_and_lets_the_first_stage_run_one_item_ahead():
-    """The second stage works on the items in the order given; a put waits while one item
-    already waits (the first stage gets at most one item ahead); an error in one item is
+    """The second stage works on the items in the order given; put returns once the worker
+    took the item (so the first stage is at most one item ahead); an error in one item is
     reported and the stage goes on; drain waits for everything handed over."""
     done, errors = [], []
     release = threading.Event()
@@ -223,17 +223,38 @@ def test_a_stage_handoff_keeps_the_order_and_lets_the_first_stage_run_one_item_a
 
     stage = StageHandoff(work, on_error=errors.append)
     try:
-        assert stage.put(0) and stage.put(1)  # 0 in hand, 1 waiting
-        third = threading.Thread(target=stage.put, args=(2,))
-        third.start()
-        third.join(0.3)
-        assert third.is_alive() and done == []  # blocked: 1 still waits
+        assert stage.put(0)  # taken at once
+        second = threading.Thread(target=stage.put, args=(1,))
+        second.start()
+        second.join(0.3)
+        assert second.is_alive() and done == []  # blocked: the worker is on 0
         release.set()
-        third.join(5)
+        second.join(5)
+        assert not second.is_alive()
         for item in (3, 4):
             stage.put(item)
         stage.drain()
-        assert done == [0, 1, 2, 4] and [str(e) for e in errors] == ["bad item"]
+        assert done == [0, 1, 4] and [str(e) for e in errors] == ["bad item"]
     finally:
         stage.close()
     assert not stage.put(5)  # closed
+
+
+def test_the_first_stage_waits_until_the_second_is_about_to_be_free():
+    """wait_until_due(lead) returns no sooner than the worker's item is expected to end
+    ``lead`` seconds later (its time per item, a moving average), at once when it is idle."""
+    stage = StageHandoff(lambda item: time.sleep(0.2))
+    try:
+        for item in range(3):
+            stage.put(item)
+        stage.drain()
+        assert 0.19 <= stage.work_s < 2.0
+        t0 = time.monotonic()
+        stage.wait_until_due(0.05)  # idle
+        assert time.monotonic() - t0 < 0.05
+        stage.put(3)
+        t0 = time.monotonic()
+        stage.wait_until_due(0.05)
+        assert time.monotonic() - t0 >= 0.1
+    finally:
+        stage.close()

@@ -27,6 +27,7 @@ Parameters: ``--help`` prints them after this text; defaults in config/room_pipe
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 from geometry_msgs.msg import Point, Vector3
@@ -73,6 +74,7 @@ class RoomPipelineNode(BodyTrackerNode):
         self.foreground = declare_parameters(self, ForegroundParams)
         self.room: RoomPipeline | None = None
         self.handoff: StageHandoff | None = None
+        self._segment_s = 0.0  # moving average of a set's segmentation (s)
         self.pub_extremities = self.create_publisher(Extremities, "extremities", RESULT_QOS)
 
     def _set_rig(self, rig: Rig) -> None:
@@ -130,8 +132,13 @@ class RoomPipelineNode(BodyTrackerNode):
         """The first stage (the intake's worker): the set's masks, handed to the second."""
         assert self.rig is not None and self.room is not None and self.handoff is not None
         images = [picked.items.get(name) for name in self.rig.names]
+        t0 = time.monotonic()
         masks = self.room.segment(picked.stamp_ns, images)
+        took = time.monotonic() - t0
+        self._segment_s = took if self._segment_s == 0.0 else 0.8 * self._segment_s + 0.2 * took
         self.handoff.put((picked, images, masks, list(self.room.dropped)))
+        # the next set is taken (the newest) a segmentation before the tracker is free
+        self.handoff.wait_until_due(self._segment_s)
 
     def _track_segmented(self, item: tuple) -> None:
         """The second stage: detection and tracking of a segmented set (``body_tracker``'s
