@@ -75,14 +75,16 @@ answers = node.create_publisher(JointState, "/joints", QoSProfile(depth=100))
 rig = node.create_publisher(String, "/rig", QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
 status = node.create_publisher(JointState, "/status", QoSProfile(depth=10))
 end = time.monotonic() + 30
-while min(images.get_subscription_count(), answers.get_subscription_count()) < 1 and time.monotonic() < end:
+publishers = (images, answers, rig, status)
+while min(p.get_subscription_count() for p in publishers) < 1 and time.monotonic() < end:
     time.sleep(0.05)
-time.sleep(0.5)
+time.sleep(1.0)  # the recorder's side of discovery too
 rig.publish(String(data="the rig"))
 time.sleep(0.2)
 now = JointState()
 now.header.stamp = node.get_clock().now().to_msg()
 status.publish(now)
+time.sleep(0.2)  # the recorder takes the messages of one wait in its subscriptions' order
 pending = []
 base = 1_000_000_000  # stamps of 1970: far from the receive times
 for k in range(8):
