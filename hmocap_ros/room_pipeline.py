@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -60,11 +60,15 @@ class RoomPipeline:
                  max_people: int = 1, ids: Sequence[str] | None = None) -> None:
         self.rig = rig
         self.backgrounds = background_models(foreground, rig.names) if foreground is not None else None
+        if detection is not None and detection.keypoints.max_people != max_people:
+            # the keypoint stage follows the people the trackers follow
+            detection = replace(detection, keypoints=replace(detection.keypoints,
+                                                             max_people=max_people))
         self.detector = (ExtremityPipeline(rig.cameras, detection, model_path)
                          if detection is not None and tracker.tracking_method.uses_detector else None)
         self.people = PeopleTracker(model, rig, tracker, rng, max_people=max_people, ids=ids)
-        #: the last skeleton (label -> room position), which places the next frame set's crops,
-        #: and its stamp
+        #: the last skeleton (label -> room position; with several people, body id -> skeleton),
+        #: which places the next frame set's crops, and its stamp
         self.previous: dict | None = None
         self.previous_stamp_ns: int | None = None
         #: the views :meth:`segment` dropped from its last frame set: (camera index, reason)
@@ -116,7 +120,12 @@ class RoomPipeline:
         seconds["tracking"] = time.perf_counter() - t2
         posed = [r for r in results if r.has_pose]
         self.previous = self.previous_stamp_ns = None
-        if posed:
+        if posed and self.people.max_people > 1:
+            self.previous = {body: skeleton_labels(list(r.joint_names), r.joints)
+                             for body, r in zip(self.people.ids, results)
+                             if r.has_pose and r.joints is not None}
+            self.previous_stamp_ns = int(stamp_ns)
+        elif posed:
             assert posed[0].joints is not None  # has_pose
             self.previous = skeleton_labels(list(posed[0].joint_names), posed[0].joints)
             self.previous_stamp_ns = int(stamp_ns)

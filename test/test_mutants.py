@@ -427,7 +427,7 @@ def pose_detector_never_run(mp: pytest.MonkeyPatch) -> None:
     the foreground's box, or nothing without a mask."""
     from hmocap_ros.detection.pose_detector import PoseDetector
 
-    mp.setattr(PoseDetector, "detect", lambda self, image: [])
+    mp.setattr(PoseDetector, "detect", lambda self, image, roi=None: [])
 
 
 @dataclass(frozen=True)

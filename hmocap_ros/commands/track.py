@@ -98,4 +98,7 @@ def main_from_args(ns: argparse.Namespace) -> int:
           f"(silhouettes {counts['silhouettes']}, {seconds / max(counts['frame_sets'], 1):.2f} s per frame set)")
     for topic, n in sorted(counts["topics"].items()):
         print(f"  {topic}: {n} messages")
+    left_out = counts.get("people_left_out") or {}
+    if left_out:
+        print("  keypoints left out: " + ", ".join(f"{what} {n}" for what, n in sorted(left_out.items())))
     return 0

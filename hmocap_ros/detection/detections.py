@@ -43,6 +43,8 @@ class Detections:
     normals: np.ndarray | None = None
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     probability: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    persons: np.ndarray | None = None
+    person_ids: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "positions", np.asarray(self.positions, float).reshape(-1, 3))
@@ -52,6 +54,36 @@ class Detections:
         if not (len(self.labels) == len(self.positions) == len(self.scores)
                 == len(self.normals)):
             raise ValueError("labels, positions, scores and normals must have one row each")
+        if self.persons is not None:
+            persons = np.asarray(self.persons, dtype=np.int64).reshape(-1)
+            object.__setattr__(self, "persons", persons)
+            if len(persons) != len(self.labels) or (
+                    len(persons) and (persons.min() < 0 or persons.max() >= len(self.person_ids))):
+                raise ValueError("persons must give one index into person_ids per detection")
+
+    def person(self, index: int) -> "Detections":
+        """The detections of one person (``persons == index``), without the person split."""
+        if self.persons is None:
+            raise ValueError("these detections do not tell people apart")
+        keep = self.persons == index
+        return Detections(self.detector, tuple(np.asarray(self.labels, dtype=object)[keep]),
+                          self.positions[keep], self.scores[keep], self.normals[keep]
+                          if self.normals is not None else None)
+
+    @staticmethod
+    def of_people(detector: str, people: list) -> "Detections":
+        """One frame set's detections from ``[(body id, labels, positions, scores)]``, one
+        entry per person."""
+        labels: list = []
+        positions, scores, persons = [np.zeros((0, 3))], [np.zeros(0)], [np.zeros(0, int)]
+        for k, (_, person_labels, person_positions, person_scores) in enumerate(people):
+            labels.extend(person_labels)
+            positions.append(np.asarray(person_positions, float).reshape(-1, 3))
+            scores.append(np.asarray(person_scores, float).reshape(-1))
+            persons.append(np.full(len(person_labels), k, dtype=int))
+        return Detections(detector, tuple(labels), np.concatenate(positions),
+                          np.concatenate(scores), persons=np.concatenate(persons),
+                          person_ids=tuple(str(p[0]) for p in people))
 
     def __len__(self) -> int:
         return len(self.labels)
@@ -77,9 +109,12 @@ def detections_from_msg(msg) -> Detections:
     arrays disagree in length."""
     positions = np.array([[p.x, p.y, p.z] for p in msg.positions], float).reshape(-1, 3)
     normals = np.array([[n.x, n.y, n.z] for n in msg.normals], float).reshape(-1, 3)
+    persons = np.asarray(getattr(msg, "persons", []), dtype=np.int64)
     return Detections(str(msg.detector) or "skin", tuple(str(s) for s in msg.labels), positions,
                       np.asarray(msg.scores, float),
-                      normals if len(normals) == len(positions) else None)
+                      normals if len(normals) == len(positions) else None,
+                      persons=persons if len(persons) == len(positions) and len(persons) else None,
+                      person_ids=tuple(str(s) for s in getattr(msg, "person_ids", [])))
 
 
 def fill_msg(msg, det: Detections, point_cls, vector_cls):
@@ -92,4 +127,6 @@ def fill_msg(msg, det: Detections, point_cls, vector_cls):
     msg.normals = [vector_cls(x=float(x), y=float(y), z=float(z))
                    for x, y, z in np.nan_to_num(normals)]
     msg.scores = [float(s) for s in det.scores]
+    msg.persons = [] if det.persons is None else [int(k) for k in det.persons]
+    msg.person_ids = list(det.person_ids) if det.persons is not None else []
     return msg

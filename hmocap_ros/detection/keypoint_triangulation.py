@@ -58,7 +58,7 @@ from hmocap_ros.detection.keypoint_network import NUM_LANDMARKS, ViewLandmarks
 from hmocap_ros.geometry import ROOM_UP, project_points, reprojection_errors, triangulate
 
 __all__ = ["KEYPOINT_LABELS", "COMPOSITION", "MIRROR", "TRIANGULATED_POINTS", "Keypoints3D", "view_keypoints",
-           "robust_points", "resolve_swaps", "triangulate_views"]
+           "robust_points", "resolve_swaps", "triangulate_views", "near_foreground"]
 
 #: Labels of the 3D keypoints (the subject's left and right), the message terms.
 KEYPOINT_LABELS = (
@@ -176,7 +176,7 @@ class Keypoints3D:
         return cls((), np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=int))
 
 
-def _near_foreground(mask: np.ndarray, pixels: np.ndarray, width: int, height: int,
+def near_foreground(mask: np.ndarray, pixels: np.ndarray, width: int, height: int,
                      tolerance_px: float) -> np.ndarray:
     """(K,) bool: a foreground pixel of ``mask`` (uint8, any resolution: scaled to the image)
     lies within ``tolerance_px`` (full-image pixels, Chebyshev distance) of each pixel
@@ -218,7 +218,7 @@ def view_keypoints(cameras, views: Sequence[ViewLandmarks | None],
         weights[v] = np.where(_USES, confidence[None, :], np.inf).min(axis=1) * view.score
         mask = None if masks is None else masks[v]
         if mask is not None:
-            near = _near_foreground(mask, pixels[v], camera.width, camera.height,
+            near = near_foreground(mask, pixels[v], camera.width, camera.height,
                                     params.mask_tolerance_px)
             weights[v] = np.where(near, weights[v], weights[v] * params.outside_mask_weight)
     weights[(weights < params.min_visibility) | ~np.isfinite(pixels).all(axis=-1)] = 0.0

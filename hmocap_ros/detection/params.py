@@ -67,6 +67,20 @@ class KeypointParams:
               "sets 0).")
     max_carry_ms: float = param(
         400.0, "Landmarks older than this (ms) are not carried to a later frame set (> 0).")
+    max_people: int = param(
+        1, "People the keypoint stage follows (>= 1). Above 1 every tracked body gets its own "
+           "crop and landmark run per view (from the tracked skeletons fed back, by body id) and "
+           "the pose detector looks for the people no body follows; set it to the tracker's "
+           "max_people.")
+    occluded_share: float = param(
+        0.5, "With several people: a body's crop in a view is left out when the box of a nearer "
+             "body's projected keypoints covers more than this share of its own (in (0, 1]).")
+    new_person_tolerance: float = param(
+        0.06, "With several people: two views' pose detections are one new person when their "
+              "keypoints triangulate within this share of the image's longer side (> 0).")
+    search_every: int = param(
+        1, "With several people and fewer tracked than max_people: the pose detector looks for "
+           "new people on every this many frame sets (>= 1).")
     threads: int = param(
         1, "LiteRT threads of the landmark network and the pose detector (>= 1): one, as the "
            "room's other stages run beside it; more only on a machine with cores to spare.")
@@ -88,6 +102,10 @@ class KeypointParams:
             "views_per_set": int(self.views_per_set) == self.views_per_set and self.views_per_set >= 0,
             "pose_rate_hz": self.pose_rate_hz >= 0, "max_carry_ms": self.max_carry_ms > 0,
             "swap_margin": self.swap_margin >= 0,
+            "max_people": int(self.max_people) == self.max_people and self.max_people >= 1,
+            "occluded_share": 0 < self.occluded_share <= 1,
+            "new_person_tolerance": self.new_person_tolerance > 0,
+            "search_every": int(self.search_every) == self.search_every and self.search_every >= 1,
         }
         bad = [name for name, ok in checks.items() if not ok]
         if bad:

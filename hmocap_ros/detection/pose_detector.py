@@ -149,10 +149,13 @@ class PoseDetector:
         self.anchors = ssd_anchors()
         self.min_score = float(min_score)
 
-    def detect(self, image_rgb: np.ndarray) -> list[PoseDetection]:
-        """The people in an RGB uint8 image ``(H, W, 3)``, best scored first."""
+    def detect(self, image_rgb: np.ndarray, roi: Roi | None = None) -> list[PoseDetection]:
+        """The people in an RGB uint8 image ``(H, W, 3)``, best scored first; ``roi``: look
+        in this square of the image only (default: the whole image, letterboxed), in image
+        pixels all the same."""
         height, width = image_rgb.shape[:2]
-        letterbox = Roi(0.5 * width, 0.5 * height, float(max(width, height)))
+        letterbox = roi if roi is not None else Roi(0.5 * width, 0.5 * height,
+                                                    float(max(width, height)))
         matrix = crop_transform(letterbox, DETECTOR_INPUT_SIZE)
         size = DETECTOR_INPUT_SIZE
         tensor = cv2.warpAffine(image_rgb, matrix, (size, size), flags=cv2.INTER_LINEAR,

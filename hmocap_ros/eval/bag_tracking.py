@@ -61,6 +61,7 @@ class TrackCounts(TypedDict):
     warnings: dict[str, int]
     topics: dict[str, int]
     silhouettes: NotRequired[str]  # set once the bag is open and the source chosen
+    people_left_out: NotRequired[dict[str, int]]  # with several people: the keypoint stage's
 
 
 class TrackError(ValueError):
@@ -190,7 +191,9 @@ def _extremities_msg(det, stamp_ns: int, frame_id: str, factory):
                         detector=det.detector, labels=list(det.labels),
                         positions=vectors("geometry_msgs/msg/Point", det.positions),
                         normals=vectors("geometry_msgs/msg/Vector3", np.nan_to_num(det.normals)),
-                        scores=np.asarray(det.scores, np.float32))
+                        scores=np.asarray(det.scores, np.float32),
+                        persons=np.asarray([] if det.persons is None else det.persons, np.int32),
+                        person_ids=list(det.person_ids) if det.persons is not None else [])
 
 
 def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = None,
@@ -321,4 +324,6 @@ def track_to_bag(bag, out, *, method: str | None = None, detector: str | None = 
                 raise TrackError(f"{bag}: no frame set with {min(MIN_VIEWS, len(read))} views on "
                                  f"{', '.join(read)}")
             counts["topics"] = {t: n for t, n in writer.counts.items() if n}
+            if room.detector is not None:
+                counts["people_left_out"] = dict(getattr(room.detector.detector, "people_left_out", {}))
     return counts

@@ -109,6 +109,8 @@ class ExtremityDetectionNode(Node):
         self.intake: FrameSetIntake | None = None
         self.images: dict = {}   # camera -> stamp -> rgb image waiting for its mask
         self.skeleton: tuple[int, dict] | None = None
+        #: with several people (``keypoints.max_people`` > 1): body id -> (stamp, skeleton)
+        self.skeletons: dict[str, tuple[int, dict]] = {}
         self.frame_id = "room"
         self.frames = 0
         self.seconds = 0.0
@@ -171,6 +173,7 @@ class ExtremityDetectionNode(Node):
             return
         self.skeleton = (stamp_to_ns(msg.header.stamp),
                          skeleton_labels([str(n) for n in msg.joint_names], joints))
+        self.skeletons[str(msg.body_id)] = self.skeleton
 
     def _on_image(self, name: str):
         def on_image(msg) -> None:
@@ -208,6 +211,7 @@ class ExtremityDetectionNode(Node):
         """The stamps went back: the crops and the last skeleton belong to the old stream."""
         self.get_logger().warning(f"the stamps went back by {jump_ns / 1e9:.2f} s: frame sets start over")
         self.skeleton = None
+        self.skeletons.clear()
         assert self.pipeline is not None  # made with the intake
         self.pipeline.reset()
 
@@ -225,11 +229,20 @@ class ExtremityDetectionNode(Node):
     # ------------------------------------------------------------------ detection
 
     def _previous(self, stamp_ns: int) -> tuple[dict | None, int | None]:
-        """The last skeleton and its stamp, (None, None) when none is recent enough."""
+        """The last skeleton and its stamp, (None, None) when none is recent enough; with
+        several people every body's recent skeleton by body id, and the newest stamp."""
+        max_age = self.config.skeleton_max_age_ms * 1e6
+        if self.params.keypoints.max_people > 1:
+            recent = {body: item for body, item in self.skeletons.items()
+                      if abs(stamp_ns - item[0]) <= max_age}
+            if not recent:
+                return None, None
+            return ({body: joints for body, (_, joints) in recent.items()},
+                    max(stamp for stamp, _ in recent.values()))
         if self.skeleton is None:
             return None, None
         stamp, joints = self.skeleton
-        if abs(stamp_ns - stamp) > self.config.skeleton_max_age_ms * 1e6:
+        if abs(stamp_ns - stamp) > max_age:
             return None, None
         return joints, stamp
 
@@ -292,7 +305,9 @@ class ExtremityDetectionNode(Node):
                     KeyValue(key="detections", value=str(self.last_counts[0])),
                     KeyValue(key="views", value=str(self.last_counts[1])),
                     KeyValue(key="views_left_out", value=" ".join(
-                        f"{name}:{n}" for name, n in sorted(self._left_out().items())))]))
+                        f"{name}:{n}" for name, n in sorted(self._left_out().items()))),
+                    KeyValue(key="people_left_out", value=" ".join(
+                        f"{what.replace(' ', '_')}:{n}" for what, n in sorted(self._people_left_out().items())))]))
         self.pub_diag.publish(out)
 
     def _left_out(self) -> dict:
@@ -300,6 +315,12 @@ class ExtremityDetectionNode(Node):
         if self.pipeline is None:
             return {}
         return dict(getattr(self.pipeline.detector, "views_left_out", {}))
+
+    def _people_left_out(self) -> dict:
+        """With several people: what the keypoint stage left out and how often."""
+        if self.pipeline is None:
+            return {}
+        return dict(getattr(self.pipeline.detector, "people_left_out", {}))
 
     def log_totals(self) -> None:
         self.get_logger().info(f"frame sets detected: {self.frames}")

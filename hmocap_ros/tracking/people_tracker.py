@@ -1,12 +1,16 @@
 """Several people in one room: one :class:`~.body_tracker.BodyTracker` per person.
 
-A smart room often holds more than its user. One tracker follows one body and starts on the
-person the cameras see best (:func:`~hmocap_ros.detection.visual_hull.visual_hull`), so with a bystander in
-better view it follows the bystander. :class:`PeopleTracker` runs up to ``max_people``
-trackers on the same frame sets, each following a person of its own:
+A smart room often holds more than its user. :class:`PeopleTracker` runs up to
+``max_people`` trackers on the same frame sets, each following a person of its own:
 
-- slot 0 is exactly a single tracker (the same random draws, so with
-  ``max_people = 1`` or nobody else in the room its output is bit for bit the same);
+- with keypoints that tell people apart (the keypoint stage with ``max_people`` > 1:
+  :attr:`~hmocap_ros.detection.detections.Detections.persons`), each slot takes the keypoints
+  of its own body id, and the people no body follows yet go, best agreeing first, to the slots
+  that follow nobody; a slot that loses its person forgets its shape (its next start may be
+  anyone);
+- otherwise slot 0 is exactly a single tracker (the same random draws, so with
+  ``max_people = 1`` or nobody else in the room its output is bit for bit the same) and takes
+  labelled keypoints; unlabelled skin candidates go to every slot;
 - every other slot starts only on a person standing farther than
   :data:`~.startup.SAME_PERSON_RADIUS` (on the floor) from the people the other slots
   follow (``exclude``), so two slots never start on the same person;
@@ -33,7 +37,7 @@ from hmocap_ros.geometry.pinhole_camera import PinholeCamera
 from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.tracking.body_tracker import BodyTracker
 from hmocap_ros.tracking.params import TrackerParams
-from hmocap_ros.tracking.result import TrackResult
+from hmocap_ros.tracking.result import TrackerState, TrackResult
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS
 
 __all__ = ["DEFAULT_BODY_ID", "PeopleTracker", "body_ids"]
@@ -99,20 +103,51 @@ class PeopleTracker:
         """One frame set through every slot, in slot order; one result per slot.
 
         detections: the frame set's 3D detections. Unlabelled skin candidates go to every
-        slot (each assigns them to its own body, eq. 2.19); a keypoint detector's labelled
-        joints are one person's, the first slot's. budget_s: seconds each slot may take
-        (:meth:`BodyTracker.update`)."""
+        slot (each assigns them to its own body, eq. 2.19). Labelled joints that tell people
+        apart (:attr:`~hmocap_ros.detection.detections.Detections.persons`) go by body id:
+        a slot takes the person its body's crops found, and the people no body follows yet
+        go, best agreeing first, to the slots that follow nobody (:meth:`_people_per_slot`);
+        labelled joints of one person are the first slot's. budget_s: seconds each slot may
+        take (:meth:`BodyTracker.update`)."""
+        per_slot = self._people_per_slot(detections)
         results = []
         for k, tracker in enumerate(self.trackers):
             positions = [t.position for j, t in enumerate(self.trackers) if j != k]
             others = np.array([p for p in positions if p is not None]).reshape(-1, 3)
-            mine = detections if (k == 0 or detections is None
-                                  or not carries_labels(detections)) else None
+            if per_slot is not None:
+                mine = per_slot[k]
+            else:
+                mine = detections if (k == 0 or detections is None
+                                      or not carries_labels(detections)) else None
             results.append(tracker.update(masks, stamp_ns, mine,
                                           exclude=others if len(others) else None,
                                           budget_s=budget_s))
         self._drop_duplicates(results)
+        if per_slot is not None:
+            # the next start of a slot that lost its person may be anyone: not their shape
+            for tracker in self.trackers:
+                if tracker.state == TrackerState.LOST:
+                    tracker.reset(forget_shape=True)
         return results
+
+    def _people_per_slot(self, detections: Detections | None) -> list | None:
+        """Per slot, its detections when they tell people apart (None otherwise): the person
+        whose ``person_ids`` entry is the slot's body id, else, for a slot that follows
+        nobody, the next person no body follows (``""``), else none (an empty set: the slot's
+        body was not found in this frame set)."""
+        if detections is None or detections.persons is None:
+            return None
+        ids = list(detections.person_ids)
+        new = [k for k, body in enumerate(ids) if body == ""]
+        out = []
+        for slot, tracker in zip(self.ids, self.trackers):
+            if slot in ids:
+                out.append(detections.person(ids.index(slot)))
+            elif tracker.position is None and new:
+                out.append(detections.person(new.pop(0)))
+            else:
+                out.append(Detections.empty(detections.detector))
+        return out
 
     def _drop_duplicates(self, results: list[TrackResult]) -> None:
         """Two slots on one person: reset the worse fit (its result keeps this frame's pose)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from hmocap_ros.detection.detections import Detections
 from hmocap_ros.detection.keypoint_detector import KeypointDetector
 
-__all__ = ["KeypointsDetector"]
+__all__ = ["KeypointsDetector", "per_body"]
 
 
 class KeypointsDetector:
@@ -43,7 +43,34 @@ class KeypointsDetector:
     def close(self) -> None:
         self.network.close()
 
+    @property
+    def people_left_out(self) -> dict:
+        """With several people: what was left out and how often (``occluded``, ``other
+        person``, ``one view``)."""
+        return self.network.people_left_out
+
     def detect(self, images, masks, previous=None, stamp_ns=None,
                previous_stamp_ns=None) -> Detections:
+        """One person's keypoints (``max_people`` 1; ``previous`` that person's skeleton), or
+        every person's (``max_people`` > 1; ``previous`` body id -> skeleton), each detection
+        with its person (:attr:`Detections.persons`)."""
+        if self.network.params.max_people > 1:
+            bodies = per_body(previous)
+            people = self.network.detect_people(images, masks, bodies, stamp_ns,
+                                                previous_stamp_ns)
+            return Detections.of_people(self.name, [
+                (p.body_id, p.keypoints.labels, p.keypoints.positions, p.keypoints.scores)
+                for p in people])
         kp = self.network.detect(images, masks, previous, stamp_ns, previous_stamp_ns)
         return Detections(self.name, tuple(kp.labels), kp.positions, kp.scores)
+
+
+def per_body(previous: dict | None) -> dict:
+    """``previous`` as body id -> skeleton (label -> position); ValueError for one skeleton
+    without its body id, which cannot place that body's crops among several people."""
+    if not previous:
+        return {}
+    if all(isinstance(v, dict) for v in previous.values()):
+        return previous
+    raise ValueError("with several people the previous skeletons come by body id "
+                     "(body id -> label -> position)")
