@@ -23,8 +23,8 @@ Output, next to each other (``BAG`` = ``--out``, e.g. ``run.mcap``):
   ``header.stamp`` and is logged at it; room-frame data has frame id ``room``, images the
   camera's optical frame id.
 - ``<stem>_rig.yaml``: the rig (``hmocap_ros.geometry.rig.load_rig`` format).
-- ``<stem>.contact.png``: a contact sheet (all views of a few frames, ground-truth skeleton
-  projected, silhouette outlined).
+- ``<stem>.contact.png``: a contact sheet (all views of a few frames, every person's
+  ground-truth skeleton projected, the subject's silhouette outlined).
 
 The recording starts with ``--background-seconds`` of the empty room (for background
 models to learn; those frames have images and empty silhouettes but no skeleton or joint
@@ -36,6 +36,10 @@ changes then, so no background model can tell the person from the room by motion
 The subject is placed (position and heading searched with the seed) so that all joints stay
 inside every camera's image and away from the furniture; a motion that travels farther than
 the cameras' common view (a run) is placed to stay in view as long as it can, with a warning.
+``--people N`` adds persons 1..N-1 with ground truth (:mod:`~hmocap_sim.mocap_people`), each
+with a clip, a body and a look of their own: their skeleton, joint states, body shape and
+silhouettes are on the subject's topics under ``/ground_truth/body_<k>/``, with body id
+``body_<k>`` (:func:`hmocap_ros.eval.people_truth.person_topic`).
 ``--distractors`` adds a door that opens and closes, a ball rolling across the floor and a
 second person at the side of the room, which all cause foreground that is not the subject (and
 may occlude it: the silhouettes stay exact). ``--lighting-changes`` adds sudden lighting
@@ -48,7 +52,8 @@ posed with the same parameters as the tracking body, so joints coincide exactly 
 silhouettes are those of the finer surface.
 
 The parts: :mod:`~hmocap_sim.mocap_rig` (cameras), :mod:`~hmocap_sim.mocap_subject`
-(random streams, subject, placement), :mod:`~hmocap_sim.mocap_distractors`,
+(random streams, subject, placement), :mod:`~hmocap_sim.mocap_people`,
+:mod:`~hmocap_sim.mocap_distractors`,
 :mod:`~hmocap_sim.mocap_lighting`, :mod:`~hmocap_sim.mocap_frames` (the frame loop) and
 :mod:`~hmocap_sim.mocap_outputs` (the files beside the bag); this module sets a recording up
 from its options and runs them.
@@ -72,6 +77,7 @@ from hmocap_sim.mocap_outputs import (
     save_contact_sheet,
     save_rig_yaml,
 )
+from hmocap_sim.mocap_people import MAX_PEOPLE, build_people, people_stream
 from hmocap_sim.mocap_rig import make_rig, views_seeing
 from hmocap_sim.mocap_subject import make_performer, random_streams, subject_in_room
 from hmocap_sim.params import DEFAULT_BVH, MocapSimConfig
@@ -110,8 +116,8 @@ class _Recording:
     rig: object
     tracking: object
     full: object
-    shape: object
-    performers: list  # the subject first, then the people among the distractors
+    performers: list  # the people with ground truth (the subject first), then the distractors'
+    n_people: int  # people with ground truth
     renderer: object
     timeline: Timeline
     n_motion: int
@@ -131,6 +137,9 @@ def _set_up(config: MocapSimConfig) -> _Recording:
     full = load_body_model("hands", "full")
     look = dress(full, sample_appearance(rng_look))
     subject = make_performer(motion, tracking, full, shape, look)
+    people = build_people(config.people, subject=subject, subject_bvh=Path(config.bvh), rig=rig,
+                          room=room, tracking=tracking, full=full, fps=fps,
+                          rng=people_stream(config.seed))
     n_motion = len(subject.params)
     n_bg = int(round(config.background_seconds * fps))
     n_frames = n_bg + n_motion
@@ -138,21 +147,24 @@ def _set_up(config: MocapSimConfig) -> _Recording:
     t_motion, t_end = n_bg / fps, n_frames / fps
     distractors = build_distractors(
         DistractorContext(t=t, t_motion=t_motion, t_end=t_end, fps=fps, rig=rig, room=room,
-                          tracking=tracking, full=full, subject=subject),
+                          tracking=tracking, full=full, subject=subject,
+                          people=tuple(people)),
         rng_dist, config.distractors)
     window_gain, exposure, lamp_gain = light_levels(rng_light, rng_events, t, t_motion, t_end,
                                                     config.lighting_changes)
     gains = camera_gains(rng_cam, len(rig))
-    performers = [subject, *distractors.performers]
+    performers = [subject, *people, *distractors.performers]
     options = RenderOptions(shadows=config.shadows, noise=config.noise,
                             supersample=config.supersample)
     renderer = MocapRenderer(rig, room, [(full.faces, p.look) for p in performers], options,
-                             camera_gains=gains, with_ball=distractors.with_ball)
+                             camera_gains=gains, with_ball=distractors.with_ball,
+                             truth_people=1 + len(people))
     stamps = BASE_STAMP_NS + np.round(np.arange(n_frames) * 1e9 / fps).astype(np.int64)
     timeline = Timeline(stamps=stamps, n_background=n_bg, door=distractors.door,
                         balls=distractors.balls, window_gain=window_gain, exposure=exposure,
                         lamp_gain=lamp_gain)
-    return _Recording(rig, tracking, full, shape, performers, renderer, timeline, n_motion)
+    return _Recording(rig, tracking, full, performers, 1 + len(people), renderer, timeline,
+                      n_motion)
 
 
 def _sheet_frames(n_background: int, n_motion: int, n_sheet: int) -> set:
@@ -166,6 +178,7 @@ def _sheet_frames(n_background: int, n_motion: int, n_sheet: int) -> set:
 def _sheet_title(config: MocapSimConfig, rig) -> str:
     return (f"{Path(config.bvh).name} from {config.start:g} s, seed {config.seed}, "
             f"{len(rig)} cameras {rig[0].width}x{rig[0].height}"
+            + (f", {config.people} people" if config.people > 1 else "")
             + (", distractors" if config.distractors else "")
             + (", lighting changes" if config.lighting_changes else ""))
 
@@ -180,6 +193,8 @@ def generate(config: MocapSimConfig) -> SimResult:
     from hmocap_ros.io.typestore import hmocap_typestore
 
     t_start = time.perf_counter()
+    if not 1 <= int(config.people) <= MAX_PEOPLE:
+        raise ValueError(f"--people must be between 1 and {MAX_PEOPLE}, got {config.people}")
     out = Path(config.out)
     rig_path, sheet_path = output_paths(out)
     clear_outputs((out, rig_path, sheet_path), config.force)
@@ -192,12 +207,12 @@ def generate(config: MocapSimConfig) -> SimResult:
     n_bg = timeline.n_background
     factory = RosbagsFactory(hmocap_typestore())
     with whole_bag(out) as bag:
-        write_latched(bag, factory, rig, rec.shape, float(rec.shape.height(rec.tracking)),
+        write_latched(bag, factory, rig, rec.tracking, rec.performers[:rec.n_people],
                       int(timeline.stamps[0]))
         bar = tqdm(total=n_frames, desc=f"rendering {out.name}", unit="frame", file=sys.stderr,
                    disable=not config.progress, dynamic_ncols=True)
         loop = write_frames(bag, factory, rec.renderer, rec.tracking, rec.full, rec.performers,
-                            timeline, config.seed,
+                            rec.n_people, timeline, config.seed,
                             _sheet_frames(n_bg, rec.n_motion, max(0, int(config.contact_frames))),
                             bar)
         bar.close()

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from hmocap_sim.mocap_people import pingpong_frames
 from hmocap_sim.mocap_subject import make_performer, retargeted_motion
 from hmocap_sim.params import DATA_DIR
 
@@ -29,7 +30,8 @@ class DistractorContext:
 
     t: (N,) time of each frame (s); t_motion: when the subject appears; t_end: the end of the
     recording; fps: frame rate; rig, room: the cameras and the room; tracking, full: the
-    tracking body model and the rendered one; subject: the subject's performer.
+    tracking body model and the rendered one; subject: the subject's performer; people: the
+    performers of the other people with ground truth (``--people``).
     """
 
     t: np.ndarray
@@ -41,6 +43,7 @@ class DistractorContext:
     tracking: object
     full: object
     subject: object
+    people: tuple = ()
 
 
 @dataclass(eq=False)
@@ -57,8 +60,9 @@ class Distractors:
     with_ball: bool = False
 
 
-def _place_distractor(motion, room, rig, subject_xz: np.ndarray, rng):
-    """A spot at the side of the room, clear of furniture, 1.3 m from the subject and 1.8 m
+def _place_distractor(motion, room, rig, people_xz: np.ndarray, rng):
+    """A spot at the side of the room, clear of furniture, 1.3 m from the people with ground
+    truth (``people_xz``: their pelvis positions on the floor, any frame) and 1.8 m
     from every camera (nearer, a person fills the view), facing roughly the room centre."""
     from hmocap_sim.retarget import place_in_room
 
@@ -70,7 +74,7 @@ def _place_distractor(motion, room, rig, subject_xz: np.ndarray, rng):
         heading = math.atan2(-xz[0], -xz[1]) + rng.uniform(-0.6, 0.6)
         placed = place_in_room(motion, xz, heading)
         root = placed.root_translation[:, [0, 2]]
-        far = np.min(np.linalg.norm(root[:, None] - subject_xz[None], axis=-1)) >= 1.3
+        far = np.min(np.linalg.norm(root[:, None] - people_xz[None], axis=-1)) >= 1.3
         seen = np.min(np.linalg.norm(root[:, None] - cameras[None], axis=-1)) >= 1.8
         if far and seen and room.clearance(root).min() >= 0.35:
             return placed
@@ -120,9 +124,9 @@ def _ball_states(t: np.ndarray, rng, t0: float, t1: float, avoid: list, radius: 
 
 
 def _second_person(ctx: DistractorContext, out: Distractors, rng) -> None:
-    """Another subject (shape and look drawn from ``rng``) playing ``DISTRACTOR_BVH`` at the
-    side of the room, ping-ponging through the clip if the recording is longer than it;
-    nobody where no spot is free (``_place_distractor``)."""
+    """Another person (shape and look drawn from ``rng``) playing ``DISTRACTOR_BVH`` at the
+    side of the room, ping-ponging through the clip if the recording is longer than it, away
+    from the people with ground truth; nobody where no spot is free (``_place_distractor``)."""
     from hmocap_ros.body import sample_shape
     from hmocap_sim.appearance import dress, sample_appearance
 
@@ -130,12 +134,11 @@ def _second_person(ctx: DistractorContext, out: Distractors, rng) -> None:
     look = dress(ctx.full, sample_appearance(rng))
     motion = retargeted_motion(DISTRACTOR_BVH, ctx.tracking, shape, ctx.fps)
     n_motion = len(ctx.subject.params)
-    idx = np.arange(n_motion) % (2 * motion.n_frames - 2)
-    idx = np.where(idx < motion.n_frames, idx, 2 * motion.n_frames - 2 - idx)
+    idx = pingpong_frames(motion.n_frames, n_motion)
     motion = replace(motion, local_rotations=motion.local_rotations[idx],
                      root_translation=motion.root_translation[idx], source_frames=None)
-    subject_xz = ctx.subject.joints[:, 0][:, [0, 2]]
-    motion = _place_distractor(motion, ctx.room, ctx.rig, subject_xz, rng)
+    people_xz = np.concatenate([p.joints[:, 0][:, [0, 2]] for p in (ctx.subject, *ctx.people)])
+    motion = _place_distractor(motion, ctx.room, ctx.rig, people_xz, rng)
     if motion is not None:
         out.performers.append(make_performer(motion, ctx.tracking, ctx.full, shape, look))
 
@@ -150,7 +153,7 @@ def _ball(ctx: DistractorContext, out: Distractors, rng) -> None:
     """The ball starts rolling in the first 40 % of the motion, away from the people."""
     from hmocap_sim.mocap_render import BALL_RADIUS
 
-    tracks = [p.joints[:, 0][:, [0, 2]] for p in [ctx.subject, *out.performers]]
+    tracks = [p.joints[:, 0][:, [0, 2]] for p in [ctx.subject, *ctx.people, *out.performers]]
     t_motion = ctx.t_motion
     out.balls = _ball_states(ctx.t, rng, t_motion, t_motion + 0.4 * (ctx.t_end - t_motion),
                              tracks, BALL_RADIUS)

@@ -1,10 +1,14 @@
 """The frame loop of a simulated recording: render every frame and write its messages.
 
-Per frame (stamp ``stamps[i]``): the people are posed (the subject from frame ``n_background``),
-:class:`hmocap_sim.mocap_render.MocapRenderer` renders every camera with sensor noise from
-a generator seeded by ``(seed, frame, camera)``, and the bag gets each camera's image and
-ground-truth silhouette, then, while the subject is present, its skeleton and joint states.
-Every message of a frame has the frame's stamp and is logged at it.
+Per frame (stamp ``stamps[i]``): the people are posed (all of them from frame
+``n_background``), :class:`hmocap_sim.mocap_render.MocapRenderer` renders every camera with
+sensor noise from a generator seeded by ``(seed, frame, camera)``, and the bag gets each
+camera's image and ground-truth silhouette, then, while the people are present, each person's
+skeleton and joint states. The subject's ground truth is on the topics of
+:mod:`hmocap_ros.io.topics` with body id ``body_0``; person ``k`` >= 1's on the same topics under
+``/ground_truth/body_<k>/`` with body id ``body_<k>``
+(:func:`hmocap_ros.eval.people_truth.person_topic`). Every message of a frame has the frame's
+stamp and is logged at it.
 """
 
 from __future__ import annotations
@@ -15,11 +19,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hmocap_ros.eval.people_truth import person_body_id, person_topic
 from hmocap_sim.mocap_rig import ROOM_FRAME
 
 __all__ = ["FrameLoopResult", "Timeline", "write_frames", "write_latched"]
 
-BODY_ID = "body_0"
+BODY_ID = person_body_id(0)
 _POSE_CHUNK = 25  # frames posed together (one second at 25 fps)
 
 
@@ -77,43 +82,50 @@ class _PoseCache:
         return perf.look.with_hair(v, self.full.faces)
 
 
-def _skeleton_msg(factory, stamp, names, parents, points):
+def _skeleton_msg(factory, stamp, names, parents, points, body_id: str = BODY_ID):
     from hmocap_ros.io.msg_factory import make_header
 
     return factory.make(
         "hmocap_interfaces/msg/Skeleton", header=make_header(factory, stamp, ROOM_FRAME),
-        body_id=BODY_ID, joint_names=list(names),
+        body_id=body_id, joint_names=list(names),
         positions=[factory.make("geometry_msgs/msg/Point", x=float(p[0]), y=float(p[1]),
                                 z=float(p[2])) for p in points],
         parents=np.asarray(parents, np.int32), confidence=np.ones(len(names), np.float32),
         fit_error=float("nan"))
 
 
-def _body_shape_msg(factory, stamp, shape, height):
+def _body_shape_msg(factory, stamp, shape, height, body_id: str = BODY_ID):
     from hmocap_ros.io.msg_factory import make_header
 
     return factory.make(
         "hmocap_interfaces/msg/BodyShape", header=make_header(factory, stamp, ROOM_FRAME),
-        body_id=BODY_ID, entity_names=list(shape.entity_names),
+        body_id=body_id, entity_names=list(shape.entity_names),
         bone_scale=np.asarray(shape.bone_scale, np.float32),
         radial_scale=np.asarray(shape.radial_scale, np.float32),
         global_scale=float(shape.global_scale), height=float(height))
 
 
-def write_latched(bag, factory, rig, shape, body_height: float, stamp: int) -> None:
-    """The latched topics: the camera rig and the subject's body shape."""
+def write_latched(bag, factory, rig, tracking, people: Sequence, stamp: int) -> None:
+    """The latched topics: the camera rig and the body shape of each person with ground truth
+    (``people``: their performers, the subject first)."""
     from hmocap_ros.io import topics
     from hmocap_ros.io.bag_writer import LATCHED
     from hmocap_ros.io.rig_messages import rig_to_msg
 
     bag.add_topic(topics.CAMERA_RIG, "hmocap_interfaces/msg/CameraRig", LATCHED)
-    bag.add_topic(topics.GT_BODY_SHAPE, "hmocap_interfaces/msg/BodyShape", LATCHED)
+    for k in range(len(people)):
+        bag.add_topic(person_topic(topics.GT_BODY_SHAPE, k), "hmocap_interfaces/msg/BodyShape",
+                      LATCHED)
     bag.write(topics.CAMERA_RIG, rig_to_msg(rig, stamp, factory), stamp)
-    bag.write(topics.GT_BODY_SHAPE, _body_shape_msg(factory, stamp, shape, body_height), stamp)
+    for k, person in enumerate(people):
+        bag.write(person_topic(topics.GT_BODY_SHAPE, k),
+                  _body_shape_msg(factory, stamp, person.shape,
+                                  float(person.shape.height(tracking)), person_body_id(k)),
+                  stamp)
 
 
 def _write_views(bag, factory, rig, frame, stamp: int) -> None:
-    """Each camera's image and ground-truth silhouette."""
+    """Each camera's image and the ground-truth silhouette of each person."""
     from hmocap_ros.io import topics
     from hmocap_ros.io.conversions import numpy_to_image
 
@@ -123,6 +135,9 @@ def _write_views(bag, factory, rig, frame, stamp: int) -> None:
         bag.write(topics.gt_silhouette(cam.name),
                   numpy_to_image(frame.silhouettes[k], "mono8", stamp, cam.frame_id, factory),
                   stamp)
+        for p, mask in enumerate(frame.people_silhouettes[k][1:], start=1):
+            bag.write(person_topic(topics.gt_silhouette(cam.name), p),
+                      numpy_to_image(mask, "mono8", stamp, cam.frame_id, factory), stamp)
 
 
 def _sheet_tiles(rig, frame, points: np.ndarray, parents: np.ndarray) -> list:
@@ -137,19 +152,18 @@ def _sheet_tiles(rig, frame, points: np.ndarray, parents: np.ndarray) -> list:
             for k in range(len(rig))]
 
 
-def write_frames(bag, factory, renderer, tracking, full, performers: Sequence, timeline: Timeline,
-                 seed: int, sheet_frames: set, progress) -> FrameLoopResult:
+def write_frames(bag, factory, renderer, tracking, full, performers: Sequence, n_people: int,
+                 timeline: Timeline, seed: int, sheet_frames: set, progress) -> FrameLoopResult:
     """Render and write every frame of ``timeline`` (module docstring).
 
-    ``performers``: the subject first, then the people among the distractors; ground truth is
-    the subject's. ``sheet_frames``: frames kept for the contact sheet. ``progress``: a tqdm
-    bar, updated once per frame.
+    ``performers``: the subject first, then the other people with ground truth (``n_people``
+    in all), then the people among the distractors. ``sheet_frames``: frames kept for the
+    contact sheet. ``progress``: a tqdm bar, updated once per frame.
     """
     from hmocap_ros.io import topics
     from hmocap_ros.io.conversions import make_joint_state
 
     rig = renderer.rig
-    subject = performers[0]
     names = tuple(tracking.joint_names) + tuple(tracking.end_site_names)
     parents = np.concatenate([tracking.parents, tracking.end_site_parents]).astype(np.int32)
     dof_names = tracking.skeleton.dof_names
@@ -170,13 +184,19 @@ def write_frames(bag, factory, renderer, tracking, full, performers: Sequence, t
             result.stage_seconds[key] = result.stage_seconds.get(key, 0.0) + val
         _write_views(bag, factory, rig, frame, stamp)
         if present:
-            points = np.concatenate([subject.joints[j], subject.end_sites[j]])
-            bag.write(topics.GT_SKELETON, _skeleton_msg(factory, stamp, names, parents, points),
-                      stamp)
-            bag.write(topics.GT_JOINT_STATES,
-                      make_joint_state(dof_names, subject.params[j], stamp, ROOM_FRAME,
-                                       factory=factory), stamp)
-            if i in sheet_frames:
-                result.sheet_rows.append((i, _sheet_tiles(rig, frame, points, parents)))
+            for p, person in enumerate(performers[:n_people]):
+                points = np.concatenate([person.joints[j], person.end_sites[j]])
+                bag.write(person_topic(topics.GT_SKELETON, p),
+                          _skeleton_msg(factory, stamp, names, parents, points,
+                                        person_body_id(p)), stamp)
+                bag.write(person_topic(topics.GT_JOINT_STATES, p),
+                          make_joint_state(dof_names, person.params[j], stamp, ROOM_FRAME,
+                                           factory=factory), stamp)
+            if i in sheet_frames:  # every person's skeleton, the subject's silhouette
+                points = np.concatenate([np.concatenate([p.joints[j], p.end_sites[j]])
+                                         for p in performers[:n_people]])
+                offsets = len(parents) * np.arange(n_people)[:, None]
+                links = np.where(parents[None] >= 0, parents[None] + offsets, -1).ravel()
+                result.sheet_rows.append((i, _sheet_tiles(rig, frame, points, links)))
         progress.update(1)
     return result

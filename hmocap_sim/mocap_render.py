@@ -18,7 +18,8 @@ person, the door's opening angle, the ball, the light levels) and, per camera,
    Poisson-Gaussian sensor noise (:mod:`hmocap_sim.render.sensor` model);
 4. reads the ground-truth silhouette from the same z-buffer at the output resolution: the
    pixels whose nearest surface is the subject (``face_id`` inside the subject's face range),
-   so furniture, the door or a second person in front of the subject are handled exactly.
+   so furniture, the door or a second person in front of the subject are handled exactly; the
+   same for each person with ground truth (``truth_people``).
 
 Per-camera colour response (white balance and gain) is folded into the light intensities. All
 randomness (sensor noise) comes from the generators passed in, so frames repeat bit for bit.
@@ -112,12 +113,15 @@ class FrameState:
 
 @dataclass(frozen=True, eq=False)
 class RenderedFrame:
-    """Images (H, W, 3) uint8 RGB and ground-truth silhouettes (H, W) uint8 0/255, per camera,
-    and the seconds spent in each stage."""
+    """Images (H, W, 3) uint8 RGB and the subject's ground-truth silhouettes (H, W) uint8
+    0/255, per camera, and the seconds spent in each stage. ``people_silhouettes``: per camera,
+    the silhouette of each person with ground truth (``MocapRenderer``'s ``truth_people``; the
+    subject's first)."""
 
     images: tuple
     silhouettes: tuple
     timings: dict = field(default_factory=dict)
+    people_silhouettes: tuple = ()
 
 
 def _vignette_gain(width: int, height: int, strength: float) -> np.ndarray:
@@ -186,11 +190,14 @@ class MocapRenderer:
         options: :class:`RenderOptions`.
         camera_gains: ``(M, 3)`` per-camera colour response (white balance x gain), default 1.
         with_ball: whether the scene has the rolling ball (a distractor).
+        truth_people: the first this many people have ground-truth silhouettes.
     """
 
     def __init__(self, rig, room: Room, people: Sequence[tuple], options: RenderOptions =
-                 RenderOptions(), camera_gains=None, with_ball: bool = False):
+                 RenderOptions(), camera_gains=None, with_ball: bool = False,
+                 truth_people: int = 1):
         self.rig = rig
+        self.truth_people = int(truth_people)
         self.room = room
         self.options = options
         self.width = int(rig[0].width)
@@ -342,9 +349,10 @@ class MocapRenderer:
             exposure=float(state.exposure), shadow_bias=0.02,
             shadow_softness_px=self.options.shadow_softness_px, shadow_taps=5)
 
-    def subject_mask(self, face_id: np.ndarray) -> np.ndarray:
-        """uint8 0/255 mask of the pixels whose nearest surface is the subject (person 0)."""
-        f0, f1 = self.ranges["person_0"][2:]
+    def subject_mask(self, face_id: np.ndarray, person: int = 0) -> np.ndarray:
+        """uint8 0/255 mask of the pixels whose nearest surface is a person (default the
+        subject, person 0)."""
+        f0, f1 = self.ranges[f"person_{person}"][2:]
         return (((face_id >= f0) & (face_id < f1)) * np.uint8(255)).astype(np.uint8)
 
     def render(self, state: FrameState, rngs: Sequence[np.random.Generator] | None = None
@@ -368,7 +376,7 @@ class MocapRenderer:
         if ss > 1:
             uv1, z1 = project_batch(vertices[None], self.K, self.R, self.t, self.dist)
         timings["raster"] += time.perf_counter() - t2
-        images, masks = [], []
+        images, masks, people_masks = [], [], []
         h, w = self.height, self.width
         for m in range(self.n_cameras):
             ta = time.perf_counter()
@@ -388,6 +396,8 @@ class MocapRenderer:
             else:
                 face_id = raster[1]
             masks.append(self.subject_mask(face_id))
+            people_masks.append((masks[-1],) + tuple(self.subject_mask(face_id, p)
+                                                     for p in range(1, self.truth_people)))
             td = time.perf_counter()
             images.append(sensor_image(
                 rgb, rngs[m] if opt.noise else None, gain_map=self._vignette,
@@ -397,7 +407,7 @@ class MocapRenderer:
             timings["shade"] += tc - tb
             timings["sensor"] += te - td
         self.last_timings = timings
-        return RenderedFrame(tuple(images), tuple(masks), timings)
+        return RenderedFrame(tuple(images), tuple(masks), timings, tuple(people_masks))
 
     def _paint_emitters(self, rgb: np.ndarray, face_id: np.ndarray, m: int,
                         state: FrameState) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -22,7 +23,7 @@ from hmocap_sim.mocap_rig import make_rig, views_seeing
 if TYPE_CHECKING:
     from hmocap_sim.params import MocapSimConfig
 
-__all__ = ["MIN_PELVIS_CLEARANCE", "full_parameters", "make_performer", "motion_window",
+__all__ = ["MIN_PELVIS_CLEARANCE", "PERSON_GAP", "full_parameters", "make_performer", "motion_window",
            "place_subject", "random_streams", "retargeted_motion", "shaped_skeleton",
            "subject_in_room"]
 
@@ -33,6 +34,10 @@ THUMB_CURL = {"thumb1_flex": 0.15, "thumb2_flex": 0.2, "thumb3_flex": 0.2}
 #: (m) a placement keeps the pelvis this far from every wall and furniture footprint in every
 #: frame, if any candidate can: half a torso's width, so that no part of the trunk enters a wall
 MIN_PELVIS_CLEARANCE = 0.25
+
+#: (m) a placement keeps the pelvis this far from every other person's at the same instant, if
+#: any candidate can (two people shoulder to shoulder stand about 0.5 m apart)
+PERSON_GAP = 0.9
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,7 +138,8 @@ def shaped_skeleton(model, shape) -> _RestSkeleton:
                          model.end_site_parents)
 
 
-def place_subject(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int = 64):
+def place_subject(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidates: int = 64,
+                  avoid: Sequence[np.ndarray] = (), who: str = "the subject"):
     """Choose position and heading so the subject stays in every view and off the furniture.
 
     Candidates are drawn from ``rng``: positions uniform over the central floor; headings
@@ -145,6 +151,11 @@ def place_subject(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidat
     then the fraction of frames in which every joint and end site is inside every image (3 %
     margin) with the pelvis 0.45 m from walls and furniture, then the fraction of (frame,
     camera) pairs that see the whole body; the first perfect candidate wins, else the best.
+
+    ``avoid``: the pelvis tracks ``(F, 2)`` (floor x, z per frame) of people placed before; a
+    candidate then scores, after the clearance, the fraction of frames in which its pelvis
+    stands :data:`PERSON_GAP` from each of them at the same instant, and is perfect only when
+    that holds in every frame. ``who`` names the person in the warnings.
     """
     from hmocap_ros.body import end_site_positions, forward_kinematics
     from hmocap_sim.retarget import heading_of, place_in_room
@@ -156,7 +167,7 @@ def place_subject(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidat
     diagonal = math.atan2(room.spec.size_x, room.spec.size_z)
     axes = [0.0, math.pi / 2, math.pi, -math.pi / 2, diagonal, -diagonal,
             math.pi - diagonal, diagonal - math.pi]
-    best, best_score = None, (-1.0, -1.0, -1.0)
+    best, best_score = None, (-1.0, -1.0, -1.0, -1.0)
     for k in range(n_candidates):
         if k == 0:
             xz = (0.0, 0.0)
@@ -176,20 +187,33 @@ def place_subject(motion, rig, room, rng, skeleton: _RestSkeleton, *, n_candidat
         clearance = room.clearance(placed.root_translation[:, [0, 2]])
         clear = clearance >= 0.45
         score = (float(clearance.min() >= MIN_PELVIS_CLEARANCE),
+                 _apart_fraction(placed.root_translation[:, [0, 2]], avoid),
                  float(np.mean(seeing.all(axis=1) & clear)),
                  float(np.mean(seeing & clear[:, None])))
         if score > best_score:
             best, best_score = placed, score
-        if score[1] >= 1.0:
+        if score[1] >= 1.0 and score[2] >= 1.0:
             break
     if best_score[0] < 1.0:
         print(f"hmocap sim mocap: no placement keeps the pelvis {MIN_PELVIS_CLEARANCE} m from "
-              "the walls and furniture: the subject passes through one", file=sys.stderr)
+              f"the walls and furniture: {who} passes through one", file=sys.stderr)
     if best_score[1] < 1.0:
-        print(f"hmocap sim mocap: the motion leaves some camera's view in "
-              f"{100 * (1 - best_score[1]):.0f} % of its frames (whole body seen in "
-              f"{100 * best_score[2]:.0f} % of the images)", file=sys.stderr)
+        print(f"hmocap sim mocap: {who} comes nearer than {PERSON_GAP} m to another person in "
+              f"{100 * (1 - best_score[1]):.0f} % of the frames", file=sys.stderr)
+    if best_score[2] < 1.0:
+        print(f"hmocap sim mocap: the motion of {who} leaves some camera's view in "
+              f"{100 * (1 - best_score[2]):.0f} % of its frames (whole body seen in "
+              f"{100 * best_score[3]:.0f} % of the images)", file=sys.stderr)
     return best
+
+
+def _apart_fraction(track: np.ndarray, avoid: Sequence[np.ndarray]) -> float:
+    """Fraction of frames in which the pelvis track ``track`` (F, 2) stands at least
+    :data:`PERSON_GAP` from every track of ``avoid`` at the same frame (1 without any)."""
+    if not len(avoid):
+        return 1.0
+    gaps = np.stack([np.linalg.norm(track - other, axis=-1) for other in avoid])
+    return float(np.mean(gaps.min(axis=0) >= PERSON_GAP))
 
 
 def random_streams(seed: int) -> tuple:

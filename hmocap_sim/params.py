@@ -32,6 +32,7 @@ class MocapSimConfig:
     background_seconds: float = 1.0
     still_seconds: float = 0.0
     seed: int = 0
+    people: int = 1
     distractors: bool = False
     lighting_changes: bool = False
     shadows: bool = True

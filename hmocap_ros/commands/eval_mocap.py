@@ -102,6 +102,12 @@ def main_from_args(ns: argparse.Namespace) -> int:
               f"(std {result['std_mm']:.1f}, median {result['median_mm']:.1f}) over "
               f"{result['frames_with_pose']}/{result['frames']} frames, {result['seconds_per_frame']:.2f} s/frame"
               + (f", {result['track_switches']} track switches" if ns.max_people > 1 else ""))
+        if len(result["persons"]) > 1:
+            for person in result["persons"]:
+                print(f"  {person['person_id']}: 12 limb joints {person['limb_joints_mm']:.1f} mm, "
+                      f"mean {person['mean_mm']:.1f} mm, tracked on {person['frames_tracked']}/"
+                      f"{person['frames_seen']} frame sets seen, {person['id_switches']} id "
+                      f"switches")
     failed = unevaluated_methods(report)
     if failed:
         print(f"hmocap eval mocap: no frame evaluated ({', '.join(failed)}: no pose on any of the "

@@ -459,6 +459,19 @@ class KeypointDetector:
             self._count("off the foreground")
         return kept
 
+    def _unexplained(self, masks, usable, hips_px: np.ndarray) -> bool:
+        """Whether a usable view may hold a person no body follows: it has no mask, or a
+        foreground blob without any tracked body's projected hips (``hips_px (V, B, 2)``)."""
+        for v, (camera, mask) in enumerate(zip(self.cameras, masks)):
+            if usable[v] is None:
+                continue
+            if mask is None:
+                return True
+            known = hips_px[v].reshape(-1, 2)
+            if any(not _holds(blob, known) for blob in foreground_blobs(camera, mask, self.params)):
+                return True
+        return False
+
     def _on_foreground(self, point: np.ndarray, masks) -> bool:
         """Whether a room point lies on (within :data:`FOREGROUND_TOLERANCE` of the image's
         longer side of) the foreground of every view that has a mask and sees it: two views'
@@ -487,7 +500,8 @@ class KeypointDetector:
         landmarks that lie on another body are dropped (:func:`~.people_search.landmarks_owner`);
         its views run in rotation as :meth:`detect`'s. While fewer than ``max_people`` bodies
         are tracked, the pose detector looks for the others (every ``search_every`` frame
-        sets) and every person two views agree on is returned with body id ``""``. Bodies are
+        sets, when a view has no mask or a foreground blob without a tracked body's projected hips)
+        and every person two views agree on is returned with body id ``""``. Bodies are
         returned in id order, then the new people, best agreeing first."""
         n = len(self.cameras)
         masks = [None] * n if masks is None else list(masks)
@@ -552,7 +566,8 @@ class KeypointDetector:
         t1 = time.perf_counter()
         people = []
         self._searches += 1
-        if len(ids) < p.max_people and self._searches % int(p.search_every) == 0:
+        if (len(ids) < p.max_people and self._searches % int(p.search_every) == 0
+                and self._unexplained(masks, usable, hips_px)):
             people = self._search(images, masks, usable, hips_px, p.max_people - len(ids))
         out: list[PersonKeypoints] = []
         views_run = 0

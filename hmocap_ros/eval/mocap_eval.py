@@ -28,6 +28,14 @@ Several people (``--max-people N``): N trackers run side by side, each on a pers
 track whose pelvis stands nearest the subject's, as multi-person benchmarks match estimates to
 people, and the report counts the changes of that track (``track_switches``).
 
+Several people with ground truth (``hmocap sim mocap --people N``; person ``k``'s truth under
+``/ground_truth/body_<k>/``, :mod:`~hmocap_ros.eval.people_truth`): each method's ``persons``
+scores every person, the subject first, matched to the tracked bodies in each frame set by the
+Hungarian method on the mean joint distance within a gate
+(:mod:`~hmocap_ros.eval.people_scores`): the error figures below, the 12 limb joints, the
+frame sets where the person is seen (by >= 2 cameras, from the per-person silhouettes) and
+tracked, and the id switches. The top-level figures stay the subject's on its nearest track.
+
 Output (``--json``): per method the overall mean and standard deviation of the per-frame mean
 joint error (mm; thesis table 2.3), per-joint mean and std, per-frame errors, frames with and
 without a pose, tracker seconds per frame and frames per second (also including segmentation),
@@ -49,6 +57,7 @@ import numpy as np
 
 from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
 from hmocap_ros.eval.mocap_frames import BagFrames, load_frames
+from hmocap_ros.eval.people_scores import score_people
 from hmocap_ros.params import field_overrides, flat_record, from_flat
 from hmocap_ros.tracking.methods import get_method
 
@@ -76,6 +85,7 @@ class EvalResult:
     fit_costs: list
     anthropometry: dict | None
     params: dict = field(default_factory=dict)
+    persons: list = field(default_factory=list)
 
 
 # ----------------------------------------------------------------------------- runs
@@ -122,6 +132,18 @@ def _subject_track(results: list, truth: np.ndarray | None, root: int, true_root
         return posed[0] if posed else 0
     gaps = [np.linalg.norm((results[k].joints[root] - truth[true_root])[[0, 2]]) for k in posed]
     return posed[int(np.argmin(gaps))]
+
+
+def _score_people(frames: BagFrames, true_idx: np.ndarray, bodies: np.ndarray, names: list,
+                  body_ids) -> list[dict]:
+    """Every person of ``frames`` scored on the tracked ``bodies`` (F, T, J, 3) (the subject
+    alone where the frames hold no other person's truth)."""
+    if frames.people_truth is None:
+        return score_people(frames.truth[None][:, :, true_idx], bodies, names,
+                            person_ids=frames.person_ids[:1] or ("body_0",), body_ids=body_ids)
+    return score_people(frames.people_truth[:, :, true_idx], bodies, names,
+                        person_ids=frames.person_ids, body_ids=body_ids,
+                        views=frames.people_views)
 
 
 def method_params(method: str, particles: int = 0, layers: int = 0,
@@ -188,6 +210,8 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     max_people: trackers run side by side (:class:`~hmocap_ros.tracking.people_tracker.
     PeopleTracker`); each scored frame takes the track nearest the subject
     (:func:`_subject_track`), and a change of track between scored frames counts as a switch.
+    ``persons``: every person with truth scored on the bodies matched to them
+    (:func:`~hmocap_ros.eval.people_scores.score_people`).
     Time and evaluations per frame are those of all trackers together.
     """
     from hmocap_ros.body import load_body_model
@@ -204,6 +228,7 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     root, true_root = int(est_idx[0]), int(true_idx[0])
     has_truth = frames.has_truth
     estimates = np.full((len(frames.stamps), len(est_idx), 3), np.nan)
+    bodies = np.full((len(frames.stamps), people.max_people, len(est_idx), 3), np.nan)
     states, costs, tracks = [], [], []
     stage: dict[str, float]
     times, stage, evals = [], {}, []
@@ -224,6 +249,9 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
                 tracks.append(slot)
         if result.joints is not None:  # has_pose
             estimates[k] = result.joints[est_idx]
+        for t, r in enumerate(results):
+            if r.joints is not None:
+                bodies[k, t] = r.joints[est_idx]
         if progress is not None:
             progress(k, len(frames.stamps), result)
     errors = joint_errors(estimates[has_truth], frames.truth[has_truth][:, true_idx])
@@ -242,7 +270,8 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
         stage_seconds={k: v / n for k, v in stage.items()}, states=states, fit_costs=costs,
         anthropometry=_anthropometry(people.trackers[subject].model,
                                      people.trackers[subject].shape, frames.body_shape, model),
-        params=params_record(params))
+        params=params_record(params),
+        persons=_score_people(frames, true_idx, bodies, names, people.ids))
 
 
 def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
@@ -301,6 +330,7 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
             "stage_seconds_per_frame": res.stage_seconds, "states": res.states,
             "fit_costs": res.fit_costs, "anthropometry": res.anthropometry,
             "params": res.params,
+            "persons": res.persons,
         }
         print(f"{Path(bag).name} {method:8s} mean {s['mean_mm']:.1f} mm (std {s['std_mm']:.1f}) "
               f"over {s['frames_with_pose']}/{s['frames']} frames, "

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hmocap_ros.eval.people_truth import PeopleTruth, PersonViews, read_people
+
 if TYPE_CHECKING:
     from hmocap_ros.body import BodyShape
     from hmocap_ros.geometry.rig import Rig
@@ -43,6 +45,10 @@ class BagFrames:
     detections: per frame the extremity detection's Detections, when loaded for a method that
     takes them (``kf-hpf``, ``dd-hpf``), else None; detector_s: seconds of extremity detection
     per frame set.
+    people_truth: (P, F, J, 3) the truth of every person (:mod:`~hmocap_ros.eval.people_truth`;
+    ``people_truth[0]`` is ``truth``); person_ids: their body ids; people_views: (P, F) cameras
+    that see each person (:class:`~hmocap_ros.eval.people_truth.PersonViews`), or None when the
+    bag has not every person's silhouettes.
     """
 
     rig: Rig
@@ -57,6 +63,9 @@ class BagFrames:
     shape_hw: tuple = ()
     detections: list | None = None
     detector_s: float = 0.0
+    people_truth: np.ndarray | None = None
+    person_ids: tuple = ()
+    people_views: np.ndarray | None = None
 
     def mask_list(self, k: int) -> list:
         h, w = self.shape_hw
@@ -73,28 +82,21 @@ class BagFrames:
         return np.isfinite(self.truth).all(axis=(1, 2))
 
 
-def _read_truth(reader, available, bag) -> tuple[dict, tuple, BodyShape | None]:
-    """The ground-truth skeletons by stamp, their joint names, and the subject's shape."""
+def _read_truth(reader, available, bag) -> tuple[PeopleTruth, BodyShape | None]:
+    """Every person's ground-truth skeletons, and the subject's shape."""
     from hmocap_ros.body import BodyShape
     from hmocap_ros.io import topics
-    from hmocap_ros.io.msg_factory import stamp_to_ns
 
     if topics.GT_SKELETON not in available:
         raise ValueError(f"{bag}: no {topics.GT_SKELETON}: nothing to score against")
-    truth_by_stamp = {}
-    joint_names: tuple = ()
-    for item in reader.messages([topics.GT_SKELETON]):
-        msg = item.msg
-        joint_names = tuple(str(n) for n in msg.joint_names)
-        truth_by_stamp[stamp_to_ns(msg.header.stamp)] = np.array(
-            [[p.x, p.y, p.z] for p in msg.positions], dtype=np.float64)
+    people = read_people(reader, available)
     body_shape: BodyShape | None = None
     if topics.GT_BODY_SHAPE in available:
         shape_msg = reader.first(topics.GT_BODY_SHAPE)
         if shape_msg is not None:
             body_shape = BodyShape.from_named(shape_msg.entity_names, shape_msg.bone_scale,
                                               shape_msg.radial_scale, shape_msg.global_scale)
-    return truth_by_stamp, joint_names, body_shape
+    return people, body_shape
 
 
 def empty_room_frames(reader, image_topics, slop_ns: int, first_truth) -> int:
@@ -132,14 +134,16 @@ def _mask_row(use, msgs, stamp, bg, rgb_of) -> list:
 
 
 def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, bg,
-                truth_by_stamp, n_joints: int, max_frames: int | None):
+                people: PeopleTruth, views: PersonViews | None, max_frames: int | None):
     """Every frame set's packed masks of the ``use`` topics (those in the bag:
     ``use_present``), its detections when ``pipeline`` (an ExtremityPipeline) is given, its
-    truth and the timing: ``(stamps, masks, truth, detections, shape_hw, segmentation s,
-    detection s)``."""
+    truth of every person (``people``), the cameras that see each (when ``views``) and the
+    timing: ``(stamps, masks, truth, detections, shape_hw, segmentation s, detection s,
+    people truth, people views)``."""
     from hmocap_ros.io.image_codec import decoded_rgb
 
-    stamps, masks, truth = [], [], []
+    stamps, masks, truth, people_rows, views_rows = [], [], [], [], []
+    truth_by_stamp = people.by_stamp[0]
     detections: list | None = [] if pipeline is not None else None
     shape_hw: tuple = ()
     seg_time = det_time = 0.0
@@ -147,6 +151,8 @@ def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, 
     read = list(use_present)
     if pipeline is not None:
         read += [t for t in image_topics if t not in read and t in reader.topics(compressed_as_raw=True)]
+    if views is not None:
+        read += [t for t in views.topics if t not in read]
     for stamp, msgs in reader.frame_sets(read, slop_ns, allow_partial=True, min_topics=1):
         decoded: dict = {}  # each image decoded once, for its mask and its detections
 
@@ -171,12 +177,16 @@ def _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns: int, 
         stamps.append(stamp)
         masks.append(row)
         gt = truth_by_stamp.get(stamp)
-        truth.append(gt if gt is not None else np.full((n_joints, 3), np.nan))
+        people_rows.append(people.row(stamp))
+        truth.append(people_rows[-1][0])
+        if views is not None:
+            views_rows.append(views.count(people_rows[-1], msgs))
         if gt is not None:
             n_truth += 1
             if max_frames is not None and n_truth >= max_frames:
                 break
-    return stamps, masks, truth, detections, shape_hw, seg_time, det_time
+    return (stamps, masks, truth, detections, shape_hw, seg_time, det_time, people_rows,
+            views_rows)
 
 
 def _detect(pipeline, image_topics, msgs, stamp, rgb_of, masks):
@@ -227,13 +237,18 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
         rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
         if rig_msg is None:
             raise ValueError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown")
-        rig = rig_from_msg(rig_msg)
+        rig = bag_rig = rig_from_msg(rig_msg)
         if rig is not None and given_rig is not None:
             if set(given_rig.names) != set(rig.names):
                 raise ValueError(f"the rig's cameras ({', '.join(given_rig.names)}) are not the "
                                  f"bag's ({', '.join(rig.names)})")
             rig = type(given_rig)(given_rig.frame_id, tuple(given_rig[n] for n in rig.names))
-        truth_by_stamp, joint_names, body_shape = _read_truth(reader, available, bag)
+        people, body_shape = _read_truth(reader, available, bag)
+        truth_by_stamp, joint_names = people.by_stamp[0], people.joint_names
+        views: PersonViews | None = None
+        if bag_rig is not None:  # the truth's cameras, whatever rig the tracker is given
+            views = PersonViews(bag_rig, joint_names, len(people.ids), available)
+            views = views if views.known else None
         names = rig.names
         image_topics = [topics.camera_image(n) for n in names]
         gt_topics = [topics.gt_silhouette(n) for n in names]
@@ -278,11 +293,18 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
 
             pipeline = ExtremityPipeline(rig.cameras, detector)
         frames = _frame_sets(reader, use, use_present, pipeline, image_topics, slop_ns,
-                             bg, truth_by_stamp, len(joint_names), max_frames)
-    stamps, masks, truth, detections, shape_hw, seg_time, det_time = frames
+                             bg, people, views, max_frames)
+    stamps, masks, truth, detections, shape_hw, seg_time, det_time, people_rows, views_rows = frames
+    n_people, n_joints = len(people.ids), len(joint_names)
     return BagFrames(rig=rig, stamps=np.asarray(stamps, dtype=np.int64), masks=masks,
                      truth=np.stack(truth) if truth else np.zeros((0, len(joint_names), 3)),
                      joint_names=joint_names, body_shape=body_shape, silhouettes=silhouettes,
                      fallback=fallback, segmentation_s=seg_time / max(len(stamps), 1),
                      shape_hw=tuple(shape_hw), detections=detections,
-                     detector_s=det_time / max(len(stamps), 1))
+                     detector_s=det_time / max(len(stamps), 1),
+                     people_truth=(np.stack(people_rows, axis=1) if people_rows
+                                   else np.zeros((n_people, 0, n_joints, 3))),
+                     person_ids=people.ids,
+                     people_views=(None if views is None
+                                   else np.stack(views_rows, axis=1) if views_rows
+                                   else np.zeros((n_people, 0), dtype=np.int64)))

@@ -38,6 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default 0)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of subject shape, look, room, placement and noise (default 0)")
+    parser.add_argument("--people", type=int, default=1,
+                        help="people with ground truth, 1-4 (default 1): the subject, then "
+                             "people each playing another shipped clip with a body of their "
+                             "own, truth under /ground_truth/body_<k>/")
     parser.add_argument("--distractors", action="store_true",
                         help="add a door that opens, a rolling ball and a second person")
     parser.add_argument("--lighting-changes", action="store_true",
@@ -64,7 +68,8 @@ def main_from_args(ns: argparse.Namespace) -> int:
     config = MocapSimConfig(
         out=ns.out, bvh=ns.bvh, cameras=ns.cameras, width=ns.width, height=ns.height, fps=ns.fps,
         start=ns.start, seconds=ns.seconds, background_seconds=ns.background_seconds,
-        still_seconds=ns.still_seconds, seed=ns.seed, distractors=ns.distractors, lighting_changes=ns.lighting_changes,
+        still_seconds=ns.still_seconds, seed=ns.seed, people=ns.people,
+        distractors=ns.distractors, lighting_changes=ns.lighting_changes,
         shadows=ns.shadows, noise=ns.noise,
         supersample=ns.supersample, rig=ns.rig, contact_frames=ns.contact_frames,
         force=ns.force, progress=not ns.quiet)
