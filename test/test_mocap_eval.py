@@ -156,18 +156,17 @@ def test_eval_reports_json_and_plot_on_the_demo_bag(tmp_path, capsys):
 
 
 def test_the_subject_is_scored_on_the_nearest_track():
-    from hmocap_ros.eval.mocap_eval import _subject_track
-    from hmocap_ros.tracking.body_tracker import TrackResult
+    from hmocap_ros.eval.people_scores import nearest_bodies
 
-    def posed(x):
-        return TrackResult(0, "tracking", joints=np.array([[x, 0.9, 0.0], [x, 1.4, 0.0]]))
-
-    truth = np.array([[1.0, 0.9, 0.1], [1.0, 1.4, 0.1]])
-    nobody = TrackResult(0, "searching")
-    assert _subject_track([posed(-1.0), posed(0.9)], truth, 0, 0) == 1
-    assert _subject_track([nobody, posed(-1.0)], truth, 0, 0) == 1  # the only pose
-    assert _subject_track([posed(-1.0), posed(0.9)], np.full((2, 3), np.nan), 0, 0) == 0
-    assert _subject_track([nobody, nobody], truth, 0, 0) == 0
+    nobody = np.full(3, np.nan)
+    roots = np.array([[[-1.0, 0.9, 0.0], [0.9, 0.9, 0.0]],
+                      [nobody, [-1.0, 0.9, 0.0]],
+                      [[-1.0, 0.9, 0.0], [0.9, 0.9, 0.0]],
+                      [nobody, nobody]])
+    truth = np.array([[1.0, 0.9, 0.1]] * 2 + [nobody] + [[1.0, 0.9, 0.1]])
+    # the nearest; the only pose; no truth: the first pose; no pose: none
+    assert nearest_bodies(roots, truth).tolist() == [1, 1, 0, -1]
+    assert nearest_bodies(np.zeros((2, 0, 3)), truth[:2]).tolist() == [-1, -1]
 
 
 def write_tiny_bag(path: Path, n_empty: int, n_subject: int = 3, foreground: bool = False) -> None:

@@ -1,6 +1,7 @@
 """``hmocap eval mocap``: replay a multi-view bag through the body tracker and score it against
-its ground truth (the evaluation: :mod:`hmocap_ros.eval.mocap_eval`). Exit status 2 with one
-line on bad input, 1 when a method posed no frame with ground truth."""
+its ground truth (the evaluation: :mod:`hmocap_ros.eval.mocap_eval`), or, with ``--tracked``,
+score the bodies of a bag that ``hmocap track`` wrote (:mod:`hmocap_ros.eval.tracked_eval`).
+Exit status 2 with one line on bad input, 1 when a method posed no frame with ground truth."""
 
 from __future__ import annotations
 
@@ -21,7 +22,17 @@ from hmocap_ros.eval.mocap_eval import (
 from hmocap_ros.eval.mocap_frames import SILHOUETTES
 from hmocap_ros.tracking.methods import method_names
 
-__all__ = ["add_arguments", "main_from_args"]
+__all__ = ["TRACKING_OPTIONS", "add_arguments", "main_from_args"]
+
+#: the options of a tracker's run, by destination: (flag, default); --tracked takes none of them
+TRACKING_OPTIONS = {
+    "method": ("--method", None), "compare": ("--compare", False),
+    "particles": ("--particles", 0), "layers": ("--layers", 0), "seed": ("--seed", 0),
+    "silhouettes": ("--silhouettes", "fg"), "learn_from": ("--learn-from", None),
+    "given_shape": ("--given-shape", False), "param": ("--param", None),
+    "max_people": ("--max-people", 1), "detector": ("--detector", None), "rig": ("--rig", None),
+    "threads": ("--threads", None),
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,11 +68,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "bag's /camera_rig; the truth stays the bag's")
     parser.add_argument("--threads", type=int, default=None,
                         help="numba threads (default: numba's, one per core)")
+    parser.add_argument("--tracked", metavar="TRACKED.mcap", default=None,
+                        help="score the bodies of this bag of hmocap track (made from BAG) "
+                             "instead of tracking; takes none of the tracker's options")
     parser.add_argument("--json", metavar="OUT", help="write the report as JSON")
     parser.add_argument("--plot", metavar="OUT.png", help="plot the error over time")
 
 
+def _tracking_options(ns: argparse.Namespace) -> list[str]:
+    """The tracker's options given in ``ns`` (those set off their defaults)."""
+    return [flag for dest, (flag, default) in TRACKING_OPTIONS.items()
+            if getattr(ns, dest) != default]
+
+
 def main_from_args(ns: argparse.Namespace) -> int:
+    if ns.tracked:
+        given = _tracking_options(ns)
+        if given:
+            print(f"hmocap eval mocap: --tracked scores a tracked bag; {', '.join(given)} "
+                  f"only apply when tracking", file=sys.stderr)
+            return 2
+        from hmocap_ros.eval.tracked_eval import evaluate_tracked
+
+        try:
+            report = evaluate_tracked(ns.bag, ns.tracked, max_frames=ns.frames)
+        except (ValueError, OSError, RuntimeError) as err:
+            print(f"hmocap eval mocap: {err}", file=sys.stderr)
+            return 2
+        return _report(ns, report)
     if ns.threads:
         import numba
 
@@ -91,6 +125,11 @@ def main_from_args(ns: argparse.Namespace) -> int:
     except (ValueError, OSError, RuntimeError) as err:
         print(f"hmocap eval mocap: {err}", file=sys.stderr)
         return 2
+    return _report(ns, report)
+
+
+def _report(ns: argparse.Namespace, report: dict) -> int:
+    """Write the report's files, print each method's result; the exit status."""
     if ns.json:
         Path(ns.json).parent.mkdir(parents=True, exist_ok=True)
         Path(ns.json).write_text(json.dumps(strict_json(report), indent=1, allow_nan=False,
@@ -100,8 +139,9 @@ def main_from_args(ns: argparse.Namespace) -> int:
     for method, result in report["methods"].items():  # the result on stdout (progress went to stderr)
         print(f"{Path(ns.bag).name} {method}: mean joint error {result['mean_mm']:.1f} mm "
               f"(std {result['std_mm']:.1f}, median {result['median_mm']:.1f}) over "
-              f"{result['frames_with_pose']}/{result['frames']} frames, {result['seconds_per_frame']:.2f} s/frame"
-              + (f", {result['track_switches']} track switches" if ns.max_people > 1 else ""))
+              f"{result['frames_with_pose']}/{result['frames']} frames"
+              + (f", {result['seconds_per_frame']:.2f} s/frame" if "seconds_per_frame" in result else "")
+              + (f", {result['track_switches']} track switches" if report["max_people"] > 1 else ""))
         if len(result["persons"]) > 1:
             for person in result["persons"]:
                 print(f"  {person['person_id']}: 12 limb joints {person['limb_joints_mm']:.1f} mm, "

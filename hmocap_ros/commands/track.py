@@ -53,6 +53,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--param", action="append", metavar="KEY=VALUE",
                         help="a tracker setting by its dotted name, e.g. filter.particles=500 "
                              "(repeatable; body_tracker --help lists them)")
+    parser.add_argument("--detection-param", action="append", metavar="KEY=VALUE",
+                        help="an extremity detection setting by its dotted name, e.g. "
+                             "keypoints.views_per_set=0 (repeatable; extremity_detection --help "
+                             "lists them)")
     parser.add_argument("--rig", default=None, help="rig YAML (default: the bag's /camera_rig)")
     parser.add_argument("--no-tf", action="store_true", help="leave out the bodies' frames on /tf")
     parser.add_argument("--frames", type=int, default=None, help="stop after this many frame sets")
@@ -60,7 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main_from_args(ns: argparse.Namespace) -> int:
-    from hmocap_ros.eval.mocap_eval import tracker_overrides
+    from hmocap_ros.eval.mocap_eval import detection_overrides, tracker_overrides
     from hmocap_ros.io.bag_reader import BagReadError
     from hmocap_ros.io.bag_writer import BagWriteError
 
@@ -79,7 +83,8 @@ def main_from_args(ns: argparse.Namespace) -> int:
                               max_people=ns.max_people, seed=ns.seed,
                               overrides=tracker_overrides(ns.param), body_id=ns.body_id,
                               publish_tf=not ns.no_tf, rig_file=ns.rig, max_frames=ns.frames,
-                              progress=None if ns.quiet else progress)
+                              progress=None if ns.quiet else progress,
+                              detection_overrides=detection_overrides(ns.detection_param))
     except (BagReadError, BagWriteError, TrackError) as err:
         print(f"{PROG}: {err}", file=sys.stderr)
         return 2

@@ -3,6 +3,7 @@
     hmocap eval mocap BAG [--method kf-hpf|apf|hpf|hpf-apo|dd-hpf ...] [--compare] [--particles N]
         [--layers L] [--frames N] [--seed S] [--silhouettes auto|masks|fg|gt] [--max-people N]
         [--json OUT] [--plot OUT.png]
+    hmocap eval mocap BAG --tracked TRACKED.mcap [--frames N] [--json OUT] [--plot OUT.png]
 
 No DDS: the bag is read with :class:`~hmocap_ros.io.bag_reader.BagReader` and every frame set
 goes through the same code as the live nodes, in order: foreground segmentation
@@ -36,6 +37,10 @@ Hungarian method on the mean joint distance within a gate
 frame sets where the person is seen (by >= 2 cameras, from the per-person silhouettes) and
 tracked, and the id switches. The top-level figures stay the subject's on its nearest track.
 
+A tracked bag (``--tracked``, :mod:`~hmocap_ros.eval.tracked_eval`): the bodies that
+``hmocap track`` wrote from BAG are scored in the same way, as method ``tracked``, without
+running a tracker (no timing, states or anthropometry).
+
 Output (``--json``): per method the overall mean and standard deviation of the per-frame mean
 joint error (mm; thesis table 2.3), per-joint mean and std, per-frame errors, frames with and
 without a pose, tracker seconds per frame and frames per second (also including segmentation),
@@ -55,14 +60,15 @@ from typing import Any
 
 import numpy as np
 
-from hmocap_ros.eval.metrics import joint_errors, match_joints, summarize_errors
+from hmocap_ros.eval.metrics import match_joints
 from hmocap_ros.eval.mocap_frames import BagFrames, load_frames
-from hmocap_ros.eval.people_scores import score_people
+from hmocap_ros.eval.people_scores import nearest_bodies, score_tracks
 from hmocap_ros.params import field_overrides, flat_record, from_flat
 from hmocap_ros.tracking.methods import get_method
 
 __all__ = ["BagFrames", "EvalResult", "evaluate", "json_default", "load_frames", "plot_errors",
-           "run_method", "strict_json", "tracker_overrides", "unevaluated_methods"]
+           "run_method", "scores_record", "strict_json", "tracker_overrides",
+           "unevaluated_methods"]
 
 log = logging.getLogger(__name__)
 
@@ -121,29 +127,6 @@ def _anthropometry(model, estimate, truth, truth_model=None) -> dict | None:
         out["neutral_mean_abs_error_mm"] = 1000.0 * float(np.abs(neutral - true).mean())
         out["true_global_scale"] = float(truth.global_scale)
     return out
-
-
-def _subject_track(results: list, truth: np.ndarray | None, root: int, true_root: int) -> int:
-    """Index of the result that follows the subject: of those with a pose, the one whose root
-    joint stands nearest the true root on the floor (the usual matching of multi-person
-    benchmarks); 0 without truth or pose."""
-    posed = [k for k, r in enumerate(results) if r.has_pose]
-    if truth is None or not np.isfinite(truth).all() or len(posed) < 2:
-        return posed[0] if posed else 0
-    gaps = [np.linalg.norm((results[k].joints[root] - truth[true_root])[[0, 2]]) for k in posed]
-    return posed[int(np.argmin(gaps))]
-
-
-def _score_people(frames: BagFrames, true_idx: np.ndarray, bodies: np.ndarray, names: list,
-                  body_ids) -> list[dict]:
-    """Every person of ``frames`` scored on the tracked ``bodies`` (F, T, J, 3) (the subject
-    alone where the frames hold no other person's truth)."""
-    if frames.people_truth is None:
-        return score_people(frames.truth[None][:, :, true_idx], bodies, names,
-                            person_ids=frames.person_ids[:1] or ("body_0",), body_ids=body_ids)
-    return score_people(frames.people_truth[:, :, true_idx], bodies, names,
-                        person_ids=frames.person_ids, body_ids=body_ids,
-                        views=frames.people_views)
 
 
 def method_params(method: str, particles: int = 0, layers: int = 0,
@@ -208,10 +191,10 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
     """Track every frame set of ``frames`` with one method and score the frames with truth.
 
     max_people: trackers run side by side (:class:`~hmocap_ros.tracking.people_tracker.
-    PeopleTracker`); each scored frame takes the track nearest the subject
-    (:func:`_subject_track`), and a change of track between scored frames counts as a switch.
-    ``persons``: every person with truth scored on the bodies matched to them
-    (:func:`~hmocap_ros.eval.people_scores.score_people`).
+    PeopleTracker`); the tracked bodies are scored by
+    :func:`~hmocap_ros.eval.people_scores.score_tracks`: each scored frame on the track nearest
+    the subject (a change of track between scored frames counts as a switch), and in
+    ``persons`` every person with truth on the bodies matched to them.
     Time and evaluations per frame are those of all trackers together.
     """
     from hmocap_ros.body import load_body_model
@@ -225,17 +208,19 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
                            max_people=max_people)
     est_idx, true_idx = match_joints(model.joint_names, frames.joint_names)
     names = [model.joint_names[i] for i in est_idx]
-    root, true_root = int(est_idx[0]), int(true_idx[0])
+    truth_roots = frames.truth[:, true_idx[0]]
     has_truth = frames.has_truth
-    estimates = np.full((len(frames.stamps), len(est_idx), 3), np.nan)
     bodies = np.full((len(frames.stamps), people.max_people, len(est_idx), 3), np.nan)
-    states, costs, tracks = [], [], []
+    states, costs = [], []
     stage: dict[str, float]
     times, stage, evals = [], {}, []
     for k, stamp in enumerate(frames.stamps):
         dets = frames.detections[k] if (frames.detections is not None and uses_detector) else None
         results = people.update(frames.mask_list(k), int(stamp), dets)
-        slot = _subject_track(results, frames.truth[k], root, true_root)
+        for t, r in enumerate(results):
+            if r.joints is not None:  # has_pose
+                bodies[k, t] = r.joints[est_idx]
+        slot = max(int(nearest_bodies(bodies[k:k + 1, :, 0], truth_roots[k:k + 1])[0]), 0)
         result = results[slot]
         if has_truth[k]:
             states.append(result.state)
@@ -245,20 +230,12 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
             for key in ("observe", "hull", "init", "filter", "skinning", "projection", "xor",
                         "detection", "proposals", "research"):
                 stage[key] = stage.get(key, 0.0) + sum(r.timings.get(key, 0.0) for r in results)
-            if result.has_pose:
-                tracks.append(slot)
-        if result.joints is not None:  # has_pose
-            estimates[k] = result.joints[est_idx]
-        for t, r in enumerate(results):
-            if r.joints is not None:
-                bodies[k, t] = r.joints[est_idx]
         if progress is not None:
             progress(k, len(frames.stamps), result)
-    errors = joint_errors(estimates[has_truth], frames.truth[has_truth][:, true_idx])
-    summary = summarize_errors(errors, names)
+    scores = score_tracks(frames, bodies, names, true_idx, people.ids)
+    summary = scores.summary
     summary["max_people"] = int(max_people)
-    summary["track_switches"] = int(np.count_nonzero(np.diff(tracks))) if tracks else 0
-    subject = int(np.bincount(tracks).argmax()) if tracks else 0
+    subject = scores.subject_body
     n = max(len(times), 1)
     spf = float(np.sum(times) / n)
     seg = frames.segmentation_s + (frames.detector_s if uses_detector else 0.0)
@@ -270,8 +247,15 @@ def run_method(frames: BagFrames, method: str, *, seed: int = 0, particles: int 
         stage_seconds={k: v / n for k, v in stage.items()}, states=states, fit_costs=costs,
         anthropometry=_anthropometry(people.trackers[subject].model,
                                      people.trackers[subject].shape, frames.body_shape, model),
-        params=params_record(params),
-        persons=_score_people(frames, true_idx, bodies, names, people.ids))
+        params=params_record(params), persons=scores.persons)
+
+
+def scores_record(summary: dict, persons: list) -> dict:
+    """A method's scores as the report stores them (``methods.<m>``): the subject's figures of
+    :func:`~hmocap_ros.eval.people_scores.score_tracks` and every person's (``persons``)."""
+    keys = ("mean_mm", "std_mm", "median_mm", "frames", "frames_with_pose", "per_joint",
+            "per_frame_mm", "track_switches")
+    return {**{k: summary[k] for k in keys}, "persons": persons}
 
 
 def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
@@ -320,17 +304,13 @@ def evaluate(bag: str | Path, methods=("kf-hpf",), *, silhouettes: str = "fg",
                          progress=ProgressPrinter(method, out))
         s = res.summary
         report["methods"][method] = {
-            "mean_mm": s["mean_mm"], "std_mm": s["std_mm"], "median_mm": s["median_mm"],
-            "frames": s["frames"], "frames_with_pose": s["frames_with_pose"],
-            "per_joint": s["per_joint"], "per_frame_mm": s["per_frame_mm"],
-            "track_switches": s["track_switches"],
+            **scores_record(s, res.persons),
             "seconds_per_frame": res.seconds_per_frame, "fps": res.fps,
             "fps_with_segmentation": res.fps_with_segmentation,
             "evaluations_per_frame": res.evaluations_per_frame,
             "stage_seconds_per_frame": res.stage_seconds, "states": res.states,
             "fit_costs": res.fit_costs, "anthropometry": res.anthropometry,
             "params": res.params,
-            "persons": res.persons,
         }
         print(f"{Path(bag).name} {method:8s} mean {s['mean_mm']:.1f} mm (std {s['std_mm']:.1f}) "
               f"over {s['frames_with_pose']}/{s['frames']} frames, "
@@ -418,6 +398,14 @@ def tracker_overrides(items) -> dict:
     from hmocap_ros.tracking.params import TrackerParams
 
     return field_overrides(TrackerParams, items, "tracker parameter")
+
+
+def detection_overrides(items) -> dict:
+    """ExtremityDetectionParams settings by dotted name from ``KEY=VALUE`` strings
+    (``--detection-param``; see :func:`hmocap_ros.params.field_overrides`)."""
+    from hmocap_ros.detection.extremity_pipeline import ExtremityDetectionParams
+
+    return field_overrides(ExtremityDetectionParams, items, "extremity detection parameter")
 
 
 def json_default(obj):

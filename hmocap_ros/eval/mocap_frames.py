@@ -5,7 +5,8 @@ segments each frame set's images with the same foreground model as the live node
 bag's exact silhouettes), optionally runs the extremity detection of detector-driven tracking on
 each frame set (:class:`~hmocap_ros.detection.extremity_pipeline.ExtremityPipeline`, the node's
 code, without the last skeleton), and collects the ground truth. Masks are stored bit-packed,
-computed once for all methods.
+computed once for all methods. :func:`load_truth` reads the truth alone, for scoring bodies
+tracked elsewhere (``hmocap eval mocap --tracked``).
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ if TYPE_CHECKING:
     from hmocap_ros.body import BodyShape
     from hmocap_ros.geometry.rig import Rig
 
-__all__ = ["SILHOUETTES", "BagFrames", "empty_room_frames", "load_frames"]
+__all__ = ["SILHOUETTES", "BagFrames", "empty_room_frames", "load_frames", "load_truth"]
 
 log = logging.getLogger(__name__)
 #: the silhouettes a bag's frames are evaluated on, as ``hmocap track`` takes them: auto (the
@@ -308,3 +309,40 @@ def load_frames(bag: str | Path, silhouettes: str = "fg", max_frames: int | None
                      people_views=(None if views is None
                                    else np.stack(views_rows, axis=1) if views_rows
                                    else np.zeros((n_people, 0), dtype=np.int64)))
+
+
+def load_truth(bag: str | Path, max_frames: int | None = None) -> BagFrames:
+    """The ground truth of ``bag`` without its images: one frame set per stamp at which any
+    person has truth, in order, with the cameras that see each person where the bag has every
+    person's silhouettes (as :func:`load_frames` counts them); no masks (``silhouettes`` "").
+    max_frames: stop after this many frame sets with the subject's truth."""
+    from hmocap_ros.io import topics
+    from hmocap_ros.io.bag_reader import BagReader
+    from hmocap_ros.io.rig_messages import rig_from_msg
+
+    with BagReader(bag) as reader:
+        available = reader.topics(compressed_as_raw=True)
+        rig_msg = reader.first(topics.CAMERA_RIG) if topics.CAMERA_RIG in available else None
+        if rig_msg is None:
+            raise ValueError(f"{bag}: no {topics.CAMERA_RIG} message: the cameras are unknown")
+        rig = rig_from_msg(rig_msg)
+        people, body_shape = _read_truth(reader, available, bag)
+        stamps = sorted(set().union(*(set(by_stamp) for by_stamp in people.by_stamp)))
+        if max_frames is not None:
+            with_subject = np.cumsum([s in people.by_stamp[0] for s in stamps])
+            stamps = stamps[:int(np.searchsorted(with_subject, max_frames)) + 1]
+        rows = [people.row(s) for s in stamps]
+        n_people, n_joints = len(people.ids), len(people.joint_names)
+        truth = (np.stack(rows, axis=1) if rows else np.zeros((n_people, 0, n_joints, 3)))
+        views = PersonViews(rig, people.joint_names, n_people, available)
+        seen = None
+        if views.known:
+            seen = np.zeros((n_people, len(stamps)), dtype=np.int64)
+            index = {s: k for k, s in enumerate(stamps)}
+            for stamp, msgs in reader.frame_sets(views.topics, 0, allow_partial=True,
+                                                 min_topics=1):
+                if stamp in index:
+                    seen[:, index[stamp]] = views.count(rows[index[stamp]], msgs)
+    return BagFrames(rig=rig, stamps=np.asarray(stamps, dtype=np.int64), masks=[[] for _ in stamps],
+                     truth=truth[0], joint_names=people.joint_names, body_shape=body_shape,
+                     silhouettes="", people_truth=truth, person_ids=people.ids, people_views=seen)

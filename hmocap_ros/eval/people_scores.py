@@ -10,10 +10,16 @@ limb joints and over the wrists, the frame sets where the person is seen (by at 
 :data:`MIN_VIEWS` cameras when the bag's silhouettes tell, else wherever the person has truth)
 and how many of those the person is matched in, and the id switches (the body matched to the
 person changes, counted against the last matched one).
+
+:func:`score_tracks` scores the tracked bodies of a bag's frame sets, whoever tracked them (the
+evaluation's own trackers, or the bodies of a bag that ``hmocap track`` wrote): the subject on
+the body nearest it in each frame set (:func:`nearest_bodies`), and every person as above.
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,7 +33,11 @@ from hmocap_ros.eval.metrics import (
     summarize_errors,
 )
 
-__all__ = ["MIN_VIEWS", "match_frames", "score_people"]
+if TYPE_CHECKING:
+    from hmocap_ros.eval.mocap_frames import BagFrames
+
+__all__ = ["MIN_VIEWS", "TrackScores", "match_frames", "nearest_bodies", "score_people",
+           "score_tracks"]
 
 #: a person counts as seen in a frame set when at least this many cameras see them
 MIN_VIEWS = 2
@@ -81,3 +91,68 @@ def score_people(truth: np.ndarray, estimates: np.ndarray, joint_names: Sequence
             "body_frames": {str(body_ids[i]): int(c) for i, c in zip(ids, counts)},
         })
     return out
+
+
+def nearest_bodies(roots: np.ndarray, truth_roots: np.ndarray) -> np.ndarray:
+    """(F,) the body that follows the subject in each frame set: of the bodies with a pose, the
+    one whose root joint stands nearest the subject's true root on the floor (x, z), as
+    multi-person benchmarks match estimates to people; the first body with a pose where the
+    subject has no truth; -1 where no body has a pose.
+
+    roots: (F, T, 3) the bodies' root joints, NaN for a body without a pose; truth_roots:
+    (F, 3) the subject's, NaN where it has no truth.
+    """
+    roots = np.asarray(roots, dtype=np.float64)
+    truth_roots = np.asarray(truth_roots, dtype=np.float64)
+    posed = np.isfinite(roots).all(axis=-1)  # (F, T)
+    if not roots.shape[1]:
+        return np.full(len(roots), -1, dtype=np.intp)
+    gaps = np.linalg.norm((roots - truth_roots[:, None])[..., [0, 2]], axis=-1)
+    gaps = np.where(posed, np.nan_to_num(gaps, nan=0.0), np.inf)
+    out = np.argmin(gaps, axis=1)  # ties (no truth: all 0) go to the first posed body
+    out[~posed.any(axis=1)] = -1
+    return out
+
+
+@dataclass
+class TrackScores:
+    """Scores of tracked bodies on a bag (:func:`score_tracks`).
+
+    summary: the subject's figures (:func:`~hmocap_ros.eval.metrics.summarize_errors`) on the
+    body nearest it, with ``track_switches`` (changes of that body between frame sets with
+    truth); persons: :func:`score_people`'s entries; subject_bodies: (F,) the subject's body per
+    frame set (-1: none with a pose); subject_body: the body that followed it most often.
+    """
+
+    summary: dict
+    persons: list
+    subject_bodies: np.ndarray
+    subject_body: int
+
+
+def score_tracks(frames: BagFrames, bodies: np.ndarray, joint_names: Sequence[str],
+                 true_idx: np.ndarray, body_ids: Sequence[str]) -> TrackScores:
+    """Score the tracked ``bodies`` (F, T, J, 3) of ``frames``' frame sets (NaN for a body
+    without a pose; joint ``j`` is the truth's joint ``true_idx[j]``, named ``joint_names[j]``,
+    the first one the root) against the truth: the subject on its nearest body
+    (:func:`nearest_bodies`), every person as :func:`score_people` does (the subject alone
+    where the frames hold no other person's truth)."""
+    bodies = np.asarray(bodies, dtype=np.float64)
+    truth = frames.truth[:, true_idx]
+    slots = nearest_bodies(bodies[:, :, 0], truth[:, 0])
+    estimates = np.full(truth.shape, np.nan)
+    posed = slots >= 0
+    estimates[posed] = bodies[np.flatnonzero(posed), slots[posed]]
+    has_truth = frames.has_truth
+    summary = summarize_errors(joint_errors(estimates[has_truth], truth[has_truth]), joint_names)
+    tracks = slots[has_truth & posed]
+    summary["track_switches"] = int(np.count_nonzero(np.diff(tracks)))
+    if frames.people_truth is None:
+        persons = score_people(truth[None], bodies, joint_names,
+                               person_ids=frames.person_ids[:1] or ("body_0",), body_ids=body_ids)
+    else:
+        persons = score_people(frames.people_truth[:, :, true_idx], bodies, joint_names,
+                               person_ids=frames.person_ids, body_ids=body_ids,
+                               views=frames.people_views)
+    return TrackScores(summary=summary, persons=persons, subject_bodies=slots,
+                       subject_body=int(np.bincount(tracks).argmax()) if len(tracks) else 0)
