@@ -16,26 +16,21 @@ seeded generator:
 
 Coordinates are the room frame of :mod:`hmocap_ros.geometry`: metres, +Y up, floor at
 y = 0; the camera looks along +Z.  :func:`render_depth` turns meshes into a z-buffer with
-:func:`hmocap_sim.render.rasterize` and into uint16 millimetres with
-:func:`hmocap_sim.render.kinect_depth` (noise growing as z^2, projector shadows, holes at
-depth edges, 0 = invalid, 0.5-4.5 m working range).
+:func:`hmocap_sim.render.rasterize` and into uint16 millimetres with a sensor family of
+:mod:`hmocap_sim.depth_sensor` (default structured light: disparity noise and steps growing as
+z^2, speckle, edge fattening, projector shadows, holes at depth edges and on dark or grazing
+surfaces, 0 = no data, 0.5-4.5 m working range).
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hmocap_ros.geometry import PinholeCamera, look_at
 from hmocap_ros.geometry.projection import project_batch
-from hmocap_sim.render import (
-    KinectNoise,
-    concatenate_meshes,
-    grid_quad,
-    kinect_depth,
-    rasterize,
-)
+from hmocap_sim.depth_sensor import DEFAULT_ALBEDO, DEFAULT_SENSOR, DepthSensor, sensor_by_name, sensor_depth
+from hmocap_sim.render import concatenate_meshes, grid_quad, rasterize
 
 #: Kinect v1 depth intrinsics at 640x480 (focal length in pixels).
 KINECT_FX = 575.0
@@ -397,29 +392,32 @@ class DepthRender:
     face_offsets: np.ndarray
 
 
-def kinect_noise(width: int) -> KinectNoise:
-    """Kinect v1 noise for an image ``width`` pixels wide: the 1/8-pixel disparity steps
-    belong to the 640-pixel sensor, so a smaller image keeps the sensor's depth steps."""
-    return dataclasses.replace(KinectNoise(), disparity_step_px=0.125 * width / KINECT_SIZE[0])
+def face_albedo(meshes, albedo) -> np.ndarray:
+    """Per-face near-infrared albedo (F,) of the concatenated ``meshes`` from ``albedo``: per
+    mesh one value or one value per face."""
+    parts = [np.broadcast_to(np.asarray(a, dtype=np.float32), (len(f),)) for (_, f), a in zip(meshes, albedo)]
+    return np.concatenate(parts) if parts else np.zeros(0, np.float32)
 
 
 def render_depth(camera: PinholeCamera, meshes, rng: np.random.Generator,
-                 noise: KinectNoise | None | str = "kinect") -> DepthRender:
+                 noise: DepthSensor | str | None = DEFAULT_SENSOR, albedo=None) -> DepthRender:
     """Rasterise meshes ``[(vertices (V, 3), faces (F, 3)), ...]`` (room frame) into the
-    camera and simulate the sensor: "kinect" = :func:`kinect_noise` for the camera's width,
-    a :class:`KinectNoise`, or None (exact millimetres, no holes)."""
-    if isinstance(noise, str):
-        noise = kinect_noise(camera.width)
+    camera and measure the z-buffer with a depth sensor: a :class:`DepthSensor`, its name in
+    :data:`hmocap_sim.depth_sensor.SENSORS`, or None (the ideal sensor: exact millimetres, no
+    holes). ``albedo``: per mesh its near-infrared albedo, one value or one per face (None:
+    :data:`~hmocap_sim.depth_sensor.DEFAULT_ALBEDO` everywhere)."""
+    sensor = sensor_by_name("ideal" if noise is None else noise) if not isinstance(noise, DepthSensor) else noise
+    meshes = list(meshes)
     verts, faces, face_offsets, _ = concatenate_meshes(meshes)
     uv, z = project_batch(np.asarray(verts, dtype=np.float64)[None], camera.K[None], camera.R[None],
                           camera.t[None], np.asarray(camera.D)[None])
     uv, z = uv[0, 0], z[0, 0]
     zbuf, face_id, _ = rasterize(uv, z, faces, camera.height, camera.width, with_barycentrics=False)
-    if noise is None:
-        valid = np.isfinite(zbuf)
-        depth = np.where(valid, np.rint(np.where(valid, zbuf, 0) * 1000.0), 0).clip(0, 65535).astype(np.uint16)
-    else:
-        depth = kinect_depth(zbuf, rng, camera.fx, noise)
+    pixel_albedo = None
+    if albedo is not None and not sensor.ideal:
+        per_face = np.append(face_albedo(meshes, albedo), np.float32(DEFAULT_ALBEDO))
+        pixel_albedo = per_face[face_id]  # face_id -1 (nothing) reads the last entry
+    depth = sensor_depth(zbuf, rng, camera.fx, sensor, pixel_albedo, (camera.cx, camera.cy))
     return DepthRender(depth, zbuf, face_id, face_offsets)
 
 

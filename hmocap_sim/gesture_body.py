@@ -124,6 +124,28 @@ def make_subject(model, subject_id: int) -> Subject:
     return Subject(int(subject_id), shape, joints, ends, verts, lm, height)
 
 
+# Seed stream of a subject's clothing reflectance (apart from SUBJECT_STREAM: the body stays).
+ALBEDO_STREAM = 0x41B0
+#: Near-infrared diffuse reflectance of skin (hands, head) at 830-850 nm.
+SKIN_ALBEDO = 0.5
+#: Range of a subject's clothing reflectance: black synthetics absorb the projector's light
+#: (a few per cent), light cotton returns most of it.
+CLOTHING_ALBEDO = (0.03, 0.7)
+_SKIN_JOINTS = ("head", "neck", "l_wrist", "r_wrist")
+
+
+def body_albedo(model, subject_id: int) -> np.ndarray:
+    """Per-face near-infrared albedo (F,) of the subject ``subject_id``'s body: skin on the
+    hands (wrist and finger joints) and the head, its clothing (one value drawn from
+    :data:`CLOTHING_ALBEDO` by the id alone) elsewhere."""
+    clothing = np.random.default_rng([ALBEDO_STREAM, int(subject_id)]).uniform(*CLOTHING_ALBEDO)
+    names = model.joint_names
+    skin = [i for i, n in enumerate(names)
+            if n in _SKIN_JOINTS or any(f in n for f in ("thumb", *FINGER_NAMES))]
+    part = np.asarray(model.vertex_part)[np.asarray(model.faces)[:, 0]]
+    return np.where(np.isin(part, skin), np.float32(SKIN_ALBEDO), np.float32(clothing)).astype(np.float32)
+
+
 @dataclass(frozen=True, eq=False)
 class Kinematics:
     """Posed skeleton of a batch: global transforms (B, J, 4, 4), joints (B, J, 3), end

@@ -1,7 +1,8 @@
 """``hmocap sim gestures``: a depth bag of people gesturing among clutter, with ground truth.
 
 Renders takes of simulated subjects (``gesture_set``) in furnished rooms (``depth_scene``)
-with a Kinect-like depth camera and writes, per frame, with one shared ``header.stamp``
+with a depth camera (Kinect v1 intrinsics, the noise, quantisation and holes of a sensor family
+of ``depth_sensor``, ``--sensor``) and writes, per frame, with one shared ``header.stamp``
 (frames ``1/fps`` apart from 1,700,000,000 s; a 1 s gap where the room changes):
 
 ==========================  ======================================  ==========================
@@ -41,7 +42,7 @@ are balanced and about half of the frames are background.  Same arguments, same 
 Side files next to the bag (``run.mcap`` -> ``run.labels.json``, ``run.contact.png``):
 
 * labels JSON: ``{"format": "hmocap-gesture-labels/1", "seed", "classes": {id: name},
-  "camera": {...}, "subjects": {id: {...}}, "layouts": {id: {...}}, "frames": [...]}``, one
+  "camera": {..., "sensor"}, "subjects": {id: {...}}, "layouts": {id: {...}}, "frames": [...]}``, one
   frame entry per depth image: ``index, stamp_ns, subject, layout, take, phase`` ("hold",
   "negative", "transition"), ``kind`` (gesture or negative kind), ``class_id`` (0 =
   background), ``name``, ``side``, ``u, v, position`` (null for background), ``visible``
@@ -69,6 +70,8 @@ from hmocap_ros.io.conversions import dict_to_camera_info, numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory
 from hmocap_sim import gesture_set as gs
 from hmocap_sim.depth_scene import Layout, make_layout, render_depth
+from hmocap_sim.depth_sensor import DEFAULT_ALBEDO, DEFAULT_SENSOR, sensor_by_name
+from hmocap_sim.gesture_body import body_albedo
 from hmocap_sim.gesture_contact_sheet import (
     TILE,
     colour_depth,
@@ -186,8 +189,9 @@ class _FrameWriter:
     """Renders frames into the open bag (depth image, camera info and ground truth under one
     stamp) and keeps the stamp, the frame index and the labels records."""
 
-    def __init__(self, bag, model, noise_rng: np.random.Generator, period: int, bar) -> None:
+    def __init__(self, bag, model, noise_rng: np.random.Generator, period: int, bar, sensor: str) -> None:
         self.bag, self.model, self.noise_rng, self.period, self.bar = bag, model, noise_rng, period, bar
+        self.sensor = sensor_by_name(sensor)
         self.factory = RosbagsFactory()
         self.stamp = START_NS
         self.index = 0
@@ -203,7 +207,8 @@ class _FrameWriter:
         meshes = [(layout.vertices, layout.faces)]
         meshes += [(p.vertices(model), model.faces) for p in scene.people]
         meshes.append((actor.vertices(model), model.faces))
-        render = render_depth(cam, meshes, self.noise_rng)
+        albedo = [DEFAULT_ALBEDO] + [body_albedo(model, p.subject.subject_id) for p in scene.people + [actor]]
+        render = render_depth(cam, meshes, self.noise_rng, self.sensor, albedo)
         face_range = (int(render.face_offsets[-2]), int(render.face_offsets[-1]))
         gt = ground_truth(model, actor, state, layout, render, face_range)
         self.bag.write(topics.DEPTH_IMAGE, numpy_to_image(render.depth_mm, "16UC1", stamp, cam.frame_id, factory),
@@ -253,13 +258,14 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
              contact: bool = True, progress: bool = True, per_class: int = 4,
              hold: tuple = HOLD_FRAMES, background: str = "room", gestures: tuple = gs.GESTURE_CLASSES,
              negatives: int = NEGATIVES_PER_BLOCK, near_misses: int = 0, near_of: tuple | None = None,
-             room: int | None = None) -> Summary:
+             room: int | None = None, sensor: str = DEFAULT_SENSOR) -> Summary:
     """Render and write the bag, its labels JSON and (optionally) its contact sheet.
 
     ``gestures`` (default the six classes), ``negatives`` and ``near_misses`` (of the gestures
     ``near_of``, default ``gestures``): the takes of each shuffled block
     (:func:`~hmocap_sim.gesture_takes.take_schedule`); ``room``: every take in
-    the room of the simulated teacher of that seed instead of a room per few takes."""
+    the room of the simulated teacher of that seed instead of a room per few takes; ``sensor``:
+    the depth sensor family (:data:`~hmocap_sim.depth_sensor.SENSORS`)."""
     if subjects < 1 or frames < 1 or width < 16 or height < 16 or fps <= 0:
         raise ValueError("subjects and frames must be >= 1, the image at least 16x16, fps > 0")
     if not 1 <= hold[0] <= hold[1]:
@@ -269,6 +275,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
         raise ValueError(f"unknown gesture(s) {', '.join(unknown)}; choose among {', '.join(gs.ALL_GESTURES)}")
     if negatives < 0 or near_misses < 0:
         raise ValueError("negatives and near misses per block must be >= 0")
+    sensor_by_name(sensor)
     from tqdm import tqdm
 
     t0 = time.perf_counter()
@@ -284,7 +291,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
     layout_id = -1
     bar = tqdm(total=frames, file=sys.stderr, disable=not progress, unit="frame", desc="gestures")
     with whole_bag(out) as bag:
-        writer = _FrameWriter(bag, model, noise_rng, int(round(1e9 / fps)), bar)
+        writer = _FrameWriter(bag, model, noise_rng, int(round(1e9 / fps)), bar, sensor)
         for k, n_frames in enumerate(splits):
             subject_id = subject_offset + k
             actor = Actor(gs.make_subject(model, subject_id))
@@ -311,7 +318,7 @@ def generate(out: str | Path, *, seed: int = 0, subjects: int = 2, frames: int =
                for name in ("background",) + classes}
     cam = scene.layout.camera
     cam_info = {"frame_id": cam.frame_id, "width": width, "height": height,
-                "K": np.round(cam.K, 6).tolist(), "depth_unit": "mm", "invalid": 0}
+                "K": np.round(cam.K, 6).tolist(), "depth_unit": "mm", "invalid": 0, "sensor": sensor}
     labels = {"format": LABELS_FORMAT, "bag": out.name, "seed": seed, "subject_offset": subject_offset,
               "fps": fps, "background": background, "classes": {str(gs.class_id(n)): n for n in classes},
               "reference_points": {n: gs.REFERENCE_POINTS[n] for n in classes}, "camera": cam_info,

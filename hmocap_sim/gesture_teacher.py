@@ -44,6 +44,8 @@ from hmocap_ros.io.conversions import dict_to_camera_info, numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
 from hmocap_sim import gesture_set as gs
 from hmocap_sim.depth_scene import make_layout, render_depth
+from hmocap_sim.depth_sensor import DEFAULT_ALBEDO
+from hmocap_sim.gesture_body import body_albedo
 from hmocap_sim.gesture_takes import MAX_YAW_DEG, Actor, bystander_pose, facing_yaw, lerp_pose, take_frames
 
 __all__ = ["NEAR_MISS_SHARE", "START_NS", "VARIATION_S", "GestureTeacher", "run_session", "write_recording_bag"]
@@ -204,9 +206,11 @@ class GestureTeacher:
         self.actor.params = self._pose_for(status)
         meshes = [(self.layout.vertices, self.layout.faces)]
         meshes += [(p.vertices(self.model), self.model.faces) for p in self.people]
+        people = self.people + ([self.actor] if self.present else [])
         if self.present:
             meshes.append((self.actor.vertices(self.model), self.model.faces))
-        render = render_depth(self.camera, meshes, self.noise_rng)
+        albedo = [DEFAULT_ALBEDO] + [body_albedo(self.model, p.subject.subject_id) for p in people]
+        render = render_depth(self.camera, meshes, self.noise_rng, albedo=albedo)
         stamp = START_NS + self.index * self.period
         self.index += 1
         return render.depth_mm, stamp

@@ -2,8 +2,8 @@
 """Thesis table 3.1 on simulated depth: AP per gesture for plain tests (eq. 3.3) vs depth
 clipping kappa = 15/30/50 cm (eq. 3.6), boosted vs plain (bagged) learning (sec. 3.2.3).
 
-One command (about 1.5 h on 2 busy cores; bags and forests are cached in ``--workdir``, so an
-interrupted run resumes where it stopped)::
+One command (about 1.5 h on 2 busy cores; bags and forests are cached in ``--workdir``/SENSOR, so
+an interrupted run resumes where it stopped)::
 
     .venv/bin/python tools/gesture_table.py
 
@@ -32,6 +32,11 @@ on the validation bags ``val`` and ``val_near`` (:mod:`hmocap_ros.eval.gesture_t
 ``--max-false-per-minute``, ``--min-recall``) and stored in the file; the held-out bags ``test``, ``test_close``
 and ``test_near`` score it at those thresholds.
 The defaults are chosen on the validation bag; the test bags are held out for this table.
+
+Every bag is rendered with one depth sensor family, ``--sensor`` (default structured light,
+:mod:`hmocap_sim.depth_sensor`), cached in ``--workdir``/SENSOR; the figures of another family
+are written with its name appended (``gesture_shipped_ideal.md``). ``--bags`` scores only some
+of the evaluation bags.
 """
 
 from __future__ import annotations
@@ -54,6 +59,7 @@ from hmocap_ros.gestures.forest import train_forest_on_frames
 from hmocap_ros.gestures.forest_file import load_forest, save_forest
 from hmocap_ros.gestures.params import DetectorParams
 from hmocap_sim import gesture_dataset as gd
+from hmocap_sim.depth_sensor import DEFAULT_SENSOR, SENSOR_NAMES
 from hmocap_sim.gesture_set import GESTURE_CLASSES
 
 #: name -> ``hmocap sim gestures`` arguments (all 640x480). Short holds in the training bags give
@@ -89,7 +95,7 @@ KAPPAS = (None, 0.15, 0.30, 0.50)
 DEFAULT = "boosted, kappa 15 cm"
 
 
-def sim_command(name: str) -> str:
+def sim_command(name: str, sensor: str = DEFAULT_SENSOR) -> str:
     kw = BAGS[name]
     args = [f"--seed {kw['seed']}", f"--subjects {kw['subjects']}", f"--subject-offset {kw['subject_offset']}",
             f"--frames {kw['frames']}"]
@@ -105,14 +111,16 @@ def sim_command(name: str) -> str:
         args.append(f"--near-misses {kw['near_misses']}")
     if "near_of" in kw:
         args.append("--near-misses-of " + " ".join(kw["near_of"]))
+    if sensor != DEFAULT_SENSOR:
+        args.append(f"--sensor {sensor}")
     return f"hmocap sim gestures {' '.join(args)} --out {name}.mcap"
 
 
-def make_bag(work: Path, name: str) -> Path:
+def make_bag(work: Path, name: str, sensor: str = DEFAULT_SENSOR) -> Path:
     path = work / f"{name}.mcap"
     if not path.exists():
         t0 = time.perf_counter()
-        gd.generate(path, contact=False, progress=False, **BAGS[name])
+        gd.generate(path, contact=False, progress=False, sensor=sensor, **BAGS[name])
         print(f"generated {path} in {time.perf_counter() - t0:.0f} s", flush=True)
     return path
 
@@ -123,7 +131,13 @@ def variant_name(boosted: bool, kappa: float | None) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--workdir", default="/tmp/hmocap_gesture_table", help="bags, forests and results (cache)")
+    p.add_argument("--workdir", default="/tmp/hmocap_gesture_table",
+                   help="bags, forests and results (cache), in a folder per sensor")
+    p.add_argument("--sensor", choices=SENSOR_NAMES, default=DEFAULT_SENSOR,
+                   help="the depth sensor family of every bag (hmocap sim gestures --sensor); the figures of "
+                        "another than the default are written with the sensor's name appended")
+    p.add_argument("--bags", nargs="+", choices=EVAL + NEAR, default=None,
+                   help="with --shipped or --near-forest: score only these evaluation bags (default all)")
     p.add_argument("--trees", type=int, default=15)
     p.add_argument("--depth", type=int, default=20)
     p.add_argument("--seed", type=int, default=0)
@@ -184,23 +198,26 @@ def score_variant(name: str, model: Path, bags: dict) -> dict:
     return r
 
 
-def score_shipped(model: Path, bags: dict, train: tuple) -> dict:
+def score_shipped(model: Path, bags: dict, train: tuple, scored: tuple = EVAL + NEAR,
+                  sensor: str = DEFAULT_SENSOR, train_sensor: str = DEFAULT_SENSOR) -> dict:
     """A forest as the node runs it (``DetectorParams`` defaults): AP and false detections on
-    :data:`EVAL` and the near-miss bags :data:`NEAR`, and its exact-vote APs; ``train``: the
-    names of the bags it was trained on."""
+    the bags ``scored`` (of :data:`EVAL` and the near-miss bags :data:`NEAR`), and its
+    exact-vote APs; ``train``: the names of the bags it was trained on (with ``train_sensor``);
+    ``sensor``: the scored bags' sensor."""
     forest = load_forest(model)
     shown = model.relative_to(ROOT) if model.is_relative_to(ROOT) else model
     r = {"forest": str(shown), "n_nodes": forest.n_nodes, "file_bytes": model.stat().st_size,
          "train_seconds": forest.meta["training"]["seconds_total"], "train_frames": forest.meta["training"]["n_frames"],
-         "train_samples": forest.meta["training"]["n_samples"], "bags": {b: sim_command(b) for b in train},
+         "train_samples": forest.meta["training"]["n_samples"], "sensor": sensor,
+         "bags": {b: sim_command(b, train_sensor) for b in train},
          "thresholds": dict(forest.meta.get("gesture_thresholds", {})),
          "threshold_rule": forest.meta.get("threshold_curves", {}).get("rule", "")}
-    for bag in EVAL + NEAR:
+    for bag in scored:
         data = read_gesture_bag(bags[bag])
         e = evaluate_gestures(data, forest)
         r[bag] = {"mean_ap": e["mean_ap"], "ap": {g: c["ap"] for g, c in e["per_class"].items()},
                   "found": {g: [c["found_at_node_thresholds"], c["positives"]] for g, c in e["per_class"].items()},
-                  "false_detections": e["false_detections"], "fps": e["fps"], "command": sim_command(bag)}
+                  "false_detections": e["false_detections"], "fps": e["fps"], "command": sim_command(bag, sensor)}
         if bag in EVAL:
             r[bag]["exact_mean_ap"] = evaluate_gestures(data, forest, EXACT)["mean_ap"]
         fd = e["false_detections"]
@@ -212,14 +229,17 @@ def score_shipped(model: Path, bags: dict, train: tuple) -> dict:
 
 def shipped_lines(r: dict, option: str) -> list[str]:
     """A forest's tables (docs/figures/gesture_shipped.md, gesture_near_forest.md)."""
-    gestures = list(r["test"]["ap"])
+    present = [b for b in EVAL + NEAR if b in r]
+    gestures = list(next((r[b]["ap"] for b in present if b in EVAL), GESTURE_CLASSES))
+    sensor = r.get("sensor", DEFAULT_SENSOR)
     lines = [f"<!-- written by tools/gesture_table.py {option}; do not edit -->", "", f"Forest: `{r['forest']}`.", "",
+             f"Evaluation bags rendered with the `{sensor}` depth sensor (`hmocap sim gestures --sensor`).", "",
              "Training: " + ", ".join(f"`{c}`" for c in r["bags"].values())
              + f" ({r['train_frames']} frames, {r['train_samples']} samples after mining); {r['n_nodes']} nodes, "
                f"{r['file_bytes'] / 1e6:.2f} MB, {r['train_seconds']:.0f} s of training.", "",
              "| bag | " + " | ".join(gestures) + " | mean AP | mean AP, exact vote | frames with a false detection |",
              "|---|" + "---:|" * (len(gestures) + 3)]
-    for bag in EVAL + NEAR:
+    for bag in present:
         e = r[bag]
         cells = ([f"{e['ap'][g]:.2f}" for g in gestures] + [f"**{e['mean_ap']:.3f}**", f"{e['exact_mean_ap']:.3f}"]
                  if bag in EVAL else ["-"] * len(gestures) + ["-", "-"])
@@ -233,17 +253,17 @@ def shipped_lines(r: dict, option: str) -> list[str]:
               "frames of each gesture found / its frames, false events per minute.", "",
               "| bag | " + " | ".join(gestures) + " | recall (all) | false events / min |",
               "|---|" + "---:|" * (len(gestures) + 2)]
-    for bag in EVAL:
+    for bag in (b for b in present if b in EVAL):
         e = r[bag]
         found = [e["found"][g] for g in gestures]
         total = sum(f for f, _ in found) / max(sum(n for _, n in found), 1)
         lines.append(f"| {bag} | " + " | ".join(f"{f}/{n}" for f, n in found)
                      + f" | {total:.3f} | {e['false_detections']['events_per_minute']:.2f} |")
-    for bag in NEAR:
+    for bag in (b for b in present if b in NEAR):
         e = r[bag]
         lines.append(f"| {bag} | " + " | ".join("-" for _ in gestures)
                      + f" | - | {e['false_detections']['events_per_minute']:.2f} |")
-    lines += ["", "Bags: " + "; ".join(f"{b}: `{r[b]['command']}`" for b in EVAL + NEAR)]
+    lines += ["", "Bags: " + "; ".join(f"{b}: `{r[b]['command']}`" for b in present)]
     return lines
 
 
@@ -254,7 +274,7 @@ def table_lines(results: dict, names: list, ns) -> list[str]:
     lines = ["<!-- written by tools/gesture_table.py; do not edit -->", ""]
     for bag in EVAL:
         first = default[bag]
-        lines += [f"**{bag}** (`{sim_command(bag)}`: {first['scored_frames']} scored frames, "
+        lines += [f"**{bag}** (`{sim_command(bag, ns.sensor)}`: {first['scored_frames']} scored frames, "
                   f"{sum(c['positives'] for c in first['per_class'].values())} gestures)", "",
                   "| forest | " + " | ".join(gestures) + " | mean |", "|---|" + "---:|" * (len(gestures) + 1)]
         for n in names:
@@ -262,7 +282,7 @@ def table_lines(results: dict, names: list, ns) -> list[str]:
             cells = [f"{e['per_class'][g]['ap']:.2f}" for g in gestures] + [f"**{e['mean_ap']:.3f}**"]
             lines.append(f"| {n}{' (default)' if n == DEFAULT else ''} | " + " | ".join(cells) + " |")
         lines.append("")
-    lines += ["Training: " + ", ".join(f"`{sim_command(b)}`" for b in TRAIN)
+    lines += ["Training: " + ", ".join(f"`{sim_command(b, ns.sensor)}`" for b in TRAIN)
               + f" ({default['train_frames']} frames used, {default['train_samples']} samples after mining); "
               f"{ns.trees} trees, depth <= {ns.depth}, seed {ns.seed}.", "",
               "| forest | nodes | file (MB) | training (s) |", "|---|---:|---:|---:|"]
@@ -272,24 +292,24 @@ def table_lines(results: dict, names: list, ns) -> list[str]:
     return lines
 
 
-def summary(results: dict) -> dict:
+def summary(results: dict, sensor: str) -> dict:
     """Every number of the tables (and fps) per variant, and the bags' commands."""
     out = {n: {"n_nodes": r["n_nodes"], "train_seconds": r["train_seconds"],
                **{bag: {"mean_ap": r[bag]["mean_ap"], "ap": {g: c["ap"] for g, c in r[bag]["per_class"].items()},
                         "positives": {g: c["positives"] for g, c in r[bag]["per_class"].items()},
                         "fps": r[bag]["fps"]} for bag in EVAL}}
            for n, r in results.items()}
-    out["_bags"] = {b: sim_command(b) for b in BAGS}
+    out["_bags"] = {b: sim_command(b, sensor) for b in BAGS}
     return out
 
 
 def main(argv=None) -> int:
     ns = _parser().parse_args(argv)
-    work = Path(ns.workdir)
+    work = Path(ns.workdir) / ns.sensor
     work.mkdir(parents=True, exist_ok=True)
     if ns.shipped or ns.near_forest:
         return shipped(ns, work)
-    bags = {name: make_bag(work, name) for name in TRAIN + EVAL}
+    bags = {name: make_bag(work, name, ns.sensor) for name in TRAIN + EVAL}
     variants = [(b, k) for b in (True, False) for k in KAPPAS]
     names = [variant_name(b, k) for b, k in variants]
     todo = [(b, k) for b, k in variants if not ns.only or variant_name(b, k) in ns.only]
@@ -317,12 +337,15 @@ def main(argv=None) -> int:
     out = Path(ns.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     default = results[DEFAULT]
-    plot_pr(default["test"], out / "gesture_pr.png",
+    tail = "" if ns.sensor == DEFAULT_SENSOR else f"_{ns.sensor}"
+    table, numbers = out / f"gesture_table{tail}.md", out / f"gesture_table{tail}.json"
+    pr = out / f"gesture_pr{tail}.png"
+    plot_pr(default["test"], pr,
             f"{DEFAULT}, test bag: mean AP {default['test']['mean_ap']:.3f}\n"
             f"correct: class right, within {default['test']['tolerance_px']:g} px at 640x480")
-    (out / "gesture_table.md").write_text("\n".join(table_lines(results, names, ns)) + "\n")
-    (out / "gesture_table.json").write_text(json.dumps(summary(results), indent=1) + "\n")
-    print(f"wrote {out / 'gesture_table.md'}, {out / 'gesture_table.json'}, {out / 'gesture_pr.png'}")
+    table.write_text("\n".join(table_lines(results, names, ns)) + "\n")
+    numbers.write_text(json.dumps(summary(results, ns.sensor), indent=1) + "\n")
+    print(f"wrote {table}, {numbers}, {pr}")
     return 0
 
 
@@ -335,22 +358,28 @@ def shipped(ns, work: Path) -> int:
     else:
         name, option, train, model = "gesture_near_forest", "--near-forest", NEAR_TRAIN, work / "forest_near.npz"
         scores = work / "scores_near.json"
-    bags = {b: make_bag(work, b) for b in (() if ns.shipped else NEAR_TRAIN) + EVAL + NEAR}
+    scored = tuple(b for b in EVAL + NEAR if ns.bags is None or b in ns.bags)
+    needed = (() if ns.shipped else NEAR_TRAIN + THRESHOLD_BAGS) + scored
+    bags = {b: make_bag(work, b, ns.sensor) for b in dict.fromkeys(needed)}
+    if ns.bags is not None:
+        scores = scores.with_name(scores.stem + "_" + "_".join(scored) + ".json")
+    if ns.sensor != DEFAULT_SENSOR:
+        name += f"_{ns.sensor}"
     if not model.exists():
         trained = work / "forest_near_untuned.npz"
         if not trained.exists():
             train_variant(ns, bags, True, 0.15, trained, {}, NEAR_TRAIN)
         forest = load_forest(trained)
         curves = gesture_threshold_curves([read_gesture_bag(bags[b]) for b in THRESHOLD_BAGS], forest)
-        chosen = set_gesture_thresholds(forest, curves, ns.max_false_per_minute,
-                                        [f"{b}.mcap: {sim_command(b)}" for b in THRESHOLD_BAGS], ns.min_recall)
+        sources = [f"{b}.mcap: {sim_command(b, ns.sensor)}" for b in THRESHOLD_BAGS]
+        chosen = set_gesture_thresholds(forest, curves, ns.max_false_per_minute, sources, ns.min_recall)
         print("thresholds from " + ", ".join(THRESHOLD_BAGS) + ": "
               + ", ".join(f"{g} {t:.3f}" for g, t in chosen.items()), flush=True)
         save_forest(forest, model)
     if scores.exists() and not ns.shipped:
         r = json.loads(scores.read_text())
     else:
-        r = score_shipped(model, bags, train)
+        r = score_shipped(model, bags, train, scored, ns.sensor, DEFAULT_SENSOR if ns.shipped else ns.sensor)
         scores.write_text(json.dumps(r))
     out = Path(ns.out_dir)
     out.mkdir(parents=True, exist_ok=True)

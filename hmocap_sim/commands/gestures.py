@@ -10,6 +10,7 @@ from pathlib import Path
 
 from hmocap_sim import gesture_set as gs
 from hmocap_sim.depth_scene import BACKGROUNDS
+from hmocap_sim.depth_sensor import DEFAULT_SENSOR, SENSOR_NAMES
 from hmocap_sim.gesture_dataset import generate, sidecar_paths
 from hmocap_sim.gesture_takes import HOLD_FRAMES, NEGATIVES_PER_BLOCK
 
@@ -43,6 +44,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--room", type=int, default=None, metavar="SEED",
                         help="every take in the room of the simulated teacher of this seed "
                              "(hmocap sim teacher --seed SEED): the same room as a teaching session")
+    parser.add_argument("--sensor", choices=SENSOR_NAMES, default=DEFAULT_SENSOR,
+                        help="depth sensor family: structured_light (Kinect v1-like, default), stereo "
+                             "(RealSense D4xx-like) or ideal (exact depth, no holes); docs/gestures.md")
     parser.add_argument("--no-contact-sheet", action="store_true", help="do not write BAG.contact.png")
     parser.add_argument("--force", action="store_true", help="overwrite the bag and its side files")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -64,7 +68,8 @@ def main_from_args(ns) -> int:
                      contact=not ns.no_contact_sheet, progress=not ns.quiet, hold=tuple(ns.hold),
                      background=ns.background, gestures=tuple(ns.gestures), negatives=ns.negatives,
                      near_misses=ns.near_misses,
-                     near_of=None if ns.near_misses_of is None else tuple(ns.near_misses_of), room=ns.room)
+                     near_of=None if ns.near_misses_of is None else tuple(ns.near_misses_of), room=ns.room,
+                     sensor=ns.sensor)
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
