@@ -237,6 +237,13 @@ class BodyTracker:
             return None
         return self.estimate[self.skel.translation_dofs].copy()
 
+    def mesh(self) -> np.ndarray | None:
+        """The followed body's mesh vertices (V, 3) at its current estimate (room, metres), or
+        None when not following anybody."""
+        if not self.state.follows_person or self.estimate is None:
+            return None
+        return self.model.forward(self.estimate[None], self._current_shape()).vertices[0]
+
     def _current_shape(self) -> BodyShape | None:
         if self.shape is not None:
             return self.shape

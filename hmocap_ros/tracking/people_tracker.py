@@ -7,7 +7,8 @@ A smart room often holds more than its user. :class:`PeopleTracker` runs up to
   :attr:`~hmocap_ros.detection.detections.Detections.persons`), each slot takes the keypoints
   of its own body id, and the people no body follows yet go, best agreeing first, to the slots
   that follow nobody; a slot that loses its person forgets its shape (its next start may be
-  anyone);
+  anyone); each slot is fitted to the foreground without the other bodies that stand in front
+  of it (:mod:`.other_bodies`);
 - otherwise slot 0 is exactly a single tracker (the same random draws, so with
   ``max_people = 1`` or nobody else in the room its output is bit for bit the same) and takes
   labelled keypoints; unlabelled skin candidates go to every slot;
@@ -36,6 +37,7 @@ from hmocap_ros.detection.detectors import carries_labels
 from hmocap_ros.geometry.pinhole_camera import PinholeCamera
 from hmocap_ros.geometry.rig import Rig
 from hmocap_ros.tracking.body_tracker import BodyTracker
+from hmocap_ros.tracking.other_bodies import masks_without_others, render_bodies
 from hmocap_ros.tracking.params import TrackerParams
 from hmocap_ros.tracking.result import TrackerState, TrackResult
 from hmocap_ros.tracking.startup import SAME_PERSON_RADIUS
@@ -110,6 +112,14 @@ class PeopleTracker:
         labelled joints of one person are the first slot's. budget_s: seconds each slot may
         take (:meth:`BodyTracker.update`)."""
         per_slot = self._people_per_slot(detections)
+        rendered = None
+        if per_slot is not None and sum(t.position is not None for t in self.trackers) > 0:
+            bodies: list[tuple[np.ndarray, np.ndarray] | None] = []
+            for t in self.trackers:
+                mesh, pelvis = t.mesh(), t.position
+                bodies.append(None if mesh is None or pelvis is None else (mesh, pelvis))
+            rendered = render_bodies(self.trackers[0].cameras, masks, bodies,
+                                     self.trackers[0].model.faces)
         results = []
         for k, tracker in enumerate(self.trackers):
             positions = [t.position for j, t in enumerate(self.trackers) if j != k]
@@ -119,7 +129,8 @@ class PeopleTracker:
             else:
                 mine = detections if (k == 0 or detections is None
                                       or not carries_labels(detections)) else None
-            results.append(tracker.update(masks, stamp_ns, mine,
+            mine_masks = list(masks) if rendered is None else masks_without_others(masks, rendered, k)
+            results.append(tracker.update(mine_masks, stamp_ns, mine,
                                           exclude=others if len(others) else None,
                                           budget_s=budget_s))
         self._drop_duplicates(results)
