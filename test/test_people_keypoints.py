@@ -177,8 +177,8 @@ def test_people_travel_in_the_message_and_go_to_their_slots():
     """Detections of two people (a tracked body and a new one) survive the message, and the
     people tracker gives each slot its own: the tracked body's to its slot, the new person
     to a slot that follows nobody."""
-    from hmocap_interfaces.msg import Extremities
     from geometry_msgs.msg import Point, Vector3
+    from hmocap_interfaces.msg import Extremities
 
     from hmocap_ros.body import load_body_model
     from hmocap_ros.geometry.rig import load_rig
@@ -202,3 +202,41 @@ def test_people_travel_in_the_message_and_go_to_their_slots():
     assert slots[0].labels == ("head",)  # b0 follows nobody: it takes the new person
     assert slots[1].labels == ("head", "left_hand")  # b1's own
     assert len(slots[2]) == 0
+
+
+def test_a_body_is_fitted_without_the_bodies_in_front_of_it(two_people):
+    """Each body's masks lose the other body's rendered silhouette in the views where the
+    other stands nearer, and keep it where this body stands in front; a slot that follows
+    nobody loses every tracked body."""
+    from hmocap_ros.body import load_body_model
+    from hmocap_ros.tracking.other_bodies import masks_without_others, render_bodies
+
+    model = load_body_model("tracking")
+    rig = two_people.rig
+    poses = np.repeat(model.rest_pose()[None], 2, axis=0)
+    tx, tz = model.skeleton.translation_dofs[[0, 2]]
+    poses[0, [tx, tz]] = [-0.3, 0.0]
+    poses[1, [tx, tz]] = [0.3, 0.0]
+    posed = model.forward(poses)
+    pelvis = poses[:, model.skeleton.translation_dofs]
+    masks = [np.full((c.height // 2, c.width // 2), 255, np.uint8) for c in rig.cameras]
+    masks[3] = None
+    rendered = render_bodies(rig.cameras, masks, [(posed.vertices[0], pelvis[0]),
+                                                  (posed.vertices[1], pelvis[1])], model.faces)
+    cases = set()
+    for k in (0, 1):
+        own = masks_without_others(masks, rendered, k)
+        other = rendered[1 - k]
+        assert own[3] is None
+        for v in range(3):
+            removed = own[v] == 0
+            in_front = other.depths[v] < rendered[k].depths[v]
+            cases.add(bool(in_front))
+            if in_front:
+                assert removed.any() and np.array_equal(removed, other.silhouettes[v])
+            else:
+                assert not removed.any()
+    assert cases == {True, False}
+    nobody = masks_without_others(masks, [rendered[0], rendered[1], None], 2)
+    union = rendered[0].silhouettes[0] | rendered[1].silhouettes[0]
+    assert np.array_equal(nobody[0] == 0, union)
