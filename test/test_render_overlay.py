@@ -197,3 +197,33 @@ def test_every_picture_of_a_video_has_one_size_with_and_without_a_body(tmp_path)
     while capture.read()[0]:
         frames += 1
     assert count == frames == FRAMES
+
+
+def test_each_body_id_has_its_colour_in_the_legend_and_over_the_cameras(tmp_path):
+    """Two bodies, b0 only from the second frame set on: each keeps the colour of its id's place
+    (b0 the first of BODY_COLOURS, b1 the second) in the legend and over the cameras, where its id
+    is written above its head, also in a frame set where b1 is the only body."""
+    from hmocap_ros.viz.overlay import BODY_COLOURS
+    from hmocap_ros.viz.overlay_bag import multiview_keys, multiview_pictures
+
+    bag, outputs, stamps, _, _, rig = _cut(tmp_path)
+    two = tmp_path / "two.mcap"
+    with BagReader(outputs) as reader, BagWriter(two) as writer:
+        for m in reader.messages(["/skeleton"]):
+            other = m.msg
+            other.body_id = "b1"
+            for p in other.positions:
+                p.x += 1.0
+            writer.write("/skeleton", other, m.log_time_ns)
+        for m in list(reader.messages(["/skeleton"]))[1:]:
+            writer.write("/skeleton", m.msg, m.log_time_ns)
+    assert multiview_keys(["b0", "b1"], truth=False, extremities=True) == [
+        (BODY_COLOURS[0], "b0 tracked"), (BODY_COLOURS[1], "b1 tracked"), ((255, 0, 255), "x detected body parts")]
+    first, second = (p.image for p in multiview_pictures(bag, two, truth=two, max_frames=2))
+    rows = first.shape[0] - 2 * rig.cameras[0].height
+    for picture, shown in ((first, [False, True]), (second, [True, True])):
+        banner, grid = picture[:rows], picture[rows:]
+        for colour, here in zip(BODY_COLOURS[:2], shown):
+            # its legend swatch always; its bones and id over the cameras where it is tracked
+            assert (np.abs(banner.astype(int) - colour).sum(axis=2) == 0).sum() >= 36, colour
+            assert ((np.abs(grid.astype(int) - colour).sum(axis=2) < 30).sum() >= 20) == here, colour

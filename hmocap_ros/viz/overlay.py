@@ -8,10 +8,13 @@ the frames drawn here and writes the video. One picture per frame set:
   :meth:`PinholeCamera.project <hmocap_ros.geometry.pinhole_camera.PinholeCamera.project>`): bones as
   lines, joints as dots. With ground truth each joint is coloured by its 3D error
   (:func:`error_colours`: green at 0, yellow at half of :data:`ERROR_SCALE_MM`, red from it on)
-  and the true skeleton is drawn thin in white beneath; without, each body has its colour
-  (:data:`BODY_COLOURS`, as the skeleton markers). The labelled extremities (the detector's 3D
-  head, hands, feet and the keypoint joints) are small magenta crosses. The views are tiled in a
-  grid (:func:`tile`) under a banner with the stamp, the bodies and the mean error.
+  and the true skeleton is drawn thin in white beneath; without, the joints too have their
+  body's colour. Each body's bones have its colour (:data:`BODY_COLOURS`, by the body's index, as
+  the skeleton markers) and its id is written above its head in that colour. The labelled
+  extremities (the detector's 3D head, hands, feet and the keypoint joints) are small magenta
+  crosses. The views are tiled in a grid (:func:`tile`) under a banner with the stamp, the bodies
+  and the mean error, and a legend: each body id in its colour, the truth, the extremities, and
+  the joint error scale.
 - **Depth** (:func:`depth_picture`): the depth image false-coloured (near warm, far cold), each
   detected gesture a box centred on its pixel, sized as a hand at its depth, with its name and
   score; true gestures as white boxes.
@@ -31,7 +34,7 @@ import numpy as np
 
 from hmocap_ros.gestures.trainer_feedback import colour_depth
 
-__all__ = ["BODY_COLOURS", "ERROR_SCALE_MM", "Banner", "BodyDrawing", "DepthGesture", "camera_tile",
+__all__ = ["BODY_COLOURS", "ERROR_SCALE_MM", "Banner", "BodyDrawing", "DepthGesture", "body_colour", "camera_tile",
            "depth_picture", "error_colours", "multiview_picture", "tile"]
 
 #: Joint error (mm) drawn red; 0 is green, half of it yellow.
@@ -48,12 +51,14 @@ GESTURE_HALF_SIZE_M = 0.12
 @dataclass
 class BodyDrawing:
     """One body to draw: its id, 3D joints (J, 3) in the rig's room frame, the parent of each
-    joint (-1 for the root), and optionally each joint's error in mm (J,) (NaN: unknown)."""
+    joint (-1 for the root), optionally each joint's error in mm (J,) (NaN: unknown), and its
+    index into :data:`BODY_COLOURS` (None: its place among the bodies drawn)."""
 
     body_id: str
     joints: np.ndarray
     parents: Sequence[int]
     errors_mm: np.ndarray | None = None
+    colour_index: int | None = None
 
 
 @dataclass
@@ -138,6 +143,26 @@ def _project(camera, points: np.ndarray, scale: float) -> tuple[np.ndarray, np.n
     return (pixels + 0.5) * scale - 0.5, ok
 
 
+def body_colour(body: BodyDrawing, place: int) -> tuple[int, int, int]:
+    """The RGB colour of ``body``, the ``place``-th body drawn: :data:`BODY_COLOURS` by its
+    ``colour_index``, else by ``place``."""
+    index = place if body.colour_index is None else body.colour_index
+    return BODY_COLOURS[index % len(BODY_COLOURS)]
+
+
+def _label_body(img: np.ndarray, body_id: str, pixels: np.ndarray, ok: np.ndarray, colour, scale: float,
+                gap: int) -> None:
+    """``body_id`` in ``colour`` ``gap`` pixels above the body's highest joint in the picture
+    (the head's centre: the gap clears the top of the head)."""
+    if not ok.any():
+        return
+    top = pixels[ok][np.argmin(pixels[ok][:, 1])]
+    (w, h), _ = cv2.getTextSize(body_id, cv2.FONT_HERSHEY_SIMPLEX, scale, max(1, int(round(scale * 2))))
+    x = float(np.clip(top[0] - w / 2, 0, img.shape[1] - w))
+    y = float(np.clip(top[1] - gap, h + 2, img.shape[0] - 2))
+    _text(img, body_id, (x, y), scale, colour)
+
+
 def camera_tile(camera, image: np.ndarray | None, bodies: Sequence[BodyDrawing], truth: BodyDrawing | None,
                 extremities: tuple[Sequence[str], np.ndarray] | None, tile_width: int) -> np.ndarray:
     """One camera's image at ``tile_width`` with the bodies, the truth and the extremities drawn
@@ -158,10 +183,11 @@ def camera_tile(camera, image: np.ndarray | None, bodies: Sequence[BodyDrawing],
                        max(1, radius // 2), 1)
     for k, body in enumerate(bodies):
         pixels, ok = _project(camera, body.joints, scale)
-        colour = BODY_COLOURS[k % len(BODY_COLOURS)]
+        colour = body_colour(body, k)
         joint_colours = (error_colours(body.errors_mm) if body.errors_mm is not None
                          else np.tile(np.asarray(colour, np.uint8), (len(pixels), 1)))
         _draw_skeleton(out, pixels, ok, body.parents, joint_colours, colour, radius, thick)
+        _label_body(out, body.body_id, pixels, ok, colour, max(0.35, tile_width / 900), 6 * radius)
     if extremities is not None:
         labels, positions = extremities
         pixels, ok = _project(camera, positions, scale)
@@ -228,7 +254,9 @@ def _banner(width: int, banner: Banner) -> np.ndarray:
         h = max(6, line // 3)
         strip = cv2.resize(colours[None], (w, h), interpolation=cv2.INTER_LINEAR)
         out[line // 3:line // 3 + h, x0:x0 + w] = strip
-        _text(out, "0", (x0 - int(14 * scale / 0.45), line // 3 + h), scale * 0.8)
+        label = "joint error  0"
+        (label_w, _), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, scale * 0.8, max(1, int(round(scale * 1.6))))
+        _text(out, label, (x0 - label_w - 6, line // 3 + h), scale * 0.8)
         _text(out, f"{ERROR_SCALE_MM:.0f} mm", (x0 + w - int(70 * scale / 0.45), line // 3 + h + line * 2 // 3),
               scale * 0.8)
     return out

@@ -25,7 +25,7 @@ from __future__ import annotations
 import itertools
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -119,7 +119,7 @@ def _points(msg) -> np.ndarray:
     return np.array([[p.x, p.y, p.z] for p in msg.positions], np.float64).reshape(-1, 3)
 
 
-def _body(msg, truth) -> BodyDrawing:
+def _body(msg, truth, colour_index: int | None = None) -> BodyDrawing:
     from hmocap_ros.eval.metrics import match_joints
 
     joints = _points(msg)
@@ -128,7 +128,7 @@ def _body(msg, truth) -> BodyDrawing:
         errors = np.full(len(joints), np.nan)
         i, j = match_joints(list(msg.joint_names), list(truth.joint_names))
         errors[i] = 1000.0 * np.linalg.norm(joints[i] - _points(truth)[j], axis=1)
-    return BodyDrawing(str(msg.body_id), joints, [int(p) for p in msg.parents], errors)
+    return BodyDrawing(str(msg.body_id), joints, [int(p) for p in msg.parents], errors, colour_index)
 
 
 def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | None = None,
@@ -163,9 +163,10 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
     truths = _by_stamp(truth, topics.GT_SKELETON)
     sk_stamps, ex_stamps, gt_stamps = (np.array(sorted(d), np.int64) for d in (skeletons, extremities, truths))
     tile_width = tile_width or max(camera.width for camera in rig.cameras)
-    # one legend for the whole video: every picture of it has the same size
-    keys = multiview_keys(len({m.body_id for msgs in skeletons.values() for m in msgs}), bool(truths),
-                          bool(extremities))
+    # one legend and one colour per body for the whole video: every picture of it has the same size
+    body_ids = sorted({str(m.body_id) for msgs in skeletons.values() for m in msgs}, key=lambda b: (len(b), b))
+    colour_index = {body_id: k for k, body_id in enumerate(body_ids)}
+    keys = multiview_keys(body_ids, bool(truths), bool(extremities))
     first = None
     with BagReader(bag) as reader:
         for n, (stamp, msgs) in enumerate(reader.frame_sets(present, SLOP_NS, allow_partial=True, min_topics=1)):
@@ -180,7 +181,7 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
                     images.append(None)
             gt_msgs = _near(truths, gt_stamps, stamp)
             gt = gt_msgs[0] if gt_msgs else None
-            bodies = [_body(msg, gt) for msg in _near(skeletons, sk_stamps, stamp)]
+            bodies = [_body(msg, gt, colour_index[str(msg.body_id)]) for msg in _near(skeletons, sk_stamps, stamp)]
             ex = _near(extremities, ex_stamps, stamp)
             ex_points = (list(ex[0].labels), _points(ex[0])) if ex and len(ex[0].labels) else None
             detail = "  ".join(
@@ -354,19 +355,18 @@ class _Video:
             pass
 
 
-def multiview_keys(bodies: int, truth: bool, extremities: bool) -> list[tuple[tuple[int, int, int], str]]:
+def multiview_keys(body_ids: Sequence[str], truth: bool, extremities: bool) -> list[tuple[tuple[int, int, int], str]]:
     """The legend of a multi-view video, the same on every picture: what each colour means
-    (:class:`~hmocap_ros.viz.overlay.Banner`), for ``bodies`` body ids and whether the bag has
-    ground truth and extremities."""
-    keys = []
+    (:class:`~hmocap_ros.viz.overlay.Banner`): each of ``body_ids`` in its colour (by its place in
+    the list, :data:`~hmocap_ros.viz.overlay.BODY_COLOURS`), and the ground truth and the
+    extremities where the bag has them. With the truth, the joints are coloured by their error
+    (the scale at the banner's right)."""
+    tracked = "tracked, joints by error" if truth else "tracked"
+    keys = [(BODY_COLOURS[k % len(BODY_COLOURS)], f"{body_id} {tracked}") for k, body_id in enumerate(body_ids)]
     if truth:
         keys.append((TRUTH_COLOUR, "ground truth"))
-        if bodies:
-            keys.append((BODY_COLOURS[0], "tracked (joints by error)"))
-    else:
-        keys += [(BODY_COLOURS[k % len(BODY_COLOURS)], f"tracked b{k}") for k in range(bodies)]
     if extremities:
-        keys.append((EXTREMITY_COLOUR, "detected extremities"))
+        keys.append((EXTREMITY_COLOUR, "x detected body parts"))
     return keys
 
 
