@@ -33,11 +33,20 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from hmocap_sim.render.depth import depth_discontinuities, depth_to_millimetres, projector_shadow
+from hmocap_sim.render.depth import (
+    KinectNoise,
+    depth_discontinuities,
+    depth_to_millimetres,
+    kinect_depth,
+    projector_shadow,
+)
 
 #: Near-infrared diffuse reflectance of a surface when the renderer gives none (skin and light
 #: matte surfaces reflect 0.4-0.6 of the projector's 830 nm light).
 DEFAULT_ALBEDO = 0.5
+#: the image width the plain model's disparity steps belong to: a smaller image keeps the
+#: sensor's depth steps
+PLAIN_WIDTH = 640
 
 
 @dataclass(frozen=True)
@@ -57,6 +66,10 @@ class DepthSensor:
     min_return: albedo x cos(incidence) under which a pixel may read 0 (never above it).
     dropout: probability that any pixel reads 0.
     min_depth, max_depth: working range (m).
+    plain: the plain Kinect model of :func:`hmocap_sim.render.kinect_depth` (disparity noise and
+        steps, projector shadows, holes at depth edges and at random; no speckle, fattening or
+        material holes), with this set's noise, steps, baseline, edge and range parameters: the
+        depth the shipped gesture forest was trained on.
     """
 
     baseline_m: float = 0.0
@@ -72,6 +85,7 @@ class DepthSensor:
     dropout: float = 0.0
     min_depth: float = 0.0
     max_depth: float = 65.535
+    plain: bool = False
 
     @property
     def ideal(self) -> bool:
@@ -96,6 +110,12 @@ SENSORS = {
                                     disparity_step_px=0.125, speckle_share=0.5, speckle_px=3.0,
                                     fattening_px=2.0, edge_threshold=0.05, edge_dropout=0.6,
                                     min_return=0.15, dropout=0.002, min_depth=0.5, max_depth=4.5),
+    # The plain Kinect v1 model (``plain``): 1.5 mm at 1 m, 1/8 px steps, 7.5 cm baseline.
+    "structured_light_plain": DepthSensor(baseline_m=0.075, native_fx=580.0,
+                                          disparity_sigma_px=0.0015 * 580.0 * 0.075,
+                                          disparity_step_px=0.125, edge_threshold=0.05,
+                                          edge_dropout=0.6, dropout=0.002, min_depth=0.5,
+                                          max_depth=4.5, plain=True),
     # RealSense D435 at 848x480: f 430 px (87 deg HFOV), b 5 cm, subpixel RMS 0.08 px, depth in
     # 1 mm units (no coarser disparity step); its second imager sees the occlusion band.
     "stereo": DepthSensor(baseline_m=0.050, native_fx=430.0, disparity_sigma_px=0.08,
@@ -190,6 +210,13 @@ def sensor_depth(zbuf: np.ndarray, rng: np.random.Generator, fx: float, sensor: 
     if sensor.ideal:
         return depth_to_millimetres(z, sensor.min_depth, sensor.max_depth)
     h, w = z.shape
+    if sensor.plain:
+        return kinect_depth(z, rng, fx, KinectNoise(
+            sigma_at_1m=sensor.disparity_sigma_px / (sensor.native_fx * sensor.baseline_m),
+            disparity_step_px=sensor.disparity_step_px * w / PLAIN_WIDTH,
+            baseline_m=sensor.baseline_m, min_depth=sensor.min_depth, max_depth=sensor.max_depth,
+            edge_threshold=sensor.edge_threshold, edge_dropout=sensor.edge_dropout,
+            dropout=sensor.dropout))
     cx, cy = ((w - 1) / 2.0, (h - 1) / 2.0) if principal_point is None else principal_point
     scale = fx / sensor.native_fx  # rendered pixels per sensor pixel
     white = rng.standard_normal(z.shape, dtype=np.float32)

@@ -138,3 +138,19 @@ def test_render_depth_takes_each_meshs_albedo():
     assert np.mean(r.depth_mm[on_wall] == 0) < 0.1  # the box's shadow band and edges only
     ideal = render_depth(cam, meshes, np.random.default_rng(7), None, albedo=[0.5, 0.02])
     assert np.all(ideal.depth_mm[r.face_id >= 0] > 0)
+
+
+def test_the_plain_family_is_the_plain_kinect_model():
+    """``structured_light_plain`` measures exactly what :func:`hmocap_sim.render.kinect_depth`
+    does with the Kinect v1 parameters, the disparity steps of a 640-pixel sensor kept at any
+    width (the depth the shipped gesture forest was trained on)."""
+    from hmocap_sim.depth_sensor import sensor_by_name, sensor_depth
+    from hmocap_sim.render import KinectNoise, kinect_depth
+
+    z = np.full((240, 320), 2.0)
+    z[60:180, 100:200] = 1.3
+    z[:, :20] = np.inf
+    expected = kinect_depth(z, np.random.default_rng(5), 287.5,
+                            dataclasses.replace(KinectNoise(), disparity_step_px=0.0625))
+    got = sensor_depth(z, np.random.default_rng(5), 287.5, sensor_by_name("structured_light_plain"))
+    assert np.array_equal(got, expected)
