@@ -44,7 +44,7 @@ from hmocap_ros.io.conversions import dict_to_camera_info, numpy_to_image
 from hmocap_ros.io.msg_factory import RosbagsFactory, make_header
 from hmocap_sim import gesture_set as gs
 from hmocap_sim.depth_scene import make_layout, render_depth
-from hmocap_sim.depth_sensor import DEFAULT_ALBEDO
+from hmocap_sim.depth_sensor import DEFAULT_ALBEDO, DEFAULT_SENSOR, sensor_by_name
 from hmocap_sim.gesture_body import body_albedo
 from hmocap_sim.gesture_takes import MAX_YAW_DEG, Actor, bystander_pose, facing_yaw, lerp_pose, take_frames
 
@@ -62,8 +62,11 @@ class GestureTeacher:
     """A simulated user (module docstring): ``next_frame(status)`` -> (depth_mm, stamp_ns)."""
 
     def __init__(self, seed: int = 0, width: int = 320, height: int = 240, fps: float = 30.0,
-                 subject_id: int = 0, layout_id: int = 0, bystanders: int = 0):
+                 subject_id: int = 0, layout_id: int = 0, bystanders: int = 0,
+                 sensor: str = DEFAULT_SENSOR):
         self.model = load_body_model("hands")
+        #: the depth sensor family (:data:`hmocap_sim.depth_sensor.SENSORS`)
+        self.sensor = sensor_by_name(sensor)
         self.rng = np.random.default_rng([seed, 1])
         self.noise_rng = np.random.default_rng([seed, 2])
         self.layout = make_layout(np.random.default_rng([seed, 3, layout_id]), layout_id, width, height,
@@ -210,7 +213,7 @@ class GestureTeacher:
         if self.present:
             meshes.append((self.actor.vertices(self.model), self.model.faces))
         albedo = [DEFAULT_ALBEDO] + [body_albedo(self.model, p.subject.subject_id) for p in people]
-        render = render_depth(self.camera, meshes, self.noise_rng, albedo=albedo)
+        render = render_depth(self.camera, meshes, self.noise_rng, self.sensor, albedo=albedo)
         stamp = START_NS + self.index * self.period
         self.index += 1
         return render.depth_mm, stamp

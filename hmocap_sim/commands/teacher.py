@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from hmocap_sim.depth_sensor import DEFAULT_SENSOR, SENSOR_NAMES
+
 __all__ = ["add_arguments", "main_from_args"]
 
 
@@ -34,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--width", type=int, default=320, help="depth image width (pixels)")
     parser.add_argument("--height", type=int, default=240, help="depth image height (pixels)")
     parser.add_argument("--fps", type=float, default=30.0, help="frame rate of the stamps")
+    parser.add_argument("--sensor", choices=SENSOR_NAMES, default=DEFAULT_SENSOR,
+                        help="depth sensor family of the simulated camera (hmocap sim gestures "
+                             "--help; default: %(default)s)")
 
 
 def _check(ns) -> str:

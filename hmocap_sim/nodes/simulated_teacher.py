@@ -54,6 +54,7 @@ def run_teacher(ns: SimpleNamespace | argparse.Namespace) -> int:
     from hmocap_sim.gesture_teacher import GestureTeacher
 
     teacher = GestureTeacher(seed=ns.seed, width=ns.width, height=ns.height, fps=ns.fps, subject_id=ns.subject,
+                             sensor=ns.sensor,
                              layout_id=ns.layout)
     cam = teacher.camera
     rclpy.init()
