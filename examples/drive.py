@@ -23,6 +23,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from hmocap_ros.io.msg_factory import stamp_to_ns
 from hmocap_ros.io.typestore import hmocap_typestore
@@ -43,7 +44,8 @@ class Noted:
 
     source_ns: int
     received_ns: int
-    msg: object
+    # a deserialised message of the topic's type (rosbags' message classes carry no static types)
+    msg: Any
 
 
 @dataclass(frozen=True)

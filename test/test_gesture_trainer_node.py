@@ -4,8 +4,8 @@ file) loads it and finds the gesture where the user holds it; bad requests and b
 refused or logged while the node keeps running. The session is short and its forest small (5
 trees of depth 12), so the simulated camera is the plain Kinect model
 (``--sensor structured_light_plain``): under the full structured-light model such a session
-does not find the gesture (how teaching fares under each sensor is ``hmocap bench iml``'s). Plus the node's pieces without DDS: the
-feedback image, the frame statistics, the file watch."""
+does not find the gesture (how teaching fares under each sensor is ``hmocap bench iml``'s).
+Plus the node's pieces without DDS: the feedback image, the frame statistics, the file watch."""
 
 from __future__ import annotations
 
