@@ -64,7 +64,7 @@ def toy_stream(ns, rng):
 def bag_stream(ns, rng):
     """The same from an annotated bag: one batch per frame (its patches as the offline trainer
     collects them), frames in random order, as many passes as ``--samples`` takes."""
-    from hmocap_ros.commands.train_gestures import read_training_bags
+    from hmocap_ros.eval.gesture_training_bags import read_training_bags
 
     data, _ = read_training_bags([ns.bag])
     params = OnlineTrainParams().for_focal(data.focal_px)

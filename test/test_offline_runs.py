@@ -16,9 +16,9 @@ import pytest
 from fixtures.gesture_cli import tiny_gesture_bag
 
 from hmocap_ros.cli import main as hmocap
-from hmocap_ros.commands.detect_gestures import output_topics
 from hmocap_ros.demo import DEMO_BAG
 from hmocap_ros.eval import gesture_eval as ge
+from hmocap_ros.eval.gesture_detection_bag import output_topics
 from hmocap_ros.gestures import load_forest
 from hmocap_ros.io.bag_reader import BagReader
 from hmocap_ros.io.msg_factory import RclpyFactory, RosbagsFactory, stamp_to_ns

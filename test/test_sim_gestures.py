@@ -397,7 +397,7 @@ def test_bag_layout_and_ground_truth(small_bag):
 def test_near_miss_frames_carry_where_the_near_miss_is(tmp_path):
     """A bag of near misses: each hold frame says which gesture it misses and where (the pixel of
     that gesture's reference point), and training reads those frames as located background."""
-    from hmocap_ros.commands.train_gestures import read_training_bags
+    from hmocap_ros.eval.gesture_training_bags import read_training_bags
 
     out = tmp_path / "near.mcap"
     _generate(out, subject_offset=60, frames=30, gestures=(), negatives=0, near_misses=6,

@@ -52,12 +52,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal
 from hmocap_ros.eval.gesture_eval import SWEEP_MIN_SCORE, evaluate_gestures, plot_pr, read_gesture_bag
 from hmocap_ros.eval.gesture_thresholds import gesture_threshold_curves, set_gesture_thresholds
+from hmocap_ros.eval.gesture_training_bags import read_training_bags
 from hmocap_ros.gestures.forest import train_forest_on_frames
 from hmocap_ros.gestures.forest_file import load_forest, save_forest
-from hmocap_ros.gestures.params import DetectorParams
+from hmocap_ros.gestures.params import DetectorParams, train_params_for_focal
 from hmocap_sim import gesture_dataset as gd
 from hmocap_sim.depth_sensor import DEFAULT_SENSOR, SENSOR_NAMES
 from hmocap_sim.gesture_set import GESTURE_CLASSES

@@ -39,12 +39,12 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 import gesture_table as gt
 
-from hmocap_ros.commands.train_gestures import read_training_bags, train_params_for_focal
 from hmocap_ros.eval.gesture_eval import evaluate_gestures, read_gesture_bag
+from hmocap_ros.eval.gesture_training_bags import read_training_bags
 from hmocap_ros.gestures.forest import train_forest_on_frames
 from hmocap_ros.gestures.forest_file import load_forest, save_forest
 from hmocap_ros.gestures.online_forest import OnlineForest, train_online_on_frames
-from hmocap_ros.gestures.params import OnlineParams, OnlineTrainParams
+from hmocap_ros.gestures.params import OnlineParams, OnlineTrainParams, train_params_for_focal
 
 QUICK_BAGS = {
     "train_quick": dict(seed=1000, subjects=8, subject_offset=1000, frames=400, hold=(2, 4)),

@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hmocap_ros.eval.gesture_eval import GestureBag, GestureBagError, read_gesture_bags
-from hmocap_ros.gestures.depth_features import depth_to_millimetres
+from hmocap_ros.eval.gesture_eval import GestureBag, GestureBagError
+from hmocap_ros.eval.gesture_training_bags import read_training_bags
 from hmocap_ros.gestures.forest import train_forest_on_frames
 from hmocap_ros.gestures.forest_file import ForestFileError, load_forest, save_forest
 from hmocap_ros.gestures.online_forest import OnlineForest, PassReport, train_online_on_frames
@@ -42,52 +42,12 @@ from hmocap_ros.gestures.params import (
     NEGATIVE_MODES,
     REFERENCE_FOCAL_PX,
     FeatureParams,
-    ForestParams,
     OnlineParams,
     OnlineTrainParams,
-    TrainParams,
+    train_params_for_focal,
 )
 
-__all__ = ["REFERENCE_FOCAL_PX", "add_arguments", "main_from_args", "print_data_summary", "read_training_bags",
-           "train_params_for_focal"]
-
-
-def read_training_bags(paths, params: TrainParams | None = None) -> tuple[GestureBag, int]:
-    """The trainable frames of annotated bags as compact uint16 millimetres, 0 = invalid
-    (``params.depth``; :func:`~hmocap_ros.gestures.depth_features.depth_to_millimetres`):
-    background frames and gesture frames whose reference point is visible, in bag order. Each
-    frame is converted as it is read and the others are dropped in place, so memory holds one
-    copy of the frames at 0.6 MB per 640x480 frame. A near-miss frame's label is ``(0, u, v)``,
-    the missed gesture's reference pixel (background with a place). Returns the frames and the
-    number of frames left out."""
-    params = params if params is not None else TrainParams()
-    fmt, background = params.depth, params.features.background_depth_m
-    data = read_gesture_bags(paths, frame_fn=lambda raw: depth_to_millimetres(raw, fmt, background))
-    keep = np.flatnonzero(data.trainable)
-    frames = data.depth
-    for j, i in enumerate(keep):  # per frame, not per pixel: compaction without a second stack
-        if i != j:
-            frames[j] = frames[i]
-    near = data.near_misses or [None] * len(data.labels)
-    labels = [data.labels[i] if data.labels[i] is not None or near[i] is None else (0, near[i][1], near[i][2])
-              for i in keep]
-    return GestureBag(frames[:keep.size], data.stamps_ns[keep], labels, data.visible[keep], data.focal_px,
-                      data.class_names, data.sources, [near[i] for i in keep]), len(data.labels) - keep.size
-
-
-def train_params_for_focal(focal_px: float, *, n_trees: int = 15, max_depth: int = 20,
-                           kappa_m: float | None = 0.15, boosted: bool = True,
-                           samples_per_class: int = 10000, mining_rounds: int = 1,
-                           located_share: float = 1.0) -> TrainParams:
-    """The default training parameters with the pixel sizes scaled from f = 525 px to
-    ``focal_px`` (:meth:`TrainParams.for_focal`); ``kappa_m`` None = plain tests (eq. 3.3), else
-    clipped tests (eq. 3.6)."""
-    features = FeatureParams(feature_type="plain" if kappa_m is None else "clipped",
-                             kappa_m=FeatureParams().kappa_m if kappa_m is None else float(kappa_m))
-    forest = ForestParams(n_trees=n_trees, max_depth=max_depth, boosted=boosted,
-                          samples_per_class=samples_per_class, mining_rounds=mining_rounds,
-                          located_share=located_share)
-    return TrainParams(features=features, forest=forest).for_focal(focal_px)
+__all__ = ["REFERENCE_FOCAL_PX", "add_arguments", "main_from_args", "print_data_summary"]
 
 
 #: ``--kappa none``: plain tests (eq. 3.3).

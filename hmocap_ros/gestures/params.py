@@ -382,3 +382,18 @@ class OnlineTrainParams:
                        online=replace(o, hard_half_size_px_m=o.hard_half_size_px_m * s,
                                       stride=int(min(64, max(1, round(o.stride * s)))),
                                       parzen_sigma_px=o.parzen_sigma_px * s))
+
+
+def train_params_for_focal(focal_px: float, *, n_trees: int = 15, max_depth: int = 20,
+                           kappa_m: float | None = 0.15, boosted: bool = True,
+                           samples_per_class: int = 10000, mining_rounds: int = 1,
+                           located_share: float = 1.0) -> TrainParams:
+    """The default training parameters with the pixel sizes scaled from f = 525 px to
+    ``focal_px`` (:meth:`TrainParams.for_focal`); ``kappa_m`` None = plain tests (eq. 3.3), else
+    clipped tests (eq. 3.6)."""
+    features = FeatureParams(feature_type="plain" if kappa_m is None else "clipped",
+                             kappa_m=FeatureParams().kappa_m if kappa_m is None else float(kappa_m))
+    forest = ForestParams(n_trees=n_trees, max_depth=max_depth, boosted=boosted,
+                          samples_per_class=samples_per_class, mining_rounds=mining_rounds,
+                          located_share=located_share)
+    return TrainParams(features=features, forest=forest).for_focal(focal_px)
