@@ -245,7 +245,8 @@ class KeypointDetector:
         self._searches = 0
         #: with several people, what was left out and how often: ``occluded`` (a body's crop
         #: in a view behind a nearer body's), ``other person`` (a body's landmarks on another
-        #: body), ``one view`` (a detected person that no second view confirms)
+        #: body), ``one view`` (a detected person that no second view confirms), ``off the
+        #: foreground`` (a pair of views' person that another view's foreground refutes)
         self.people_left_out: dict[str, int] = {}
 
     def close(self) -> None:
@@ -496,7 +497,7 @@ class KeypointDetector:
         ``previous_stamp_ns`` as in :meth:`detect`.
 
         Each tracked body's crop per view comes from its track or its projected skeleton;
-        crops behind a nearer body's are left out (:func:`~.people_search.occluded_crops`) and
+        crops behind a nearer body's are left out (:func:`~.people_search.occluded_bodies`) and
         landmarks that lie on another body are dropped (:func:`~.people_search.landmarks_owner`);
         its views run in rotation as :meth:`detect`'s. While fewer than ``max_people`` bodies
         are tracked, the pose detector looks for the others (every ``search_every`` frame
