@@ -227,3 +227,23 @@ def test_each_body_id_has_its_colour_in_the_legend_and_over_the_cameras(tmp_path
             # its legend swatch always; its bones and id over the cameras where it is tracked
             assert (np.abs(banner.astype(int) - colour).sum(axis=2) == 0).sum() >= 36, colour
             assert ((np.abs(grid.astype(int) - colour).sum(axis=2) < 30).sum() >= 20) == here, colour
+
+
+def test_each_body_is_scored_against_the_person_nearest_it():
+    """With several people's truth, a body's joint errors are against the person whose truth
+    lies nearest it, not against the subject's."""
+    from types import SimpleNamespace
+
+    from hmocap_ros.viz.overlay_bag import _body
+
+    def skeleton(x, body_id=""):
+        points = [SimpleNamespace(x=x + dx, y=1.0, z=0.0) for dx in (0.0, 0.1, 0.2)]
+        return SimpleNamespace(body_id=body_id, joint_names=["pelvis", "l_hip", "r_hip"],
+                               positions=points, parents=[-1, 0, 0])
+
+    subject, other = skeleton(0.0), skeleton(2.0)
+    near_other = _body(skeleton(2.01, "b1"), [subject, other])
+    assert np.allclose(near_other.errors_mm, 10.0)
+    near_subject = _body(skeleton(0.02, "b0"), [subject, other])
+    assert np.allclose(near_subject.errors_mm, 20.0)
+    assert _body(skeleton(1.0, "b2"), []).errors_mm is None

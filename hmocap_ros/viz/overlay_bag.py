@@ -6,8 +6,11 @@ Two kinds of bag (:func:`bag_kind`):
   of images (grouped by stamp, as the tracker groups them) with the tracked skeletons of that
   stamp (``/skeleton``, one message per body: body_tracker's output, recorded or written by
   ``hmocap track``), the labelled extremities (``/extremities``) and, where the bag (or the
-  ``truth`` bag) has it, the ground truth (``/ground_truth/skeleton``): per-joint errors
-  matched by joint name (:func:`hmocap_ros.eval.metrics.match_joints`);
+  ``truth`` bag) has it, the ground truth (``/ground_truth/skeleton``, and
+  ``/ground_truth/body_<k>/skeleton`` for the other people of a simulated room): each body's
+  per-joint errors against the person whose truth lies nearest it in that frame set (mean joint
+  distance), matched by joint name (:func:`hmocap_ros.eval.metrics.match_joints`); the subject's
+  truth is drawn;
 - **depth** (``/depth/image_raw``, no rig): every depth frame with the detected gestures of its
   stamp (``/gestures``) and the true ones (``/ground_truth/gestures``).
 
@@ -104,6 +107,18 @@ def _by_stamp(path: Path, topic: str) -> dict[int, list]:
     return out
 
 
+def _other_people_truth(path: Path) -> list[str]:
+    """The skeleton truth topics of the people beside the subject in ``path``
+    (``/ground_truth/body_<k>/skeleton``, k = 1, 2, ...), in order."""
+    from hmocap_ros.eval.people_truth import person_topic
+
+    available = _topics(path)
+    out: list[str] = []
+    while person_topic(topics.GT_SKELETON, len(out) + 1) in available:
+        out.append(person_topic(topics.GT_SKELETON, len(out) + 1))
+    return out
+
+
 def _near(by_stamp: dict[int, list], stamps: np.ndarray, stamp: int) -> list:
     """The messages of ``stamp``, else of the nearest stamp within :data:`SLOP_NS`."""
     if stamp in by_stamp:
@@ -119,15 +134,19 @@ def _points(msg) -> np.ndarray:
     return np.array([[p.x, p.y, p.z] for p in msg.positions], np.float64).reshape(-1, 3)
 
 
-def _body(msg, truth, colour_index: int | None = None) -> BodyDrawing:
+def _body(msg, truths: Sequence, colour_index: int | None = None) -> BodyDrawing:
+    """A tracked skeleton's drawing, its joints' errors (mm) against the truth in ``truths``
+    (one skeleton per person) whose mean joint distance to it is the smallest."""
     from hmocap_ros.eval.metrics import match_joints
 
     joints = _points(msg)
     errors = None
-    if truth is not None:
-        errors = np.full(len(joints), np.nan)
+    for truth in truths:
+        mine = np.full(len(joints), np.nan)
         i, j = match_joints(list(msg.joint_names), list(truth.joint_names))
-        errors[i] = 1000.0 * np.linalg.norm(joints[i] - _points(truth)[j], axis=1)
+        mine[i] = 1000.0 * np.linalg.norm(joints[i] - _points(truth)[j], axis=1)
+        if errors is None or np.nanmean(mine) < np.nanmean(errors):
+            errors = mine
     return BodyDrawing(str(msg.body_id), joints, [int(p) for p in msg.parents], errors, colour_index)
 
 
@@ -162,6 +181,8 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
     extremities = _by_stamp(outputs, EXTREMITIES)
     truths = _by_stamp(truth, topics.GT_SKELETON)
     sk_stamps, ex_stamps, gt_stamps = (np.array(sorted(d), np.int64) for d in (skeletons, extremities, truths))
+    others = [_by_stamp(truth, t) for t in _other_people_truth(truth)]
+    others_stamps = [np.array(sorted(d), np.int64) for d in others]
     tile_width = tile_width or max(camera.width for camera in rig.cameras)
     # one legend and one colour per body for the whole video: every picture of it has the same size
     body_ids = sorted({str(m.body_id) for msgs in skeletons.values() for m in msgs}, key=lambda b: (len(b), b))
@@ -181,7 +202,10 @@ def multiview_pictures(bag: Path, outputs: Path | None = None, truth: Path | Non
                     images.append(None)
             gt_msgs = _near(truths, gt_stamps, stamp)
             gt = gt_msgs[0] if gt_msgs else None
-            bodies = [_body(msg, gt, colour_index[str(msg.body_id)]) for msg in _near(skeletons, sk_stamps, stamp)]
+            people = ([gt] if gt is not None else []) + [
+                near[0] for near in (_near(d, st, stamp) for d, st in zip(others, others_stamps)) if near]
+            bodies = [_body(msg, people, colour_index[str(msg.body_id)])
+                      for msg in _near(skeletons, sk_stamps, stamp)]
             ex = _near(extremities, ex_stamps, stamp)
             ex_points = (list(ex[0].labels), _points(ex[0])) if ex and len(ex[0].labels) else None
             detail = "  ".join(
